@@ -1,0 +1,20 @@
+"""mbicp-viz core: scans, SE(2), and the scan matchers with their per-iteration event stream.
+
+numpy and scipy only: no I/O, no front ends.
+"""
+
+from .events import (Correspondences, FinishEvent, IterationEvent, PairKind, PairStatus, Recorder,
+                     Resampling, StartEvent)
+from .matchers import MATCHERS, Matcher, match, matcher_for
+from .params import FieldSpec, IcpParams, ImprovedParams, MbicpParams, ParamError, Params, field_specs
+from .result import Degeneracy, MatchResult, Termination
+from .scan import Scan, ScanError, ScanSource, make_scan, scan_from_points, uniform_bearings
+from .se2 import Pose2, pose_error, relative, wrap_angle
+
+__all__ = [
+    "Correspondences", "FinishEvent", "IterationEvent", "PairKind", "PairStatus", "Recorder", "Resampling",
+    "StartEvent", "MATCHERS", "Matcher", "match", "matcher_for", "FieldSpec", "IcpParams", "ImprovedParams",
+    "MbicpParams", "ParamError", "Params", "field_specs", "Degeneracy", "MatchResult", "Termination", "Scan",
+    "ScanError", "ScanSource", "make_scan", "scan_from_points", "uniform_bearings", "Pose2", "pose_error",
+    "relative", "wrap_angle",
+]

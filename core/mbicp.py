@@ -1,0 +1,105 @@
+"""MbICP (Minguez, Lamiraux & Montesano, T-RO 2006) and the improved MbICP of paper 000.
+
+One loop serves both: ``ImprovedParams`` switch on the three additions of Li et al. 2018 —
+grid resampling (§2.3), point-to-point + point-to-line pairs (§2.4.1) and MAD-from-median
+rejection (§2.4.2) — each on its own, so their effect can be seen one at a time.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .correspondence import ReferenceIndex, mbicp_pairs, point_line_pairs, visible_from_reference
+from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairStatus, StartEvent
+from .rejection import reject
+from .metric import metric_normal_equations
+from .params import ImprovedParams, MbicpParams
+from .resample import grid_resample
+from .result import MatchResult, Termination
+from .scan import Scan
+from .se2 import Pose2
+from .uncertainty import FinalSystem, build_result
+
+# Projection filter: a point more than this behind the nearest one in its bearing bin is hidden.
+PROJECTION_MARGIN_M = 0.2
+
+
+def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpParams | None = None,
+          observer: Observer | None = None) -> MatchResult:
+    """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
+    params = params if params is not None else MbicpParams()
+    improved = isinstance(params, ImprovedParams)
+    name = "improved" if improved else "mbicp"
+    R = ReferenceIndex.build(ref, params.L)
+    obj_pts = obj.points()
+    resampling = grid_resample(obj_pts, params.cell_size) if improved and params.resample else None
+    used = (resampling.kept if resampling is not None else np.arange(len(obj_pts)))[:: params.laserStep]
+    P = obj_pts[used]
+    pair_fn = point_line_pairs if improved and params.point_line else mbicp_pairs
+    bin_width = 2.0 * float(np.median(np.diff(R.bearings))) if len(R.bearings) > 1 else 0.01
+    all_rows = np.arange(len(P))
+    min_pairs = max(3, int(np.ceil(params.AsocError * len(P))))
+    if observer is not None:
+        observer(StartEvent(name, params, R.points, obj_pts, used, initial_guess, resampling))
+
+    est = initial_guess
+    prev_error = None
+    n_conv = 0
+    reason = Termination.MAX_ITERATIONS
+    it = 0
+    last = None
+    hint = None
+    for it in range(1, params.MaxIter + 1):
+        moved = est.apply(P)
+        if params.ProjectionFilter:
+            vis = visible_from_reference(moved, bin_width, PROJECTION_MARGIN_M)
+            rows = all_rows[vis]
+        else:
+            rows = all_rows
+        pairs = pair_fn(R, moved, rows, params.Bw, params.Br, params.L, params.MaxDistInter, hint)
+        hint = np.full(len(P), -1)
+        hint[pairs.obj] = pairs.ref_index[:, 0]  # bounds next iteration's search (see nearest)
+        status, thr = reject(pairs.dist, params.Br, params.filter,
+                             params.mad_k if improved and params.mad_rejection else None,
+                             params.mad_floor if improved else 0.0)
+        kept = status == PairStatus.KEPT
+        n_kept = int(np.count_nonzero(kept))
+        step = None
+        if n_kept >= min_pairs:
+            p_k, c_k = moved[pairs.obj[kept]], pairs.target[kept]
+            A, b = metric_normal_equations(p_k, c_k, params.L)
+            try:
+                step = np.linalg.solve(A, b)
+            except np.linalg.LinAlgError:
+                reason = Termination.SINGULAR
+            else:
+                if not np.all(np.isfinite(step)):
+                    step, reason = None, Termination.SINGULAR
+        else:
+            reason = Termination.TOO_FEW_PAIRS
+        inc = Pose2.from_array(step) if step is not None else Pose2()
+        error = float(np.mean(np.sum((inc.apply(p_k) - c_k) ** 2, axis=1))) if step is not None else float("nan")
+        new_est = inc @ est
+        if observer is not None:
+            observer(IterationEvent(
+                it, est, new_est, moved, used[np.setdiff1d(all_rows, rows, assume_unique=True)],
+                Correspondences(used[pairs.obj], pairs.target, pairs.kind, pairs.ref_index, pairs.dist, status),
+                thr, error, inc))
+        if step is None:
+            break
+        est = new_est
+        last = FinalSystem(A, error, c_k, pairs.ref_index[kept, 0], n_kept, len(status) - n_kept)
+        # MbICP's counted convergence: error ratio OR every increment component small.
+        small_ratio = prev_error is not None and (
+            abs(1.0 - error / prev_error) <= params.errorRatio if prev_error > 0 else error == 0.0)
+        small_step = abs(inc.x) < params.errx_out and abs(inc.y) < params.erry_out and abs(inc.theta) < params.errt_out
+        n_conv = n_conv + 1 if (small_ratio or small_step) else 0
+        prev_error = error
+        if n_conv > params.IterSmoothConv:
+            reason = Termination.CONVERGED
+            break
+
+    result = build_result(name, est, reason, it, last, R.tangents, params.L)
+    if observer is not None:
+        observer(FinishEvent(result))
+    return result

@@ -1,0 +1,139 @@
+"""MbICP's metric distance and metric least squares, and the robust statistics of paper 000.
+
+Norm on SE(2) (MbICP, T-RO 2006, eq. 1; paper 000 eq. 4): ||q|| = sqrt(x^2 + y^2 + L^2 theta^2).
+The metric distance between points is the norm of the smallest motion taking one onto the
+other (paper 000 eq. 3); linearising the rotation gives the closed form used here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def metric_distance_sq(p: np.ndarray, q: np.ndarray, L: float) -> np.ndarray:
+    """Squared metric distance of the motion taking reference point ``q`` onto point ``p``.
+
+    d^2 = |p - q|^2 - (p x q)^2 / (|q|^2 + L^2)   (MbICP eq. 12 with delta = p - q; note that
+    delta x q = p x q). The original C code scores candidates this way, with the reference point
+    in the denominator. Broadcasts over leading axes.
+    """
+    d = p - q
+    c = cross2(p, q)
+    return np.einsum("...i,...i->...", d, d) - c * c / (np.einsum("...i,...i->...", q, q) + L * L)
+
+
+def metric_exact_sq(p1: np.ndarray, p2: np.ndarray, L: float, max_theta: float = np.pi) -> float:
+    """Brute-force min over motions q with q(p1) = p2 of x^2 + y^2 + L^2 theta^2 (tests, teaching).
+
+    For a rotation theta the translation is forced to p2 - R(theta) p1, so one scalar search
+    over theta suffices; a dense grid followed by a bounded refinement avoids local minima.
+    """
+    from scipy.optimize import minimize_scalar
+
+    def cost(t):
+        c, s = np.cos(t), np.sin(t)
+        x = p2[0] - (c * p1[0] - s * p1[1])
+        y = p2[1] - (s * p1[0] + c * p1[1])
+        return x * x + y * y + L * L * t * t
+
+    grid = np.linspace(-max_theta, max_theta, 2001)
+    i = int(np.argmin([cost(t) for t in grid]))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    return float(minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}).fun)
+
+
+def metric_project_on_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray, L: float) -> np.ndarray:
+    """Parameter t in [0, 1] of the point of segment a->b metrically closest to p (row-wise).
+
+    Minimises (a + t e - p)^T M(p) (a + t e - p), e = b - a, with M(p) = I - r r^T / (|p|^2 + L^2),
+    r = (p_y, -p_x): the original code's interpolation, with the object point in the metric.
+    """
+    e = b - a
+    u = a - p
+    r = np.column_stack((p[:, 1], -p[:, 0]))
+    k = np.einsum("ij,ij->i", p, p) + L * L
+    er = np.einsum("ij,ij->i", e, r)
+    ur = np.einsum("ij,ij->i", u, r)
+    eMe = np.einsum("ij,ij->i", e, e) - er * er / k
+    uMe = np.einsum("ij,ij->i", u, e) - ur * er / k
+    t = np.where(eMe > 1e-18, -uMe / np.maximum(eMe, 1e-18), 0.0)
+    return np.clip(t, 0.0, 1.0)
+
+
+def euclidean_project_on_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Parameter t in [0, 1] of the orthogonal projection of p onto segment a->b (paper 000 §2.4.1)."""
+    e = b - a
+    ee = np.einsum("ij,ij->i", e, e)
+    t = np.where(ee > 1e-18, np.einsum("ij,ij->i", p - a, e) / np.maximum(ee, 1e-18), 0.0)
+    return np.clip(t, 0.0, 1.0)
+
+
+def _median(x: np.ndarray) -> float:
+    """Median by one sort: np.median's dispatch costs more than the sort on scan-sized arrays."""
+    s = np.sort(x)
+    n = len(s)
+    return 0.5 * float(s[(n - 1) // 2] + s[n // 2])
+
+
+def mad_threshold(distances: np.ndarray, k: float = 2.0) -> float:
+    """Rejection threshold d_rej = median + k * MAD (paper 000 eq. 5, §2.4.2)."""
+    med = _median(distances)
+    return med + k * _median(np.abs(distances - med))
+
+
+def linearised_jacobians(points: np.ndarray) -> np.ndarray:
+    """(N, 2, 3) Jacobians of q(p) ~ p + (x - theta p_y, y + theta p_x) at q = 0."""
+    n = len(points)
+    J = np.zeros((n, 2, 3))
+    J[:, 0, 0] = 1.0
+    J[:, 1, 1] = 1.0
+    J[:, 0, 2] = -points[:, 1]
+    J[:, 1, 2] = points[:, 0]
+    return J
+
+
+def metric_normal_equations(p: np.ndarray, c: np.ndarray, L: float) -> tuple[np.ndarray, np.ndarray]:
+    """A, b of MbICP's metric least squares: A q = b minimises sum (c_i - q(p_i))^T M(c_i) (...).
+
+    Linearised residual e_i = (c_i - p_i) - J_i q with J_i = [[1, 0, -p_iy], [0, 1, p_ix]] and
+    M(c) = I - r r^T / (|c|^2 + L^2), r = (c_y, -c_x): the original builds M from the associated
+    reference point (MbICP §III-C). Written out by hand: this is the hot loop.
+    """
+    px, py = p[:, 0], p[:, 1]
+    cx, cy = c[:, 0], c[:, 1]
+    dx, dy = cx - px, cy - py
+    k = cx * cx + cy * cy + L * L
+    # M = [[m11, m12], [m12, m22]]
+    m11 = 1.0 - cy * cy / k
+    m12 = cx * cy / k
+    m22 = 1.0 - cx * cx / k
+    # rows of J^T M: for columns x, y, theta
+    jx = (m11, m12)
+    jy = (m12, m22)
+    jt = (-py * m11 + px * m12, -py * m12 + px * m22)
+    A = np.empty((3, 3))
+    A[0, 0] = m11.sum()
+    A[0, 1] = A[1, 0] = m12.sum()
+    A[1, 1] = m22.sum()
+    A[0, 2] = A[2, 0] = (jx[0] * -py + jx[1] * px).sum()
+    A[1, 2] = A[2, 1] = (jy[0] * -py + jy[1] * px).sum()
+    A[2, 2] = (jt[0] * -py + jt[1] * px).sum()
+    b = np.array([(jx[0] * dx + jx[1] * dy).sum(), (jy[0] * dx + jy[1] * dy).sum(), (jt[0] * dx + jt[1] * dy).sum()])
+    return A, b
+
+
+def svd_fit(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, float]:
+    """Closed-form rigid motion (x, y, theta) minimising sum |dst - (R src + t)|^2 (Arun et al. 1987)."""
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    H = (src - ms).T @ (dst - md)
+    U, _, Vt = np.linalg.svd(H)
+    R = Vt.T @ U.T
+    if np.linalg.det(R) < 0:  # reflection: flip the weakest axis
+        Vt[1] *= -1.0
+        R = Vt.T @ U.T
+    t = md - R @ ms
+    return float(t[0]), float(t[1]), float(np.arctan2(R[1, 0], R[0, 0]))

@@ -1,0 +1,145 @@
+"""Parameter dataclasses: one frozen dataclass per matcher, fields carrying unit, bounds and help.
+
+Every front end (CLI ``--params`` TOML files, the viser panel, the docs) is generated from the
+field metadata declared with :func:`param`, so there is one source of truth.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+
+class ParamError(ValueError):
+    """A parameter value outside its declared type or bounds."""
+
+    def __init__(self, name: str, message: str):
+        super().__init__(f"parameter {name!r}: {message}")
+        self.name = name
+
+
+def param(default, *, unit: str, lo: float | None = None, hi: float | None = None, help: str):
+    """A dataclass field with unit ('m', 'rad', '1', 'count', 'bool'), closed bounds and a help line."""
+    return dataclasses.field(default=default, metadata={"unit": unit, "lo": lo, "hi": hi, "help": help})
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    name: str
+    type: type
+    default: Any
+    unit: str
+    lo: float | None
+    hi: float | None
+    help: str
+
+
+def field_specs(cls) -> list[FieldSpec]:
+    """The declared parameters of a parameter dataclass, in declaration order."""
+    out = []
+    for f in dataclasses.fields(cls):
+        m = f.metadata
+        out.append(FieldSpec(f.name, type(f.default), f.default, m["unit"], m["lo"], m["hi"], m["help"]))
+    return out
+
+
+def check_value(spec: FieldSpec, value) -> Any:
+    """The value converted to the field's type, or ParamError naming the field."""
+    if spec.type is bool:
+        if not isinstance(value, bool):
+            raise ParamError(spec.name, f"expected true or false, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParamError(spec.name, f"expected a number, got {value!r}")
+    if spec.type is int:
+        if isinstance(value, float) and not value.is_integer():
+            raise ParamError(spec.name, f"expected a whole number, got {value!r}")
+        value = int(value)
+    else:
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParamError(spec.name, f"must be finite, got {value!r}")
+    if spec.lo is not None and value < spec.lo:
+        raise ParamError(spec.name, f"{value!r} is below the minimum {spec.lo} {spec.unit}")
+    if spec.hi is not None and value > spec.hi:
+        raise ParamError(spec.name, f"{value!r} is above the maximum {spec.hi} {spec.unit}")
+    return value
+
+
+class Params:
+    """Mixin for the parameter dataclasses: validation on construction, typed copies."""
+
+    def __post_init__(self):
+        for spec in field_specs(type(self)):
+            object.__setattr__(self, spec.name, check_value(spec, getattr(self, spec.name)))
+
+    def replace(self, **changes):
+        unknown = set(changes) - {s.name for s in field_specs(type(self))}
+        if unknown:
+            raise ParamError(sorted(unknown)[0], f"unknown parameter for {type(self).__name__}")
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class IcpParams(Params):
+    """Point-to-point ICP with Euclidean closest points and the closed-form SVD fit (paper 000 §2.1)."""
+
+    max_correspondence_dist: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
+        help="pairs farther apart than this are not used")
+    filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
+        help="fraction of the closest pairs kept each iteration (trimmed ICP)")
+    MaxIter: int = param(100, unit="count", lo=1, hi=10000, help="maximum number of iterations")
+    errx_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="stop when |dx| of the increment is below this")
+    erry_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="stop when |dy| of the increment is below this")
+    errt_out: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="stop when |dtheta| of the increment is below this")
+    AsocError: float = param(0.1, unit="1", lo=0.0, hi=1.0,
+        help="fail when fewer than this fraction of object points find a pair")
+
+
+@dataclass(frozen=True)
+class MbicpParams(Params):
+    """MbICP (Minguez, Lamiraux & Montesano, T-RO 2006). Names as in the original C code."""
+
+    L: float = param(3.0, unit="m", lo=1e-3, hi=100.0,
+        help="metric length: ||q|| = sqrt(x^2 + y^2 + L^2 theta^2); large L tends to plain ICP")
+    Bw: float = param(math.radians(45.0), unit="rad", lo=math.radians(0.1), hi=math.pi,
+        help="angular window: reference points within +/-Bw of an object point's bearing are candidates")
+    Br: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
+        help="radial window: pairs with a metric distance above Br are discarded")
+    laserStep: int = param(1, unit="count", lo=1, hi=100, help="use every laserStep-th object point")
+    MaxDistInter: float = param(0.5, unit="m", lo=0.0, hi=100.0,
+        help="interpolate only between consecutive reference points closer than this")
+    filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
+        help="fraction of the best pairs kept each iteration (trimmed estimator)")
+    ProjectionFilter: bool = param(True, unit="bool",
+        help="drop object points hidden from the reference viewpoint (Lu & Milios)")
+    AsocError: float = param(0.1, unit="1", lo=0.0, hi=1.0,
+        help="fail when fewer than this fraction of object points find a pair")
+    MaxIter: int = param(100, unit="count", lo=1, hi=10000, help="maximum number of iterations")
+    errorRatio: float = param(1e-4, unit="1", lo=0.0, hi=1.0,
+        help="an iteration counts as converged when |1 - error/previous error| is below this")
+    errx_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="... or when |dx| of the increment is below this")
+    erry_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="... and |dy| below this")
+    errt_out: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="... and |dtheta| below this")
+    IterSmoothConv: int = param(2, unit="count", lo=0, hi=100,
+        help="stop after more than this many consecutive converged iterations")
+
+
+@dataclass(frozen=True)
+class ImprovedParams(MbicpParams):
+    """Improved MbICP (Li et al. 2018, paper 000): MbICP plus three switchable additions."""
+
+    resample: bool = param(True, unit="bool", help="grid resampling of the object scan (paper 000 §2.3)")
+    cell_size: float = param(0.1, unit="m", lo=0.005, hi=10.0, help="grid cell side for resampling (§2.3)")
+    point_line: bool = param(True, unit="bool",
+        help="point-to-point + point-to-line correspondences for shared targets (§2.4.1)")
+    mad_rejection: bool = param(True, unit="bool",
+        help="reject pairs above median + k*MAD of the distances (§2.4.2); replaces 'filter' when on")
+    mad_k: float = param(2.0, unit="1", lo=0.0, hi=100.0, help="k in the rejection threshold median + k*MAD (eq. 5)")
+    mad_floor: float = param(0.1, unit="m", lo=0.0, hi=100.0,
+        help="never reject a pair closer than this (0: the paper's rule as published)")

@@ -1,0 +1,136 @@
+"""Laser scans: ranges at bearings, with a validity mask.
+
+Invalid readings (no return, NaN, inf, outside [range_min, range_max]) are masked and
+never turned into points. Bearings are in the sensor frame, strictly increasing, in radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .se2 import Pose2
+
+
+class ScanError(ValueError):
+    """A scan that cannot be matched (empty, all invalid, inconsistent arrays)."""
+
+    def __init__(self, source: "ScanSource", reason: str):
+        super().__init__(f"{source}: {reason}")
+        self.source, self.reason = source, reason
+
+
+@dataclass(frozen=True)
+class ScanSource:
+    """Where a scan came from, so every message can name it."""
+
+    path: str = "<memory>"
+    index: int = 0
+    line: int | None = None
+
+    def __str__(self) -> str:
+        where = f"{self.path}: scan {self.index}"
+        return f"{where} (line {self.line})" if self.line is not None else where
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """One 2-D laser scan.
+
+    ``pose`` is the pose of the sensor frame in the log's world frame when the log stores one
+    (corrected or estimated), ``odometry`` the raw odometry pose in the odometry frame.
+    """
+
+    ranges: np.ndarray  # (N,) metres; invalid entries may hold anything
+    bearings: np.ndarray  # (N,) radians, strictly increasing, sensor frame
+    valid: np.ndarray  # (N,) bool
+    pose: Pose2 | None = None
+    odometry: Pose2 | None = None
+    stamp: float | None = None  # seconds
+    source: ScanSource = field(default_factory=ScanSource)
+
+    @property
+    def n_valid(self) -> int:
+        return int(np.count_nonzero(self.valid))
+
+    def points(self) -> np.ndarray:
+        """(M, 2) Cartesian points of the valid readings, in scan order, sensor frame."""
+        r, b = self.ranges[self.valid], self.bearings[self.valid]
+        return np.column_stack((r * np.cos(b), r * np.sin(b)))
+
+    def valid_indices(self) -> np.ndarray:
+        return np.flatnonzero(self.valid)
+
+    def angular_span(self) -> float:
+        return float(self.bearings[-1] - self.bearings[0]) if len(self.bearings) else 0.0
+
+    def is_full_circle(self) -> bool:
+        """True when the beams cover the whole circle (wrap-around neighbours exist)."""
+        n = len(self.bearings)
+        if n < 2:
+            return False
+        step = self.angular_span() / (n - 1)
+        return self.angular_span() + 1.5 * step >= 2.0 * np.pi
+
+
+def make_scan(
+    ranges,
+    bearings,
+    *,
+    range_min: float = 0.0,
+    range_max: float = np.inf,
+    invalid_values: tuple[tuple[float, float], ...] = (),
+    valid=None,
+    pose: Pose2 | None = None,
+    odometry: Pose2 | None = None,
+    stamp: float | None = None,
+    source: ScanSource | None = None,
+) -> Scan:
+    """Build a checked Scan.
+
+    ``invalid_values`` lists closed intervals of no-return codes (e.g. SICK's 81.83-81.91 m).
+    A reading is valid when it is finite, strictly above ``range_min`` (and 0), strictly below
+    ``range_max`` and outside every no-return interval. Raises ScanError when nothing is valid.
+    """
+    source = source or ScanSource()
+    r = np.asarray(ranges, dtype=float).reshape(-1)
+    b = np.asarray(bearings, dtype=float).reshape(-1)
+    if r.shape != b.shape:
+        raise ScanError(source, f"{len(r)} ranges but {len(b)} bearings")
+    if len(r) == 0:
+        raise ScanError(source, f"empty scan (no beams)")
+    if not np.all(np.isfinite(b)):
+        raise ScanError(source, f"bearings contain NaN or inf")
+    if len(b) > 1 and not np.all(np.diff(b) > 0):
+        raise ScanError(source, f"bearings must be strictly increasing")
+    if b[-1] - b[0] > 2.0 * np.pi + 1e-9:
+        raise ScanError(source, f"bearings span more than 360 degrees")
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(r) & (r > max(range_min, 0.0)) & (r < range_max)
+        for lo, hi in invalid_values:
+            ok &= ~((r >= lo) & (r <= hi))
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool).reshape(-1)
+    if not ok.any():
+        raise ScanError(source, f"no valid reading among {len(r)} beams")
+    return Scan(r, b, ok, pose, odometry, stamp, source)
+
+
+def uniform_bearings(n: int, start: float, increment: float) -> np.ndarray:
+    return start + increment * np.arange(n)
+
+
+def scan_from_points(points: np.ndarray, source: ScanSource | None = None) -> Scan:
+    """A scan whose beams hit the given sensor-frame points (sorted by bearing).
+
+    Used to build test and teaching pairs (e.g. a scan with a block of points removed);
+    duplicate bearings are dropped so that bearings stay strictly increasing.
+    """
+    pts = np.asarray(points, dtype=float)
+    b = np.arctan2(pts[:, 1], pts[:, 0])
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    order = np.argsort(b, kind="stable")
+    b, r = b[order], r[order]
+    keep = np.concatenate(([True], np.diff(b) > 0))
+    return make_scan(r[keep], b[keep], source=source)

@@ -1,0 +1,77 @@
+"""SE(2) poses: rigid motions of the plane.
+
+A ``Pose2`` ``T_a_b`` maps points given in frame ``b`` into frame ``a``:
+``p_a = R(theta) p_b + (x, y)``. Composition follows the frame names,
+``T_a_c = T_a_b @ T_b_c``. Metres and radians throughout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def wrap_angle(theta: float | np.ndarray) -> float | np.ndarray:
+    """Angle(s) wrapped into [-pi, pi)."""
+    return (theta + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@dataclass(frozen=True)
+class Pose2:
+    """Rigid motion (x [m], y [m], theta [rad]) mapping child-frame points into the parent frame."""
+
+    x: float = 0.0
+    y: float = 0.0
+    theta: float = 0.0
+
+    @staticmethod
+    def identity() -> "Pose2":
+        return Pose2(0.0, 0.0, 0.0)
+
+    @staticmethod
+    def from_array(v) -> "Pose2":
+        x, y, t = (float(c) for c in v)
+        return Pose2(x, y, wrap_angle(t))
+
+    def as_array(self) -> np.ndarray:
+        return np.array([self.x, self.y, self.theta])
+
+    def rotation(self) -> np.ndarray:
+        c, s = np.cos(self.theta), np.sin(self.theta)
+        return np.array([[c, -s], [s, c]])
+
+    def __matmul__(self, other: "Pose2") -> "Pose2":
+        c, s = np.cos(self.theta), np.sin(self.theta)
+        return Pose2(
+            self.x + c * other.x - s * other.y,
+            self.y + s * other.x + c * other.y,
+            wrap_angle(self.theta + other.theta),
+        )
+
+    def inverse(self) -> "Pose2":
+        c, s = np.cos(self.theta), np.sin(self.theta)
+        return Pose2(-c * self.x - s * self.y, s * self.x - c * self.y, wrap_angle(-self.theta))
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Map an (N, 2) array of child-frame points into the parent frame."""
+        c, s = np.cos(self.theta), np.sin(self.theta)
+        px, py = points[:, 0], points[:, 1]
+        return np.column_stack((c * px - s * py + self.x, s * px + c * py + self.y))
+
+    def translation_norm(self) -> float:
+        return float(np.hypot(self.x, self.y))
+
+    def __str__(self) -> str:
+        return f"(x={self.x:+.4f} m, y={self.y:+.4f} m, theta={np.degrees(self.theta):+.3f} deg)"
+
+
+def relative(a: Pose2, b: Pose2) -> Pose2:
+    """``a^-1 @ b``: pose of frame ``b`` seen from frame ``a`` when both are given in a common frame."""
+    return a.inverse() @ b
+
+
+def pose_error(estimate: Pose2, truth: Pose2) -> tuple[float, float]:
+    """Translation error [m] and absolute rotation error [rad] of ``estimate`` against ``truth``."""
+    d = relative(truth, estimate)
+    return d.translation_norm(), abs(d.theta)

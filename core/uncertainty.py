@@ -1,0 +1,68 @@
+"""Covariance and degeneracy of a finished match."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .metric import linearised_jacobians
+from .result import Degeneracy, MatchResult, Termination
+from .se2 import Pose2
+
+
+def covariance(A: np.ndarray, error: float, n_pairs: int) -> np.ndarray | None:
+    """sigma^2 A^-1 with sigma^2 the residual per degree of freedom (n_pairs pairs, 3 unknowns).
+
+    A is the matcher's final normal matrix; ``error`` the mean squared residual per pair.
+    """
+    if n_pairs <= 3:
+        return None
+    try:
+        inv = np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        return None
+    sigma2 = error * n_pairs / (2 * n_pairs - 3)  # two scalar residuals per pair
+    return sigma2 * inv
+
+
+def degeneracy(targets: np.ndarray, tangents: np.ndarray, L: float) -> Degeneracy | None:
+    """Point-to-line information of the final pairs, in (x, y, L*theta) (see ``Degeneracy``).
+
+    ``tangents`` are the reference surface directions at the targets; the normal n_i is their
+    perpendicular, and each pair constrains n_i^T J_i q only: motion along a wall is free.
+    """
+    if len(targets) < 3:
+        return None
+    n = np.column_stack((-tangents[:, 1], tangents[:, 0]))
+    J = linearised_jacobians(targets)
+    J[:, :, 2] /= L  # coordinates (x, y, L*theta)
+    rows = np.einsum("ij,ijk->ik", n, J)  # n_i^T J_i, (N, 3)
+    H = rows.T @ rows
+    w, V = np.linalg.eigh(H)
+    w = np.maximum(w, 0.0)
+    cond = float(w[-1] / w[0]) if w[0] > 1e-12 * max(w[-1], 1e-300) else float("inf")
+    v = V[:, 0] * (1 if V[np.argmax(np.abs(V[:, 0])), 0] >= 0 else -1)
+    return Degeneracy(cond, tuple(float(c) for c in v), tuple(float(c) for c in w))
+
+
+@dataclass(frozen=True, eq=False)
+class FinalSystem:
+    """What the last successful iteration leaves for the result's covariance and degeneracy."""
+
+    A: np.ndarray  # (3, 3) normal matrix in (x, y, theta)
+    error: float  # mean squared residual per kept pair [m^2]
+    targets: np.ndarray  # (K, 2) kept targets, reference frame
+    ref_index: np.ndarray  # (K,) reference point of each kept target
+    n_kept: int
+    n_rejected: int
+
+
+def build_result(name: str, est: Pose2, reason: Termination, iterations: int, last: FinalSystem | None,
+                 tangents: np.ndarray, L: float) -> MatchResult:
+    """The MatchResult of a finished loop (``tangents``: the reference surface directions)."""
+    if last is None:
+        return MatchResult(name, est, False, reason, iterations, float("nan"), 0, 0, None, None)
+    return MatchResult(
+        name, est, reason is Termination.CONVERGED, reason, iterations, last.error, last.n_kept, last.n_rejected,
+        covariance(last.A, last.error, last.n_kept), degeneracy(last.targets, tangents[last.ref_index], L))

@@ -1,0 +1,58 @@
+"""``bench``: time per match on consecutive pairs of a log, events off and with a recording observer."""
+
+from __future__ import annotations
+
+import platform
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from core import Params, Recorder, match
+
+from .inputs import consecutive_pairs, stored_guess
+from .readers import ScanLog
+
+
+@dataclass(frozen=True)
+class Timing:
+    label: str
+    times_ms: np.ndarray
+
+    @property
+    def median(self) -> float:
+        return float(np.median(self.times_ms))
+
+    @property
+    def p90(self) -> float:
+        return float(np.percentile(self.times_ms, 90))
+
+    def line(self) -> str:
+        return (f"{self.label:<22} median {self.median:7.2f} ms   p90 {self.p90:7.2f} ms   "
+                f"{1000.0 / self.median:8.1f} matches/s   ({len(self.times_ms)} matches)")
+
+
+def time_matches(log: ScanLog, params: Params, pairs, observe: bool, repeat: int) -> np.ndarray:
+    out = []
+    for i, j in pairs:
+        ref, obj = log.scans[i], log.scans[j]
+        guess, _ = stored_guess(ref, obj)
+        for _ in range(repeat):
+            obs = Recorder() if observe else None
+            t0 = time.perf_counter()
+            match(ref, obj, guess, params, obs)
+            out.append(1000.0 * (time.perf_counter() - t0))
+    return np.array(out)
+
+
+def bench(log: ScanLog, params: Params, limit: int | None, repeat: int) -> list[Timing]:
+    pairs = consecutive_pairs(log, limit)
+    time_matches(log, params, pairs[:3], False, 1)  # warm caches and imports
+    return [Timing("events off", time_matches(log, params, pairs, False, repeat)),
+            Timing("recording observer", time_matches(log, params, pairs, True, repeat))]
+
+
+def machine_line() -> str:
+    import os
+
+    return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"

@@ -1,0 +1,163 @@
+"""The ``mbicp-viz`` command line. Thin glue: every command calls a function of the package."""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from core import MATCHERS, ParamError, Recorder, ScanError, match
+
+from .errors import InputError
+
+app = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
+                  help="Visual debugger and teaching tool for 2-D laser scan matching (ICP, MbICP, improved MbICP).")
+eval_app = typer.Typer(no_args_is_help=True, help="Evaluate matchers on whole logs.")
+app.add_typer(eval_app, name="eval")
+
+ALGOS = ", ".join(MATCHERS)
+AlgoOpt = Annotated[str, typer.Option("--algo", help=f"matcher: {ALGOS}")]
+ParamsOpt = Annotated[Optional[Path], typer.Option("--params", help="TOML file of matcher parameters")]
+PairOpt = Annotated[Optional[tuple[int, int]], typer.Option("--pair", help="scan indices I J of one log (ref obj)")]
+InitOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
+    "--init", help="initial guess X Y THETA_DEG: object frame in the reference frame (m, m, deg)")]
+EXAMPLES = Path(__file__).parent / "examples"
+DEMO_LOG = EXAMPLES / "intel-excerpt.log.gz"
+
+
+def user_errors(fn):
+    """Bad input ends in one readable line on stderr and exit code 2, never a traceback."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except (InputError, ScanError, ParamError) as e:
+            typer.echo(f"mbicp-viz: error: {e}", err=True)
+            raise typer.Exit(2) from None
+
+    return wrapper
+
+
+def _print_match(ref, obj, guess, params, label: str, as_json: bool, indices=(0, 0)) -> None:
+    from .report import ITERATION_HEADER, iteration_line, result_lines
+    from .sequence import result_row
+
+    rec = None if as_json else Recorder()
+    t0 = time.perf_counter()
+    result = match(ref, obj, guess, params, rec)
+    ms = 1000.0 * (time.perf_counter() - t0)
+    if as_json:
+        typer.echo(json.dumps(result_row(*indices, result, ms) | result.as_dict()))
+        return
+    typer.echo(f"{label}\ninitial guess {guess}\n")
+    typer.echo(ITERATION_HEADER)
+    for e in rec.iterations:
+        typer.echo(iteration_line(e))
+    typer.echo("")
+    for line in result_lines(result):
+        typer.echo(line)
+    typer.echo(f"time        {ms:.1f} ms (with the recording observer)")
+
+
+@app.command("match")
+@user_errors
+def match_cmd(
+    first: Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")],
+    second: Annotated[Optional[str], typer.Argument(help="object scan file")] = None,
+    pair: PairOpt = None,
+    algo: AlgoOpt = "improved",
+    init: InitOpt = None,
+    params: ParamsOpt = None,
+    as_json: Annotated[bool, typer.Option("--json", help="print one JSON object with the result fields")] = False,
+):
+    """Match two scans and show every iteration."""
+    from .inputs import guess_from_deg, load_pair, make_params, stored_guess
+
+    p = make_params(algo, str(params) if params else None)
+    sp = load_pair(first, second, pair)
+    guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
+    _print_match(sp.ref, sp.obj, guess, p, sp.label, as_json, pair or (0, 0) if second else pair or (0, 1))
+
+
+@app.command()
+@user_errors
+def demo(algo: AlgoOpt = "improved", pair: PairOpt = (11, 12)):
+    """Match a bundled real pair (Intel Research Lab) from the identity guess and show every iteration."""
+    from core import Pose2
+
+    from .inputs import load_pair, make_params
+
+    sp = load_pair(str(DEMO_LOG), None, pair)
+    _print_match(sp.ref, sp.obj, Pose2(), make_params(algo, None), sp.label + " (bundled example)", False)
+
+
+@eval_app.command("sequence")
+@user_errors
+def eval_sequence(
+    log: Annotated[str, typer.Argument(help="scan log")],
+    out: Annotated[Path, typer.Option("--out", help="JSON file: one object per consecutive pair")],
+    algo: AlgoOpt = "improved",
+    params: ParamsOpt = None,
+    limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="match only the first N pairs")] = None,
+):
+    """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
+    from .inputs import make_params
+    from .readers import read_log
+    from .sequence import match_sequence
+
+    p = make_params(algo, str(params) if params else None)
+    rows = match_sequence(read_log(log), p, limit)
+    out.write_text(json.dumps(rows, indent=1) + "\n")
+    conv = sum(r["converged"] for r in rows)
+    typer.echo(f"{len(rows)} pairs matched with {algo}: {conv} converged; written to {out}")
+
+
+@app.command("bench")
+@user_errors
+def bench_cmd(
+    log: Annotated[str, typer.Argument(help="scan log")],
+    algo: AlgoOpt = "improved",
+    params: ParamsOpt = None,
+    limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs to time")] = 50,
+    repeat: Annotated[int, typer.Option("--repeat", min=1, help="runs per pair")] = 3,
+):
+    """Time per match on consecutive pairs: median, p90, matches per second; events off and on."""
+    from .bench import bench, machine_line
+    from .inputs import make_params
+    from .readers import read_log
+
+    lg = read_log(log)
+    typer.echo(f"{algo} on {log}: {len(lg.scans[0].ranges)} beams; {machine_line()}")
+    timings = bench(lg, make_params(algo, str(params) if params else None), limit, repeat)
+    for t in timings:
+        typer.echo(t.line())
+    typer.echo(f"observer overhead      {100.0 * (timings[1].median / timings[0].median - 1.0):+.0f} % (median)")
+
+
+@app.command("params")
+@user_errors
+def params_cmd(algo: AlgoOpt = "improved",
+               out: Annotated[Optional[Path], typer.Option("--out", help="write to this file")] = None):
+    """Print (or write) the default parameters of a matcher as a TOML file for --params."""
+    from .inputs import make_params
+    from .params_io import params_to_toml
+
+    text = params_to_toml(make_params(algo, None))
+    if out:
+        out.write_text(text)
+    else:
+        typer.echo(text, nl=False)
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

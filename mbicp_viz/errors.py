@@ -1,0 +1,13 @@
+"""The one error type users see: where (file, line, field) and what."""
+
+from __future__ import annotations
+
+
+class InputError(Exception):
+    """Bad input, reported as one line ``file:line: field: message`` and exit code 2."""
+
+    def __init__(self, message: str, path: str | None = None, line: int | None = None, field: str | None = None):
+        self.path, self.line, self.field, self.message = path, line, field, message
+        where = ":".join(str(p) for p in (path, line) if p is not None)
+        text = f"{field}: {message}" if field else message
+        super().__init__(f"{where}: {text}" if where else text)
