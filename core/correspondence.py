@@ -222,15 +222,16 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, B
     return Pairs(rows, target, kind, ref_index, np.sqrt(d2))
 
 
-def visible_from_reference(moved: np.ndarray, bin_width: float, margin: float) -> np.ndarray:
+def visible_from_reference(moved: np.ndarray, bin_start: float, bin_width: float, margin: float) -> np.ndarray:
     """Projection filter (Lu & Milios 1997, used by MbICP): which moved points the reference sees.
 
     A z-buffer over bearing bins of the reference viewpoint: in each bin only points within
-    ``margin`` of the nearest one are visible; points behind a closer surface are hidden.
+    ``margin`` of the nearest one are visible; points behind a closer surface are hidden. Bins
+    start at the reference scan's first bearing so that turning the scanner turns the bins.
     """
     alpha = np.arctan2(moved[:, 1], moved[:, 0])
     r = np.hypot(moved[:, 0], moved[:, 1])
-    bins = np.floor((alpha + np.pi) / bin_width).astype(np.int64)
+    bins = np.floor(((alpha - bin_start) % (2 * np.pi)) / bin_width).astype(np.int64)
     order = np.lexsort((r, bins))
     sb = bins[order]
     starts = np.flatnonzero(np.concatenate(([True], sb[1:] != sb[:-1])))

@@ -52,7 +52,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     for it in range(1, params.MaxIter + 1):
         moved = est.apply(P)
         if params.ProjectionFilter:
-            vis = visible_from_reference(moved, bin_width, PROJECTION_MARGIN_M)
+            vis = visible_from_reference(moved, R.bearings[0], bin_width, PROJECTION_MARGIN_M)
             rows = all_rows[vis]
         else:
             rows = all_rows

@@ -1,0 +1,26 @@
+from pathlib import Path
+
+import pytest
+
+from mbicp_viz.readers import read_log
+
+DATA = Path(__file__).parent / "data"
+EXAMPLES = Path(__file__).parent.parent / "mbicp_viz" / "examples"
+INTEL = EXAMPLES / "intel-excerpt.log.gz"
+LASERAZOS = DATA / "laserazosSM3-40.log"
+HOKUYO_BAG = DATA / "hokuyo-demo.bag"
+
+
+@pytest.fixture(scope="session")
+def intel():
+    return read_log(INTEL)
+
+
+@pytest.fixture(scope="session")
+def laserazos():
+    return read_log(LASERAZOS)
+
+
+@pytest.fixture(scope="session")
+def hokuyo():
+    return read_log(HOKUYO_BAG)

@@ -1,0 +1,88 @@
+"""MbICP's metric distance and least squares; paper 000's MAD rejection; the SVD fit."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from core import PairStatus
+from core.metric import (mad_threshold, metric_distance_sq, metric_exact_sq, metric_normal_equations,
+                         svd_fit)
+from core.rejection import reject
+
+# Paper 000 §2.4.2, Figure 9: 21 correspondence distances.
+PAPER_DISTANCES = np.array([12.281, 12.270, 12.712, 11.932, 11.053, 10.768, 11.077, 11.685, 6.393, 6.001, 5.549,
+                            38.760, 86.305, 34.497, 2.988, 3.227, 1.297, 3.539, 6.409, 12.477, 12.381])
+
+
+def test_paper_mad_example():
+    assert np.median(PAPER_DISTANCES) == pytest.approx(11.07, abs=0.01)
+    status, thr = reject(PAPER_DISTANCES, max_dist=1e9, keep_fraction=1.0, mad_k=2.0)
+    rejected = PAPER_DISTANCES[status == PairStatus.MAD]
+    assert sorted(rejected) == [34.497, 38.760, 86.305]
+    assert thr == pytest.approx(mad_threshold(PAPER_DISTANCES, 2.0))
+
+
+def test_mean_plus_two_sigma_rejects_only_the_largest():
+    # The paper's contrast: mean + n*sigma is distorted by the outliers themselves.
+    thr = PAPER_DISTANCES.mean() + 2 * PAPER_DISTANCES.std()
+    assert list(PAPER_DISTANCES[PAPER_DISTANCES > thr]) == [86.305]
+
+
+def test_mad_floor_never_rejects_close_pairs():
+    d = np.array([0.0, 0.0, 0.0, 0.0, 0.05])
+    status, thr = reject(d, 1.0, 1.0, mad_k=2.0, mad_floor=0.1)
+    assert thr == pytest.approx(0.1) and np.all(status == PairStatus.KEPT)
+
+
+def test_trimming_keeps_the_best_fraction():
+    d = np.arange(20, dtype=float)
+    status, thr = reject(d, max_dist=100.0, keep_fraction=0.75)
+    assert np.count_nonzero(status == PairStatus.KEPT) == 15
+    assert np.all(status[15:] == PairStatus.TRIMMED) and thr == 15.0
+
+
+small = st.floats(-0.05, 0.05, allow_nan=False)
+far = st.floats(-8.0, 8.0, allow_nan=False)
+
+
+@settings(max_examples=60, deadline=None)
+@given(far, far, small, small, st.floats(0.5, 5.0))
+def test_closed_form_matches_brute_force_minimisation(qx, qy, dx, dy, L):
+    """The linearised closed form (MbICP eq. 12) against min over (x, y, theta) of the norm."""
+    q = np.array([qx, qy])
+    p = q + np.array([dx, dy])
+    exact = metric_exact_sq(q, p, L)
+    approx = metric_distance_sq(p, q, L)
+    # linearisation error is second order in the (small) motion
+    assert approx == pytest.approx(exact, rel=0.05, abs=1e-6)
+    assert approx <= np.dot(p - q, p - q) + 1e-12  # never above the Euclidean distance
+
+
+def test_metric_is_euclidean_along_the_ray_and_shrinks_across_it():
+    q = np.array([4.0, 0.0])
+    L = 3.0
+    assert metric_distance_sq(q + [0.1, 0.0], q, L) == pytest.approx(0.01)
+    # across the ray: scaled by L^2 / (|q|^2 + L^2) (the ellipse of paper 000 Fig. 3)
+    assert metric_distance_sq(q + [0.0, 0.1], q, L) == pytest.approx(0.01 * 9 / 25, rel=1e-2)
+
+
+@settings(max_examples=40, deadline=None)
+@given(small, small, st.floats(-0.01, 0.01))
+def test_metric_least_squares_recovers_a_small_motion(x, y, t):
+    rng = np.random.default_rng(0)
+    p = rng.uniform(-5, 5, (50, 2))
+    c, s = np.cos(t), np.sin(t)
+    target = p @ np.array([[c, -s], [s, c]]).T + [x, y]
+    A, b = metric_normal_equations(p, target, 3.0)
+    q = np.linalg.solve(A, b)
+    np.testing.assert_allclose(q, [x, y, t], atol=5e-4)
+
+
+@given(st.floats(-3, 3), st.floats(-3, 3), st.floats(-np.pi + 0.01, np.pi - 0.01))
+def test_svd_fit_recovers_any_motion(x, y, t):
+    rng = np.random.default_rng(1)
+    p = rng.uniform(-5, 5, (30, 2))
+    c, s = np.cos(t), np.sin(t)
+    q = p @ np.array([[c, -s], [s, c]]).T + [x, y]
+    np.testing.assert_allclose(svd_fit(p, q), [x, y, t], atol=1e-8)

@@ -1,0 +1,144 @@
+"""Every reader on real files (excerpts shipped in tests/data and the package examples)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from mbicp_viz.readers import read_log, read_npz, write_npz
+
+from .conftest import DATA, HOKUYO_BAG
+
+
+def test_carmen_flaser_intel(intel):
+    assert len(intel) == 60 and intel.skipped == {}  # NEFF lines were cut from the excerpt
+    s = intel.scans[0]
+    assert len(s.ranges) == 180 and s.n_valid > 100
+    assert s.bearings[0] == pytest.approx(-math.pi / 2) and s.bearings[-1] == pytest.approx(math.pi / 2)
+    assert s.pose == s.odometry and s.pose.x == pytest.approx(0.600266)
+    assert s.source.line is not None and s.stamp == pytest.approx(32.9068)
+    assert len(intel.odometry) > 100  # ODOM lines
+    # no-return codes are masked, never points
+    assert not np.any((s.ranges[s.valid] > 81.8) & (s.ranges[s.valid] < 82.0))
+
+
+def test_carmen_aces_gz_masks_its_no_return_code():
+    log = read_log(DATA / "aces-10.log.gz")
+    assert len(log) == 10
+    all_r = np.concatenate([s.ranges for s in log.scans])
+    all_v = np.concatenate([s.valid for s in log.scans])
+    assert np.any(np.isclose(all_r, 50.0))  # the file has them...
+    assert not np.any(np.isclose(all_r[all_v], 50.0))  # ...and they are masked
+
+
+def test_carmen_361_beams_with_nan():
+    log = read_log(DATA / "laserazosSM3-40.log")
+    s = log.scans[0]
+    assert len(log) == 40 and len(s.ranges) == 361
+    assert s.bearings[1] - s.bearings[0] == pytest.approx(math.radians(0.5))
+    assert np.all(np.isfinite(s.points()))
+
+
+def test_off_block_layout_matches_carmen_conversion():
+    off = read_log(DATA / "laserazosSM3-6.off")
+    log = read_log(DATA / "laserazosSM3-40.log")
+    assert len(off) == 6
+    for a, b in zip(off.scans, log.scans):
+        np.testing.assert_array_equal(a.valid, b.valid)
+        np.testing.assert_allclose(a.ranges[a.valid], b.ranges[b.valid])
+        assert a.odometry.as_array() == pytest.approx(b.odometry.as_array(), abs=1e-6)
+
+
+def test_off_one_scan_per_line():
+    log = read_log(DATA / "datos.off")
+    assert len(log) == 2 and len(log.scans[0].ranges) == 361
+
+
+def test_csm_json_full_circle():
+    log = read_log(DATA / "stallo2.jsonl")
+    s = log.scans[0]
+    assert len(log) == 2 and len(s.ranges) == 1024
+    assert s.is_full_circle()
+    assert s.odometry is not None and s.pose is None  # estimate and true_pose are null
+
+
+def test_ros1_bag_with_damaged_index_is_recovered(hokuyo):
+    from rosbags.highlevel import AnyReader
+
+    with pytest.raises(Exception):  # rosbags itself refuses this bag
+        with AnyReader([HOKUYO_BAG]) as r:
+            list(r.messages())
+    assert len(hokuyo) == 360
+    s = hokuyo.scans[0]
+    assert len(s.ranges) == 681 and s.n_valid > 500
+    assert s.bearings[-1] - s.bearings[0] == pytest.approx(math.radians(239), abs=0.01)
+    assert np.all(s.ranges[s.valid] < 5.6)
+    stamps = [x.stamp for x in hokuyo.scans]
+    assert np.all(np.diff(stamps) > 0)
+
+
+def _write_bag(path, scans, version):
+    """Write real scans into a bag with rosbags' own writer (ROS 1 or ROS 2)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC if version == 1 else Stores.ROS2_HUMBLE)
+    LaserScan = store.types["sensor_msgs/msg/LaserScan"]
+    Header = store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+
+    def msg(s, k):
+        sec = int(s.stamp)
+        head = Header(seq=k, stamp=Time(sec=sec, nanosec=int((s.stamp - sec) * 1e9)), frame_id="laser") \
+            if version == 1 else Header(stamp=Time(sec=sec, nanosec=int((s.stamp - sec) * 1e9)), frame_id="laser")
+        inc = float(s.bearings[1] - s.bearings[0])
+        return LaserScan(header=head, angle_min=float(s.bearings[0]), angle_max=float(s.bearings[-1]),
+                         angle_increment=inc, time_increment=0.0, scan_time=0.1, range_min=0.02, range_max=5.6,
+                         ranges=np.where(s.valid, s.ranges, 0.0).astype(np.float32),
+                         intensities=np.zeros(0, np.float32))
+
+    if version == 1:
+        from rosbags.rosbag1 import Writer
+
+        with Writer(path) as w:
+            conn = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=store)
+            for k, s in enumerate(scans):
+                w.write(conn, int(s.stamp * 1e9), store.serialize_ros1(msg(s, k), "sensor_msgs/msg/LaserScan"))
+    else:
+        from rosbags.rosbag2 import Writer
+
+        with Writer(path, version=8) as w:
+            conn = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=store)
+            for k, s in enumerate(scans):
+                w.write(conn, int(s.stamp * 1e9), store.serialize_cdr(msg(s, k), "sensor_msgs/msg/LaserScan"))
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_ros_bags_written_by_rosbags_round_trip(tmp_path, hokuyo, version):
+    scans = hokuyo.scans[:5]
+    path = tmp_path / ("scans.bag" if version == 1 else "scans_ros2")
+    _write_bag(path, scans, version)
+    log = read_log(path)
+    assert len(log) == 5
+    for a, b in zip(log.scans, scans):
+        np.testing.assert_array_equal(a.valid, b.valid)
+        np.testing.assert_allclose(a.ranges[a.valid], b.ranges[b.valid], rtol=1e-6)
+        np.testing.assert_allclose(a.bearings, b.bearings, atol=1e-6)
+
+
+def test_plain_text_and_npz_round_trip(tmp_path, intel):
+    scans = intel.scans[:3]
+    txt = tmp_path / "pair.scans"
+    lines = ["# mbicp-viz scans v1: angle_min_rad angle_increment_rad range_1_m ..."]
+    for s in scans:
+        r = np.where(s.valid, s.ranges, np.nan)
+        lines.append(" ".join([repr(float(s.bearings[0])), repr(float(s.bearings[1] - s.bearings[0]))]
+                              + [repr(float(v)) for v in r]))
+    txt.write_text("\n".join(lines) + "\n")
+    npz = tmp_path / "pair.npz"
+    write_npz(npz, scans)
+    for log in (read_log(txt), read_npz(str(npz))):
+        assert len(log) == 3
+        for a, b in zip(log.scans, scans):
+            np.testing.assert_array_equal(a.valid, b.valid)
+            np.testing.assert_allclose(a.points(), b.points(), atol=1e-9)
+    assert read_npz(str(npz)).scans[1].pose == scans[1].pose
