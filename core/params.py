@@ -86,23 +86,30 @@ class Params:
 
 
 @dataclass(frozen=True)
-class IcpParams(Params):
+class StopParams(Params):
+    """Stopping rules every iterative matcher shares (names as in MbICP's C code)."""
+
+    MaxIter: int = param(100, unit="count", lo=1, hi=10000, help="maximum number of iterations")
+    errx_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="an iteration counts as converged when |dx| of "
+                            "its increment is below this (and |dy|, |dtheta| below theirs)")
+    erry_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="... |dy| of the increment below this")
+    errt_out: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="... |dtheta| of the increment below this")
+    AsocError: float = param(0.1, unit="1", lo=0.0, hi=1.0,
+        help="fail when fewer than this fraction of object points find a pair")
+
+
+@dataclass(frozen=True)
+class IcpParams(StopParams):
     """Point-to-point ICP with Euclidean closest points and the closed-form SVD fit (paper 000 §2.1)."""
 
     max_correspondence_dist: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
         help="pairs farther apart than this are not used")
     filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
         help="fraction of the closest pairs kept each iteration (trimmed ICP)")
-    MaxIter: int = param(100, unit="count", lo=1, hi=10000, help="maximum number of iterations")
-    errx_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="stop when |dx| of the increment is below this")
-    erry_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="stop when |dy| of the increment is below this")
-    errt_out: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="stop when |dtheta| of the increment is below this")
-    AsocError: float = param(0.1, unit="1", lo=0.0, hi=1.0,
-        help="fail when fewer than this fraction of object points find a pair")
 
 
 @dataclass(frozen=True)
-class MbicpParams(Params):
+class MbicpParams(StopParams):
     """MbICP (Minguez, Lamiraux & Montesano, T-RO 2006). Names as in the original C code."""
 
     L: float = param(3.0, unit="m", lo=1e-3, hi=100.0,
@@ -118,14 +125,8 @@ class MbicpParams(Params):
         help="fraction of the best pairs kept each iteration (trimmed estimator)")
     ProjectionFilter: bool = param(True, unit="bool",
         help="drop object points hidden from the reference viewpoint (Lu & Milios)")
-    AsocError: float = param(0.1, unit="1", lo=0.0, hi=1.0,
-        help="fail when fewer than this fraction of object points find a pair")
-    MaxIter: int = param(100, unit="count", lo=1, hi=10000, help="maximum number of iterations")
     errorRatio: float = param(1e-4, unit="1", lo=0.0, hi=1.0,
-        help="an iteration counts as converged when |1 - error/previous error| is below this")
-    errx_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="... or when |dx| of the increment is below this")
-    erry_out: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="... and |dy| below this")
-    errt_out: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="... and |dtheta| below this")
+        help="an iteration also counts as converged when |1 - error/previous error| is below this")
     IterSmoothConv: int = param(2, unit="count", lo=0, hi=100,
         help="stop after more than this many consecutive converged iterations")
 
