@@ -64,7 +64,7 @@ class MatchResult:
             "iterations": self.iterations,
             "converged": self.converged,
             "reason": self.reason.value,
-            "error": self.error,
+            "error": self.error if np.isfinite(self.error) else None,  # strict JSON has no NaN
             "pairs_kept": self.pairs_kept,
             "pairs_rejected": self.pairs_rejected,
             "algorithm": self.algorithm,

@@ -82,7 +82,8 @@ def match_cmd(
     p = make_params(algo, str(params) if params else None)
     sp = load_pair(first, second, pair)
     guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
-    _print_match(sp.ref, sp.obj, guess, p, sp.label, as_json, pair or (0, 0) if second else pair or (0, 1))
+    indices = (0, 0) if second else (pair or (0, 1))  # scan index within each file
+    _print_match(sp.ref, sp.obj, guess, p, sp.label, as_json, indices)
 
 
 @app.command()
@@ -116,6 +117,34 @@ def eval_sequence(
     out.write_text(json.dumps(rows, indent=1) + "\n")
     conv = sum(r["converged"] for r in rows)
     typer.echo(f"{len(rows)} pairs matched with {algo}: {conv} converged; written to {out}")
+
+
+@eval_app.command("protocol")
+@user_errors
+def eval_protocol(
+    log: Annotated[str, typer.Argument(help="scan log")],
+    algo: AlgoOpt = "improved",
+    params: ParamsOpt = None,
+    cases: Annotated[int, typer.Option("--cases", min=1, help="number of random cases")] = 200,
+    seed: Annotated[int, typer.Option("--seed", help="random seed")] = 24,
+    max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, help="largest |x|, |y| of the guess [m]")] = 0.2,
+    max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
+                                                 help="largest |theta| of the guess [deg]")] = 45.0,
+):
+    """MbICP's own protocol: every case matches a scan against itself from a random guess."""
+    import math
+
+    from .inputs import make_params
+    from .protocols import displaced_self_matches
+    from .readers import read_log
+
+    p = make_params(algo, str(params) if params else None)
+    res = displaced_self_matches(read_log(log).scans, cases, p, seed, max_xy, math.radians(max_theta_deg))
+    ok = sum(c.error_m < 0.01 and c.error_rad < math.radians(0.1) for c in res)
+    gross = sum(c.error_m > 0.1 or c.error_rad > math.radians(3.0) for c in res)
+    its = sorted(c.iterations for c in res)
+    typer.echo(f"{algo}: {ok}/{cases} within 1 cm and 0.1 deg ({100.0 * ok / cases:.1f} %); {gross} off by more than "
+               f"0.1 m or 3 deg; median {its[len(its) // 2]} iterations")
 
 
 @app.command("bench")

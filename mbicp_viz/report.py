@@ -11,7 +11,7 @@ def result_lines(r: MatchResult) -> list[str]:
     lines = [
         f"algorithm   {r.algorithm}",
         f"pose        {r.pose}   (object frame in the reference frame)",
-        f"status      {'converged' if r.converged else 'NOT converged'} ({r.reason.value}) after {r.iterations} iterations",
+        f"status      {'converged' if r.converged else 'NOT converged: ' + r.reason.value} after {r.iterations} iterations",
         f"error       {r.error:.3e} m^2 mean squared residual; pairs kept {r.pairs_kept}, rejected {r.pairs_rejected}",
     ]
     if r.covariance is not None:

@@ -68,3 +68,15 @@ def test_params_file_round_trip(tmp_path, algo):
         assert getattr(loaded, s.name) == pytest.approx(getattr(defaults, s.name), rel=1e-12), s.name
     # and --params reads it
     ok("match", INTEL, "--pair", 1, 2, "--algo", algo, "--params", path, "--json")
+
+
+def test_failed_match_is_valid_json_with_its_reason():
+    out = ok("match", LASERAZOS, "--pair", 0, 1, "--algo", "mbicp", "--init", "40", "40", "0", "--json")
+    row = json.loads(out)  # strict: no NaN
+    assert row["converged"] is False and row["reason"] == "too_few_pairs" and row["error"] is None
+
+
+def test_eval_protocol_reports_the_success_rate():
+    out = ok("eval", "protocol", LASERAZOS, "--algo", "mbicp", "--params", DATA / "mbicp-protocol.toml",
+             "--cases", 20, "--seed", 3)
+    assert out.startswith("mbicp: 20/20 within 1 cm and 0.1 deg (100.0 %)")
