@@ -123,6 +123,16 @@ Event = Union[StartEvent, IterationEvent, FinishEvent]
 Observer = Callable[[Event], None]
 
 
+def broadcast(*observers: Observer) -> Observer:
+    """One observer that hands every event to each of ``observers`` in turn."""
+
+    def send(event: Event) -> None:
+        for o in observers:
+            o(event)
+
+    return send
+
+
 class Recorder:
     """An observer that keeps every event in memory (tests, front ends replaying a run)."""
 

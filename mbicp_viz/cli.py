@@ -26,6 +26,12 @@ ParamsOpt = Annotated[Optional[Path], typer.Option("--params", help="TOML file o
 PairOpt = Annotated[Optional[tuple[int, int]], typer.Option("--pair", help="scan indices I J of one log (ref obj)")]
 InitOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
     "--init", help="initial guess X Y THETA_DEG: object frame in the reference frame (m, m, deg)")]
+RrdOpt = Annotated[Optional[Path], typer.Option("--rrd", help="write the run to this rerun .rrd file")]
+TeachOpt = Annotated[bool, typer.Option("--teach", help="add teaching layers: iso-distance curves, distance histogram")]
+ConnectOpt = Annotated[Optional[str], typer.Option(
+    "--connect", help="stream into a running rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")]
+ServeOpt = Annotated[bool, typer.Option("--serve", help="serve rerun's web viewer on 127.0.0.1 with the run")]
+PortOpt = Annotated[int, typer.Option("--port", min=0, max=65535, help="web viewer port for --serve")]
 EXAMPLES = Path(__file__).parent / "examples"
 DEMO_LOG = EXAMPLES / "intel-excerpt.log.gz"
 
@@ -75,8 +81,13 @@ def match_cmd(
     init: InitOpt = None,
     params: ParamsOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object with the result fields")] = False,
+    rrd: RrdOpt = None,
+    teach: TeachOpt = False,
+    connect: ConnectOpt = None,
+    serve: ServeOpt = False,
+    port: PortOpt = 9090,
 ):
-    """Match two scans and show every iteration."""
+    """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from .inputs import guess_from_deg, load_pair, make_params, stored_guess
 
     p = make_params(algo, str(params) if params else None)
@@ -84,6 +95,24 @@ def match_cmd(
     guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
     indices = (0, 0) if second else (pair or (0, 1))  # scan index within each file
     _print_match(sp.ref, sp.obj, guess, p, sp.label, as_json, indices)
+    if rrd or connect or serve:
+        from .rrd import Run
+        _record([Run(algo, sp.ref, sp.obj, guess, p)], rrd, connect, serve, port, teach)
+
+
+def _record(runs, rrd, connect, serve, port, teach) -> None:
+    """Write the runs to an .rrd, stream them to a viewer, and/or serve them on 127.0.0.1."""
+    import tempfile
+
+    from .rrd import record, serve as serve_rrd
+
+    path = str(rrd) if rrd else (tempfile.mkdtemp(prefix="mbicp-viz-") + "/match.rrd" if serve else None)
+    record(runs, path, connect, teach)
+    if path:
+        typer.echo(f"recording written to {path} (open it with: rerun {path})", err=True)
+    if serve:
+        typer.echo(f"serving rerun's web viewer on http://127.0.0.1:{port} (Ctrl-C stops)", err=True)
+        serve_rrd(path, port)
 
 
 @app.command()

@@ -76,7 +76,7 @@ class Frame:
     pose: Pose2
 
 
-Layer = Union[Points, Segments, Boxes, Scalar, Text, Frame]
+Layer = Union["Points", "Segments", "Boxes", "Scalar", "Text", "Frame", "Strips"]
 
 # Paths, relative to a run's root; the front ends and the blueprint rely on them.
 SCANS = "scene"
@@ -85,9 +85,11 @@ LOG = "log"
 
 
 def ratio_colors(ratio: np.ndarray) -> np.ndarray:
-    """Cell colour by sampling ratio: pale for thinned near cells, saturated blue for kept far ones."""
+    """RGBA cell colour by sampling ratio: faint grey for thinned near cells, blue for kept far ones."""
     r = np.clip(ratio, 0.0, 1.0)[:, None]
-    return np.round((1 - r) * np.array([235, 235, 235]) + r * np.array(OBJECT)).astype(np.uint8)
+    rgb = (1 - r) * np.array([200, 200, 200]) + r * np.array(OBJECT)
+    alpha = 40 + 100 * r
+    return np.round(np.hstack((rgb, alpha))).astype(np.uint8)
 
 
 def start_layers(ev: StartEvent) -> list[Layer]:
@@ -153,3 +155,84 @@ def finish_layers(ev: FinishEvent) -> list[Layer]:
         text += (f"; condition number {r.degeneracy.condition_number:.1f}, weakest direction heading "
                  f"{r.degeneracy.weakest_heading_deg:+.0f} deg")
     return [Text(LOG, text, level), Frame(f"{SCANS}/estimate", r.pose)]
+
+
+# Teaching layers (switchable): paper 000 Fig. 3 and Fig. 9b.
+ISO_METRIC: RGB = (40, 90, 220)
+ISO_EUCLID: RGB = (220, 40, 40)
+HIST_BAR: RGB = (120, 120, 120)
+MEDIAN: RGB = (20, 20, 20)
+TEACH = "teaching"
+
+
+def metric_isocurve(p: np.ndarray, target: np.ndarray, L: float, n: int = 72) -> np.ndarray:
+    """The iso-distance curve of MbICP's metric through ``target`` around ``p`` (paper 000 Fig. 3).
+
+    d^2 = (delta . u)^2 + (delta . v)^2 L^2 / (|c|^2 + L^2) with u along the ray through c, v
+    across it (c = target, as in the distance the matcher scores): an ellipse with semi-axes d
+    along the ray and d sqrt(|c|^2 + L^2) / L across it.
+    """
+    c = np.asarray(target, float)
+    r2 = float(c @ c)
+    u = c / np.sqrt(r2) if r2 > 0 else np.array([1.0, 0.0])
+    v = np.array([-u[1], u[0]])
+    delta = np.asarray(p, float) - c
+    d = np.sqrt((delta @ u) ** 2 + (delta @ v) ** 2 * L * L / (r2 + L * L))
+    t = np.linspace(0, 2 * np.pi, n)
+    return c + np.outer(d * np.cos(t), u) + np.outer(d * np.sqrt(r2 + L * L) / L * np.sin(t), v)
+
+
+def circle(center: np.ndarray, radius: float, n: int = 72) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, n)
+    return np.asarray(center) + radius * np.column_stack((np.cos(t), np.sin(t)))
+
+
+@dataclass(frozen=True, eq=False)
+class Strips:
+    """Closed or open polylines (iso-curves, histogram bars)."""
+
+    path: str
+    strips: list[np.ndarray]
+    color: RGB
+    width: float
+
+
+def teaching_layers(start: StartEvent, ev: IterationEvent, n_points: int = 6, bins: int = 30) -> list[Layer]:
+    """Iso-distance curves for a few object points and the histogram of pair distances.
+
+    For every chosen point the metric ellipse and the Euclidean circle pass through its target,
+    so a user sees why that target won; the histogram shows the distances with the median and
+    the rejection threshold (for improved MbICP: median + k MAD, Fig. 9b).
+    """
+    layers: list[Layer] = []
+    p = ev.pairs
+    L = getattr(start.params, "L", None)
+    if L is not None and len(p.kind):
+        pick = np.unique(np.linspace(0, len(p.kind) - 1, n_points).round().astype(int))
+        moved_of = np.empty(len(start.obj_points), dtype=np.int64)
+        moved_of[start.used] = np.arange(len(start.used))
+        src = ev.moved_points[moved_of[p.obj_index[pick]]]
+        tgt = p.target[pick]
+        layers.append(Strips(f"{SCANS}/{TEACH}/metric_isocurves",
+                             [metric_isocurve(s, t, L) for s, t in zip(src, tgt)], ISO_METRIC, 0.004))
+        layers.append(Strips(f"{SCANS}/{TEACH}/euclidean_circles",
+                             [circle(t, float(np.linalg.norm(s - t))) for s, t in zip(src, tgt)], ISO_EUCLID, 0.004))
+    if len(p.distance):
+        layers += histogram_layers(p.distance, ev.threshold, bins)
+    return layers
+
+
+def histogram_layers(distance: np.ndarray, threshold: float | None, bins: int) -> list[Layer]:
+    """Distances as bars in a unit-height 2-D plot (x: metres), with median and threshold lines."""
+    hi = max(float(distance.max()), threshold or 0.0) * 1.05 or 1.0
+    counts, edges = np.histogram(distance, bins=bins, range=(0.0, hi))
+    h = counts / max(counts.max(), 1) * hi * 0.6  # bar heights scaled to the axis for a square view
+    bars = [np.array([[a, 0.0], [a, y], [b, y], [b, 0.0]]) for a, b, y in zip(edges[:-1], edges[1:], h) if y > 0]
+    med = float(np.median(distance))
+    top = hi * 0.65
+    out: list[Layer] = [Strips(f"{TEACH}/histogram/bars", bars, HIST_BAR, hi * 0.004),
+                        Strips(f"{TEACH}/histogram/median", [np.array([[med, 0.0], [med, top]])], MEDIAN, hi * 0.004)]
+    if threshold is not None:
+        out.append(Strips(f"{TEACH}/histogram/threshold", [np.array([[threshold, 0.0], [threshold, top]])],
+                          THRESHOLD, hi * 0.004))
+    return out

@@ -1,3 +1,5 @@
+import os
+import sys
 from pathlib import Path
 
 import pytest
@@ -9,6 +11,9 @@ EXAMPLES = Path(__file__).parent.parent / "mbicp_viz" / "examples"
 INTEL = EXAMPLES / "intel-excerpt.log.gz"
 LASERAZOS = DATA / "laserazosSM3-40.log"
 HOKUYO_BAG = DATA / "hokuyo-demo.bag"
+# the rerun CLI of the environment running the tests (the wheel installs it beside python)
+RERUN = str(Path(sys.executable).parent / "rerun")
+os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 
 @pytest.fixture(scope="session")
