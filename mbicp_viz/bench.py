@@ -56,3 +56,25 @@ def machine_line() -> str:
     import os
 
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def time_recordings(log: ScanLog, params: Params, limit: int | None, repeat: int, teaching: bool):
+    """Time for matching and writing each pair to an .rrd (rerun front end), and the file sizes [bytes]."""
+    import os
+    import tempfile
+
+    from .rrd import Run, record
+
+    pairs = consecutive_pairs(log, limit)
+    times, sizes = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "bench.rrd")
+        for i, j in pairs:
+            ref, obj = log.scans[i], log.scans[j]
+            guess, _ = stored_guess(ref, obj)
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                record([Run("bench", ref, obj, guess, params)], path, teaching=teaching)
+                times.append(1000.0 * (time.perf_counter() - t0))
+                sizes.append(os.path.getsize(path))
+    return Timing("recording to .rrd", np.array(times)), np.array(sizes)

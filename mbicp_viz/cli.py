@@ -184,8 +184,12 @@ def bench_cmd(
     params: ParamsOpt = None,
     limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs to time")] = 50,
     repeat: Annotated[int, typer.Option("--repeat", min=1, help="runs per pair")] = 3,
+    rrd: Annotated[bool, typer.Option("--rrd", help="also time writing each match to an .rrd")] = False,
+    teach: TeachOpt = False,
 ):
     """Time per match on consecutive pairs: median, p90, matches per second; events off and on."""
+    import numpy as np
+
     from .bench import bench, machine_line
     from .inputs import make_params
     from .readers import read_log
@@ -196,6 +200,60 @@ def bench_cmd(
     for t in timings:
         typer.echo(t.line())
     typer.echo(f"observer overhead      {100.0 * (timings[1].median / timings[0].median - 1.0):+.0f} % (median)")
+    if rrd:
+        from .bench import time_recordings
+
+        t, sizes = time_recordings(lg, make_params(algo, str(params) if params else None), limit, 1, teach)
+        typer.echo(t.line())
+        typer.echo(f".rrd size              median {np.median(sizes) / 1e6:.2f} MB   max {sizes.max() / 1e6:.2f} MB")
+
+
+@app.command("record")
+@user_errors
+def record_cmd(
+    names: Annotated[Optional[list[str]], typer.Argument(help="scenario names (default: all)")] = None,
+    out_dir: Annotated[Optional[Path], typer.Option("--out-dir", help="write the .rrd files here")] = None,
+):
+    """Regenerate the curated recordings (recordings/*.rrd) from recordings/scenarios/*.toml."""
+    from .recordings import record_all
+
+    for s, out, lines in record_all(names, out_dir=out_dir):
+        typer.echo(f"{out}  ({s.title})")
+        for line in lines:
+            typer.echo(f"    {line}")
+
+
+@app.command("compare")
+@user_errors
+def compare_cmd(
+    first: Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")],
+    second: Annotated[Optional[str], typer.Argument(help="object scan file")] = None,
+    pair: PairOpt = None,
+    init: InitOpt = None,
+    truth: Annotated[Optional[tuple[float, float, float]], typer.Option(
+        "--truth", help="known answer X Y THETA_DEG, to print each matcher's error")] = None,
+    params: ParamsOpt = None,
+    algos: Annotated[str, typer.Option("--algos", help="comma-separated matchers")] = ",".join(MATCHERS),
+    rrd: RrdOpt = None,
+    teach: TeachOpt = False,
+    connect: ConnectOpt = None,
+    serve: ServeOpt = False,
+    port: PortOpt = 9090,
+):
+    """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
+    from .compare import compare_table
+    from .inputs import guess_from_deg, load_pair, make_params, stored_guess
+    from .rrd import Run
+
+    names = [a.strip() for a in algos.split(",") if a.strip()]
+    ps = {a: make_params(a, str(params) if params else None) for a in names}
+    sp = load_pair(first, second, pair)
+    guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
+    known = guess_from_deg(truth)
+    typer.echo(f"{sp.label}\ninitial guess {guess}\n")
+    typer.echo(compare_table(sp.ref, sp.obj, guess, ps, known))
+    if rrd or connect or serve:
+        _record([Run(a, sp.ref, sp.obj, guess, p, known) for a, p in ps.items()], rrd, connect, serve, port, teach)
 
 
 @app.command("params")

@@ -22,17 +22,26 @@ from .errors import InputError
 APP_ID = "mbicp-viz"
 
 
-def new_stream(recording_id: str) -> rr.RecordingStream:
-    """A stream with a fixed recording id and no wall-clock properties, so re-runs compare equal."""
-    return rr.RecordingStream(APP_ID, recording_id=recording_id, send_properties=False)
+def new_stream(recording_id: str, live: bool = False) -> rr.RecordingStream:
+    """A stream with a fixed recording id and no wall-clock properties, so re-runs compare equal.
+
+    Files are batched into chunks only at the end: chunk boundaries then do not depend on timing
+    (``rerun rrd compare`` compares chunks). A live viewer gets rerun's default, timely batching.
+    """
+    batching = rr.ChunkBatcherConfig.DEFAULT() if live else rr.ChunkBatcherConfig.NEVER()
+    return rr.RecordingStream(APP_ID, recording_id=recording_id, send_properties=False, batcher_config=batching)
 
 
-def blueprint(roots: list[str], teaching: bool = False) -> rrb.Blueprint:
+ABOUT = "about"
+
+
+def blueprint(roots: list[str], teaching: bool = False, about: bool = False) -> rrb.Blueprint:
     """Scans side by side, error and threshold plots, the text log; time panel on ``iteration``."""
     scans = [rrb.Spatial2DView(origin=f"/{r}/{scene.SCANS}", name=f"{r}: scans") for r in roots]
+    log = rrb.TextLogView(origin="/", contents=[f"/{r}/{scene.LOG}" for r in roots], name="log")
     side = [rrb.TimeSeriesView(origin="/", contents=[f"/{r}/{scene.PLOTS}/**" for r in roots],
                                name="error and threshold"),
-            rrb.TextLogView(origin="/", contents=[f"/{r}/{scene.LOG}" for r in roots], name="log")]
+            rrb.Tabs(rrb.TextDocumentView(origin=f"/{ABOUT}", name="what to look at"), log) if about else log]
     if teaching:
         side.insert(1, rrb.Tabs(*[rrb.Spatial2DView(origin=f"/{r}/{scene.TEACH}/histogram",
                                                     name=f"{r}: pair distances") for r in roots]))
@@ -114,26 +123,36 @@ class RerunObserver:
 
 @dataclass(frozen=True)
 class Run:
-    """One matcher run to record under ``root``."""
+    """One matcher run to record under ``root``; ``truth`` (if known) is drawn as a frame."""
 
     root: str
     ref: Scan
     obj: Scan
     guess: Pose2
     params: Params
+    truth: Pose2 | None = None
 
 
 def record(runs: list[Run], path: str | None = None, connect: str | None = None, teaching: bool = False,
-           recording_id: str = "mbicp-viz", extra_observer: Observer | None = None) -> list[MatchResult]:
-    """Match every run with a rerun observer attached; write ``path`` (.rrd) and/or stream to ``connect``."""
-    stream = new_stream(recording_id)
-    bp = blueprint([r.root for r in runs], teaching)
+           recording_id: str = "mbicp-viz", extra_observer: Observer | None = None,
+           about: str | None = None) -> list[MatchResult]:
+    """Match every run with a rerun observer attached; write ``path`` (.rrd) and/or stream to ``connect``.
+
+    ``about`` (Markdown) is stored as a document beside the runs: what the recording shows.
+    """
+    stream = new_stream(recording_id, live=connect is not None)
+    bp = blueprint([r.root for r in runs], teaching, about is not None)
     if path is not None:
         stream.save(path, default_blueprint=bp)
     if connect is not None:
         stream.connect_grpc(connect, default_blueprint=bp)
+    if about is not None:
+        stream.log(ABOUT, rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
     results = []
     for r in runs:
+        if r.truth is not None:
+            log_layer(stream, r.root, scene.Points(f"{scene.SCANS}/truth", r.truth.apply(r.obj.points()),
+                                                   scene.TRUTH, 0.008), static=True)
         obs = RerunObserver(stream, r.root, teaching)
         results.append(match(r.ref, r.obj, r.guess, r.params, obs if extra_observer is None
                              else broadcast(obs, extra_observer)))

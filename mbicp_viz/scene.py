@@ -24,6 +24,7 @@ PAIR_POINT: RGB = (20, 20, 20)
 PAIR_INTERPOLATED: RGB = (0, 160, 90)
 PAIR_REJECTED: RGB = (245, 160, 0)
 HIDDEN: RGB = (170, 170, 170)
+TRUTH: RGB = (120, 200, 120)  # the object scan at the known answer, when there is one
 ERROR: RGB = (90, 90, 90)
 THRESHOLD: RGB = (245, 160, 0)
 
