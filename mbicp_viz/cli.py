@@ -31,7 +31,7 @@ TeachOpt = Annotated[bool, typer.Option("--teach", help="add teaching layers: is
 ConnectOpt = Annotated[Optional[str], typer.Option(
     "--connect", help="stream into a running rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")]
 ServeOpt = Annotated[bool, typer.Option("--serve", help="serve rerun's web viewer on 127.0.0.1 with the run")]
-PortOpt = Annotated[int, typer.Option("--port", min=0, max=65535, help="web viewer port for --serve")]
+PortOpt = Annotated[int, typer.Option("--port", min=1, max=65534, help="web viewer port for --serve (data: PORT+1)")]
 EXAMPLES = Path(__file__).parent / "examples"
 DEMO_LOG = EXAMPLES / "intel-excerpt.log.gz"
 
@@ -135,6 +135,7 @@ def eval_sequence(
     algo: AlgoOpt = "improved",
     params: ParamsOpt = None,
     limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="match only the first N pairs")] = None,
+    rrd: RrdOpt = None,
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
     from .inputs import make_params
@@ -142,10 +143,17 @@ def eval_sequence(
     from .sequence import match_sequence
 
     p = make_params(algo, str(params) if params else None)
-    rows = match_sequence(read_log(log), p, limit)
+    lg = read_log(log)
+    rows = match_sequence(lg, p, limit)
     out.write_text(json.dumps(rows, indent=1) + "\n")
     conv = sum(r["converged"] for r in rows)
     typer.echo(f"{len(rows)} pairs matched with {algo}: {conv} converged; written to {out}")
+    if rrd:
+        from .rrd import record_sequence
+
+        record_sequence(lg, rows, str(rrd))
+        typer.echo(f"sequence recording written to {rrd}; open a pair's iterations with: "
+                   f"mbicp-viz match {log} --pair I J --algo {algo} --rrd pair.rrd", err=True)
 
 
 @eval_app.command("protocol")

@@ -14,7 +14,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from core import (Event, FinishEvent, IterationEvent, MatchResult, Observer, Params, Pose2, Scan, StartEvent,
-                  broadcast, match)
+                  broadcast, match, relative)
 
 from . import scene
 from .errors import InputError
@@ -162,12 +162,49 @@ def record(runs: list[Run], path: str | None = None, connect: str | None = None,
 
 
 def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
-    """Serve ``path`` in rerun's web viewer from the wheel's own CLI, bound to ``host`` (loopback)."""
+    """Serve ``path`` in rerun's web viewer from the wheel's own CLI, bound to ``host`` (loopback).
+
+    The web viewer listens on ``port``, its gRPC data server on ``port + 1``.
+    """
     import shutil
     import subprocess
+    import sys
+    from pathlib import Path
 
-    exe = shutil.which("rerun")
+    beside = Path(sys.executable).parent / "rerun"  # the wheel's CLI, in the same environment
+    exe = str(beside) if beside.exists() else shutil.which("rerun")
     if exe is None:
         raise InputError("the rerun viewer command is not installed (pip install rerun-sdk)")
-    cmd = [exe, "--serve-web", "--bind", host, "--web-viewer-port", str(port), path]
+    cmd = [exe, "--serve-web", "--bind", host, "--web-viewer-port", str(port), "--port", str(port + 1), path]
     return subprocess.call(cmd)
+
+
+def record_sequence(log, rows: list[dict], path: str, recording_id: str = "mbicp-viz/sequence") -> None:
+    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, per-pair log."""
+    stream = new_stream(recording_id)
+    root = "sequence"
+    bp = rrb.Blueprint(
+        rrb.Horizontal(rrb.Spatial2DView(origin=f"/{root}/{scene.SEQUENCE}", name="trajectory and map"),
+                       rrb.Vertical(rrb.TimeSeriesView(origin=f"/{root}/{scene.PLOTS}", name="iterations, time"),
+                                    rrb.TextLogView(origin=f"/{root}/{scene.LOG}", name="pairs")),
+                       column_shares=[3, 2]),
+        rrb.TimePanel(timeline="scan", expanded=True), collapse_panels=True)
+    stream.save(path, default_blueprint=bp)
+    pose = Pose2()
+    poses = [pose]
+    for row in rows:
+        poses.append(poses[-1] @ Pose2(row["x"], row["y"], row["theta"]))
+    first = log.scans[rows[0]["ref"]].pose if rows and log.scans[rows[0]["ref"]].pose is not None else None
+    by_obj = {row["obj"]: row for row in rows}
+    indices = [rows[0]["ref"]] + [row["obj"] for row in rows] if rows else []
+    for n, k in enumerate(indices):
+        stream.set_time("scan", sequence=k)
+        scan = log.scans[k]
+        traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
+        log_traj = None
+        if first is not None and all(log.scans[i].pose is not None for i in indices[: n + 1]):
+            log_traj = np.array([[q.x, q.y] for q in (relative(first, log.scans[i].pose) for i in indices[: n + 1])])
+        for layer in scene.sequence_layers(k, poses[n], scan.points(), traj, log_traj, by_obj.get(k)):
+            log_layer(stream, root, layer)
+    stream.flush()
+    stream.disconnect()

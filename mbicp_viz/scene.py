@@ -237,3 +237,29 @@ def histogram_layers(distance: np.ndarray, threshold: float | None, bins: int) -
         out.append(Strips(f"{TEACH}/histogram/threshold", [np.array([[threshold, 0.0], [threshold, top]])],
                           THRESHOLD, hi * 0.004))
     return out
+
+
+# Sequence view: one step per scan of a log (``eval sequence --rrd``).
+SEQUENCE = "sequence"
+TRAJECTORY: RGB = (40, 90, 220)
+LOG_TRAJECTORY: RGB = (120, 200, 120)
+
+
+def sequence_layers(k: int, pose: Pose2, points: np.ndarray, trajectory: np.ndarray,
+                    log_trajectory: np.ndarray | None, row: dict | None) -> list[Layer]:
+    """Scan ``k`` placed at the pose accumulated from the matches (world = first scan's frame)."""
+    layers: list[Layer] = [
+        Points(f"{SEQUENCE}/map/scan_{k:05d}", pose.apply(points), REFERENCE, 0.02),
+        Points(f"{SEQUENCE}/current", pose.apply(points), OBJECT, 0.03),
+        Strips(f"{SEQUENCE}/trajectory", [trajectory], TRAJECTORY, 0.02),
+        Frame(f"{SEQUENCE}/robot", pose),
+    ]
+    if log_trajectory is not None:
+        layers.append(Strips(f"{SEQUENCE}/log_trajectory", [log_trajectory], LOG_TRAJECTORY, 0.015))
+    if row is not None:
+        layers += [Scalar(f"{PLOTS}/iterations", float(row["iterations"]), ERROR),
+                   Scalar(f"{PLOTS}/time_ms", float(row["time_ms"]), THRESHOLD),
+                   Text(LOG, f"pair {row['ref']} -> {row['obj']}: ({row['x']:+.3f} m, {row['y']:+.3f} m, "
+                             f"{math.degrees(row['theta']):+.2f} deg), {row['iterations']} iterations, "
+                             f"{row['reason']}", "INFO" if row["converged"] else "WARN")]
+    return layers

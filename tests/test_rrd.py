@@ -103,3 +103,68 @@ def test_two_generations_compare_equal(tmp_path, intel):
     res = subprocess.run([RERUN, "rrd", "compare", "--unordered", *paths], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert {"/mbicp/scene/reference", "/improved/scene/reference"} <= set(columns(paths[0]))
+
+
+def test_eval_sequence_records_the_scan_timeline(tmp_path):
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app
+
+    from .conftest import LASERAZOS
+
+    rrd = tmp_path / "seq.rrd"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(LASERAZOS), "--out", str(tmp_path / "s.json"),
+                                   "--limit", "6", "--rrd", str(rrd)])
+    assert res.exit_code == 0, res.output
+    cols = columns(rrd)
+    maps = [p for p in cols if p.startswith("/sequence/sequence/map/scan_")]
+    assert len(maps) == 7  # scans 0..6, each placed once at its accumulated pose
+    traj = cols["/sequence/sequence/trajectory"]["LineStrips2D:strips"]
+    assert [len(v[0]) for _, v in sorted(traj)] == list(range(1, 8))  # grows one pose per scan
+    assert len(cols["/sequence/log"]["TextLog:text"]) == 6
+    assert RrdReader(str(rrd)).blueprints
+
+
+def _listeners(port: int) -> set[str]:
+    """Local addresses (hex, as in /proc/net/tcp) listening on ``port``."""
+    out = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        with open(table) as f:
+            for line in list(f)[1:]:
+                local, state = line.split()[1], line.split()[3]
+                addr, p = local.rsplit(":", 1)
+                if state == "0A" and int(p, 16) == port:
+                    out.add(addr)
+    return out
+
+
+def test_serve_binds_loopback_only(tmp_path):
+    import os
+    import signal
+    import socket
+    import sys
+    import time
+    import urllib.request
+
+    from .conftest import DATA
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "mbicp_viz", "match", str(DATA / "datos.off"), str(DATA / "datos.off"),
+                             "--serve", "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            start_new_session=True)
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and not _listeners(port):
+            time.sleep(0.3)
+        assert _listeners(port) == {"0100007F"}, _listeners(port)  # 127.0.0.1, never 0.0.0.0
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as r:
+            assert r.status == 200
+        deadline = time.time() + 30
+        while time.time() < deadline and not _listeners(port + 1):
+            time.sleep(0.3)
+        assert _listeners(port + 1) == {"0100007F"}
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=30)
