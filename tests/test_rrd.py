@@ -168,3 +168,39 @@ def test_serve_binds_loopback_only(tmp_path):
     finally:
         os.killpg(proc.pid, signal.SIGTERM)
         proc.wait(timeout=30)
+
+
+def test_connect_streams_into_a_running_viewer_server(tmp_path):
+    """A rerun server (no window) saving what it receives; --connect streams the run into it."""
+    import os
+    import signal
+    import socket
+    import sys
+    import time
+
+    from .conftest import DATA
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    saved = tmp_path / "received.rrd"
+    server = subprocess.Popen([RERUN, "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.time() + 30
+        while time.time() < deadline and not _listeners(port):
+            time.sleep(0.2)
+        res = subprocess.run([sys.executable, "-m", "mbicp_viz", "match", str(DATA / "datos.off"),
+                              str(DATA / "datos.off"), "--connect", f"rerun+http://127.0.0.1:{port}/proxy"],
+                             capture_output=True, text=True, timeout=60)
+        assert res.returncode == 0, res.stderr
+        time.sleep(1.0)
+    finally:
+        os.killpg(server.pid, signal.SIGINT)
+        server.wait(timeout=30)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a file saved by a live server has no footer
+        paths = {c.entity_path for c in RrdReader(str(saved)).stream().to_chunks()}
+    assert {"/improved/scene/reference", "/improved/scene/pairs/point", "/improved/log"} <= paths
