@@ -33,7 +33,7 @@ ConnectOpt = Annotated[Optional[str], typer.Option(
 ServeOpt = Annotated[bool, typer.Option("--serve", help="serve rerun's web viewer on 127.0.0.1 with the run")]
 PortOpt = Annotated[int, typer.Option("--port", min=1, max=65534, help="web viewer port for --serve (data: PORT+1)")]
 EXAMPLES = Path(__file__).parent / "examples"
-DEMO_LOG = EXAMPLES / "intel-excerpt.log.gz"
+DEMO_PAIR = EXAMPLES / "hokuyo-125-130.npz"
 
 
 def user_errors(fn):
@@ -117,14 +117,54 @@ def _record(runs, rrd, connect, serve, port, teach) -> None:
 
 @app.command()
 @user_errors
-def demo(algo: AlgoOpt = "improved", pair: PairOpt = (11, 12)):
-    """Match a bundled real pair (Intel Research Lab) from the identity guess and show every iteration."""
+def serve(
+    first: Annotated[Optional[str], typer.Argument(help="a scan log, or the reference scan file")] = None,
+    second: Annotated[Optional[str], typer.Argument(help="the object scan file")] = None,
+    scenario: Annotated[Optional[str], typer.Option("--scenario", help="a curated scenario of recordings/")] = None,
+    host: Annotated[str, typer.Option("--host", help="address to bind; anything but 127.0.0.1 exposes the app")]
+    = "127.0.0.1",
+    port: Annotated[int, typer.Option("--port", min=0, max=65535, help="port (0: any free port)")] = 8080,
+    for_seconds: Annotated[Optional[float], typer.Option("--for-seconds", min=0.0, help="stop after this long")]
+    = None,
+):
+    """The interactive debugger in the browser: step, play, tune live, compare, export."""
+    from .viser_app import source_for
+
+    _serve(source_for(first, second, scenario), host, port, for_seconds)
+
+
+@app.command()
+@user_errors
+def demo(
+    port: Annotated[int, typer.Option("--port", min=0, max=65535, help="port (0: any free port)")] = 8080,
+    for_seconds: Annotated[Optional[float], typer.Option("--for-seconds", min=0.0, help="stop after this long")]
+    = None,
+):
+    """The debugger on a bundled real pair: a hand-held Hokuyo turning 17 degrees, from the identity."""
     from core import Pose2
 
-    from .inputs import load_pair, make_params
+    from .readers import read_log
+    from .viser_app import Source
 
-    sp = load_pair(str(DEMO_LOG), None, pair)
-    _print_match(sp.ref, sp.obj, Pose2(), make_params(algo, None), sp.label + " (bundled example)", False)
+    log = read_log(str(DEMO_PAIR))
+    _serve(Source("bundled example: hand-held Hokuyo URG-04LX, scans 125 -> 130", log, guess=Pose2()),
+           "127.0.0.1", port, for_seconds)
+
+
+def _serve(source, host: str, port: int, for_seconds: float | None) -> None:
+    from .viser_app import App
+
+    if host != "127.0.0.1":
+        typer.echo(f"warning: binding {host}: anyone who can reach this machine can use the app", err=True)
+    application = App(source, host, port)
+    typer.echo(f"mbicp-viz: open http://{'127.0.0.1' if host in ('127.0.0.1', '0.0.0.0') else host}:"
+               f"{application.port} in a browser (Ctrl-C stops)")
+    try:
+        time.sleep(for_seconds) if for_seconds is not None else application.server.sleep_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        application.stop()
 
 
 @eval_app.command("sequence")

@@ -1,0 +1,165 @@
+"""The viser debugger driven from Python: the real server, GUI handles and scene nodes, no browser."""
+
+import math
+
+import numpy as np
+import pytest
+import viser
+
+import mbicp_viz.viser_app as va
+from core import Pose2
+from mbicp_viz.readers import read_log
+from mbicp_viz.rrd import Run  # noqa: F401  (the export path imports it lazily; fail early if broken)
+from mbicp_viz.viser_app import COMPARE, Session, Source, source_for
+
+from .conftest import EXAMPLES, LASERAZOS
+
+PAIR = EXAMPLES / "hokuyo-125-130.npz"
+
+
+@pytest.fixture
+def server():
+    s = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    yield s
+    s.stop()
+
+
+@pytest.fixture
+def session(server):
+    return Session(server, Source("hokuyo pair", read_log(PAIR), guess=Pose2()))
+
+
+def test_opens_on_the_final_iteration_with_a_result(session):
+    n = session.max_iteration()
+    assert n > 5 and session.h_iter.value == n and session.h_iter.max == n
+    assert "improved" in session.h_result.content and "converged" in session.h_result.content
+    assert "condition number" in session.h_result.content
+
+
+def test_iteration_slider_redraws_without_rematching(session, monkeypatch):
+    calls = []
+    monkeypatch.setattr(va, "run_match", lambda *a, **k: calls.append(a))
+    run = session.runs[0]
+    for k in (0, 1, 5, session.max_iteration()):
+        session.h_iter.value = k
+        obj = session.nodes["/improved/scene/object"]
+        if k == 0:
+            expected = run.start.initial_guess.apply(run.start.obj_points[run.start.used])
+        else:
+            expected = run.iterations[k - 1].moved_points
+        np.testing.assert_allclose(obj.points[:, :2], expected, atol=1e-5)
+        assert f"iteration {k}" in session.h_iter_info.content
+    assert calls == []
+
+
+def test_previous_next_and_play(session):
+    session.h_iter.value = 3
+    session.step(+1)
+    assert session.iteration == 4
+    session.step(-1)
+    session.step(-1)
+    assert session.iteration == 2
+    session.fps = 30.0
+    session.playing = True
+    import time
+
+    time.sleep(0.5)
+    session.playing = False
+    assert session.iteration != 2  # the player advanced
+
+
+def test_pairs_by_kind_match_the_events(session):
+    k = 3
+    session.h_iter.value = k
+    ev = session.runs[0].iterations[k - 1]
+    kept = ev.pairs.status == 0
+    n_inter = int(np.count_nonzero(kept & (ev.pairs.kind == 1)))
+    n_rej = int(np.count_nonzero(~kept))
+    assert len(session.nodes["/improved/scene/pairs/interpolated"].points) == max(n_inter, 1)
+    assert len(session.nodes["/improved/scene/pairs/rejected"].points) == max(n_rej, 1)
+
+
+def test_layer_toggles_hide_nodes(session):
+    session._on_layer("rejected pairs", False)
+    assert session.nodes["/improved/scene/pairs/rejected"].visible is False
+    session._on_layer("rejected pairs", True)
+    assert session.nodes["/improved/scene/pairs/rejected"].visible is True
+
+
+def test_parameter_change_rematches_and_updates_the_result(session):
+    before = session.h_result.content
+    assert session.set_param("improved", "MaxIter", 3)
+    assert session.max_iteration() == 3 and "3 iterations" in session.h_result.content
+    assert session.h_result.content != before
+
+
+def test_invalid_entries_show_a_message_and_keep_the_last_result(session):
+    before = (session.h_result.content, session.params["improved"])
+    for name, value in (("Br", -1.0), ("L", float("nan")), ("Bw", 500.0), ("MaxIter", 2.5)):
+        assert not session.set_param("improved", name, value)
+        assert "⚠" in session.h_param_msg.content and name in session.h_param_msg.content
+        assert (session.h_result.content, session.params["improved"]) == before
+
+
+def test_an_exception_inside_a_match_is_shown_and_the_server_keeps_serving(session, monkeypatch):
+    good = session.h_result.content
+
+    def broken(*a, **k):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(va, "run_match", broken)
+    assert not session.set_param("improved", "Br", 0.8)
+    assert "boom" in session.h_status.content and session.h_result.content == good
+    assert session.params["improved"].Br != 0.8  # the failed change is not kept
+    monkeypatch.undo()
+    assert session.set_param("improved", "Br", 0.8) and session.h_status.content == ""
+
+
+def test_algorithm_dropdown_and_compare(session):
+    session.h_algo.value = "icp"
+    assert [r.name for r in session.runs] == ["icp"] and "Parameters: icp" in session.param_folder.label
+    session.h_algo.value = COMPARE
+    assert [r.name for r in session.runs] == ["icp", "mbicp", "improved"]
+    assert "/mbicp/scene/object" in session.nodes and "/icp/scene/object" in session.nodes
+
+
+def test_initial_guess_by_numbers_and_by_gizmo(session):
+    session.h_gt.value = -10.0
+    assert session.guess.theta == pytest.approx(math.radians(-10.0))
+    assert session.runs[0].start.initial_guess == session.guess
+    session.gizmo.position = (0.3, -0.2, 0.0)
+    session._on_gizmo()
+    assert (session.guess.x, session.guess.y) == pytest.approx((0.3, -0.2))
+    assert session.h_gx.value == pytest.approx(0.3)
+
+
+def test_export_writes_a_readable_rrd_and_params(session, tmp_path):
+    from rerun.chunk import RrdReader
+
+    data = session.export_rrd()
+    p = tmp_path / "s.rrd"
+    p.write_bytes(data)
+    paths = {c.entity_path for c in RrdReader(str(p)).stream().to_chunks()}
+    assert "/improved/scene/pairs/point" in paths
+    text = session.export_params()
+    f = tmp_path / "p.toml"
+    f.write_text(text)
+    from mbicp_viz.params_io import load_params
+
+    assert load_params(str(f), "improved") == session.params["improved"]
+
+
+def test_log_source_picks_any_pair(server):
+    s = Session(server, source_for(str(LASERAZOS), None, None))
+    assert s.pair == (0, 1)
+    s.h_consecutive.value = False
+    s.h_ref.value = 3
+    s.h_obj.value = 7
+    assert s.pair == (3, 7) and s.runs[0].start.ref_points.shape[0] == s.ref.n_valid
+    s.h_obj.value = 999
+    assert "⚠" in s.h_status.content and s.pair == (3, 7)
+
+
+def test_scenario_source():
+    src = source_for(None, None, "partial-overlap")
+    assert src.truth is not None and set(src.params) == {"mbicp", "improved"}
