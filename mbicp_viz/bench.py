@@ -18,6 +18,7 @@ from .readers import ScanLog
 class Timing:
     label: str
     times_ms: np.ndarray
+    what: str = "matches"
 
     @property
     def median(self) -> float:
@@ -29,7 +30,8 @@ class Timing:
 
     def line(self) -> str:
         return (f"{self.label:<22} median {self.median:7.2f} ms   p90 {self.p90:7.2f} ms   "
-                f"{1000.0 / self.median:8.1f} matches/s   ({len(self.times_ms)} matches)")
+                f"p95 {np.percentile(self.times_ms, 95):7.2f} ms   "
+                f"{1000.0 / self.median:8.1f} {self.what}/s   ({len(self.times_ms)} {self.what})")
 
 
 def time_matches(log: ScanLog, params: Params, pairs, observe: bool, repeat: int) -> np.ndarray:
@@ -78,3 +80,35 @@ def time_recordings(log: ScanLog, params: Params, limit: int | None, repeat: int
                 times.append(1000.0 * (time.perf_counter() - t0))
                 sizes.append(os.path.getsize(path))
     return Timing("recording to .rrd", np.array(times)), np.array(sizes)
+
+
+def gui_latency(path: str, pair: tuple[int, int], steps: int = 3, changes: int = 40):
+    """Server-side latency of the viser debugger on a real pair: iteration step -> redraw, and
+    parameter change -> re-match -> redraw (a real ViserServer; no browser attached)."""
+    import viser
+
+    from core import Pose2
+
+    from .readers import read_log
+    from .viser_app import Session, Source
+
+    log = read_log(path)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        s = Session(server, Source(path, log, pair=pair, guess=Pose2()))
+        step_ms = []
+        for _ in range(steps):
+            for k in range(s.max_iteration() + 1):
+                t0 = time.perf_counter()
+                s.h_iter.value = k
+                step_ms.append(1000.0 * (time.perf_counter() - t0))
+        change_ms = []
+        values = np.linspace(0.5, 1.5, changes)  # the radial window Br [m], a value a user drags
+        for v in values:
+            t0 = time.perf_counter()
+            s.set_param("improved", "Br", float(v))
+            change_ms.append(1000.0 * (time.perf_counter() - t0))
+        return (Timing("iteration step redraw", np.array(step_ms), "steps"),
+                Timing("parameter change", np.array(change_ms), "changes"))
+    finally:
+        server.stop()

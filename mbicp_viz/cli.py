@@ -304,6 +304,20 @@ def compare_cmd(
         _record([Run(a, sp.ref, sp.obj, guess, p, known) for a, p in ps.items()], rrd, connect, serve, port, teach)
 
 
+@app.command("bench-gui")
+@user_errors
+def bench_gui_cmd(
+    scans: Annotated[Path, typer.Argument(help="scan file")] = Path(__file__).parent / "examples" / "hokuyo-125-130.npz",
+    pair: PairOpt = None,
+):
+    """Latency of the debugger: iteration step -> redraw, parameter change -> re-match -> redraw."""
+    from .bench import gui_latency, machine_line
+
+    typer.echo(f"viser debugger on {scans}; {machine_line()}")
+    for t in gui_latency(str(scans), pair or (0, 1)):
+        typer.echo(t.line())
+
+
 @app.command("params")
 @user_errors
 def params_cmd(algo: AlgoOpt = "improved",

@@ -458,14 +458,14 @@ class Session:
             record(runs, str(path), teaching=True, recording_id="mbicp-viz/session",
                    about=f"# mbicp-viz session\n\n{self.source.label}, scans {self.pair[0]} -> {self.pair[1]}\n")
             data = path.read_bytes()
-        self.client.send_file_download("mbicp-viz-session.rrd", data)
+        self.client.send_file_download("mbicp-viz-session.rrd", data, save_immediately=True)
         self._say(f"exported the session: {len(data) / 1e6:.2f} MB .rrd")
         return data
 
     def export_params(self) -> str:
         name = "improved" if self.algorithm == COMPARE else self.algorithm
         text = params_to_toml(self.params[name])
-        self.client.send_file_download(f"params-{name}.toml", text.encode())
+        self.client.send_file_download(f"params-{name}.toml", text.encode(), save_immediately=True)
         self._say(f"saved the {name} parameters (TOML, readable with --params)")
         return text
 

@@ -80,3 +80,8 @@ def test_eval_protocol_reports_the_success_rate():
     out = ok("eval", "protocol", LASERAZOS, "--algo", "mbicp", "--params", DATA / "mbicp-protocol.toml",
              "--cases", 20, "--seed", 3)
     assert out.startswith("mbicp: 20/20 within 1 cm and 0.1 deg (100.0 %)")
+
+
+def test_bench_gui_reports_step_and_change_latency():
+    out = ok("bench-gui")
+    assert "iteration step redraw" in out and "parameter change" in out and "p95" in out
