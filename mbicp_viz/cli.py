@@ -21,6 +21,8 @@ eval_app = typer.Typer(no_args_is_help=True, help="Evaluate matchers on whole lo
 app.add_typer(eval_app, name="eval")
 
 ALGOS = ", ".join(MATCHERS)
+FirstArg = Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")]
+SecondArg = Annotated[Optional[str], typer.Argument(help="object scan file")]
 AlgoOpt = Annotated[str, typer.Option("--algo", help=f"matcher: {ALGOS}")]
 ParamsOpt = Annotated[Optional[Path], typer.Option("--params", help="TOML file of matcher parameters")]
 PairOpt = Annotated[Optional[tuple[int, int]], typer.Option("--pair", help="scan indices I J of one log (ref obj)")]
@@ -74,8 +76,8 @@ def _print_match(ref, obj, guess, params, label: str, as_json: bool, indices=(0,
 @app.command("match")
 @user_errors
 def match_cmd(
-    first: Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")],
-    second: Annotated[Optional[str], typer.Argument(help="object scan file")] = None,
+    first: FirstArg,
+    second: SecondArg = None,
     pair: PairOpt = None,
     algo: AlgoOpt = "improved",
     init: InitOpt = None,
@@ -274,8 +276,8 @@ def record_cmd(
 @app.command("compare")
 @user_errors
 def compare_cmd(
-    first: Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")],
-    second: Annotated[Optional[str], typer.Argument(help="object scan file")] = None,
+    first: FirstArg,
+    second: SecondArg = None,
     pair: PairOpt = None,
     init: InitOpt = None,
     truth: Annotated[Optional[tuple[float, float, float]], typer.Option(

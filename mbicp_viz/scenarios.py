@@ -34,7 +34,18 @@ from .inputs import stored_guess
 from .params_io import params_from_mapping
 from .readers import read_log
 
-RECORDINGS = Path(__file__).resolve().parent.parent / "recordings"
+def recordings_dir() -> Path:
+    """``$MBICP_VIZ_RECORDINGS``, else ``./recordings`` when run from a checkout, else the source tree's."""
+    import os
+
+    env = os.environ.get("MBICP_VIZ_RECORDINGS")
+    if env:
+        return Path(env)
+    here = Path.cwd() / "recordings"
+    return here if (here / "scenarios").is_dir() else Path(__file__).resolve().parent.parent / "recordings"
+
+
+RECORDINGS = recordings_dir()
 
 
 @dataclass(frozen=True)
