@@ -44,8 +44,11 @@ class Correspondences:
     kind:      (K,) PairKind.
     ref_index: (K, 2) reference point indices (into ``ref_points``) the target uses; the
                second is -1 for POINT pairs, the segment's other end for INTERPOLATED ones.
-    distance:  (K,) the matcher's pair distance (metric distance for MbICP, Euclidean for ICP) [m].
+    distance:  (K,) the matcher's pair distance (metric distance for MbICP, Euclidean for ICP,
+               range difference for the polar matchers) [m].
     status:    (K,) PairStatus.
+    source:    (K, 2) where each pair starts in the reference frame: the moved object point, or for
+               the polar matchers the object scan's surface projected onto a reference bearing.
     """
 
     obj_index: np.ndarray
@@ -54,6 +57,7 @@ class Correspondences:
     ref_index: np.ndarray
     distance: np.ndarray
     status: np.ndarray
+    source: np.ndarray
 
     @property
     def kept(self) -> np.ndarray:
@@ -102,6 +106,38 @@ class StartEvent:
 
 
 @dataclass(frozen=True, eq=False)
+class PolarStep:
+    """What a polar matcher (PSM, PMWN) computed in one iteration, all in the reference frame.
+
+    bearings: (N,) reference bearings [rad]; ref_ranges: (N,) preprocessed reference ranges;
+    projected_ranges: (N,) the object scan projected onto those bearings at ``estimate_before``
+    (NaN where no surface projects), and after the orientation step: ``projected_after``.
+    shifts: (S,) bearing shifts tried by the orientation step; cost: (S,) the cost per shift
+    (PSM: mean |range difference|; PMWN: that plus metric_weight * |shift angle|), NaN where too
+    few pairs; best_shift: the refined minimum in shifts (fractional); fit: "parabola" (PSM),
+    "V" (PMWN) or None when no orientation step ran; fit_abc: the cost at the integer minimum and
+    its two neighbours, through which the fit passes. metric_weight: PMWN's adaptive lambda
+    [m/rad], None for PSM. residuals, weights: (K,) translation residuals [m] and their weights.
+    circle_points: (K, 2) PMWN's projected-circle points Delta r_i u_i, circle_centre: (2,) its
+    fitted centre (T/2); None for PSM.
+    """
+
+    bearings: np.ndarray
+    ref_ranges: np.ndarray
+    projected_ranges: np.ndarray
+    shifts: np.ndarray
+    cost: np.ndarray
+    best_shift: float | None
+    fit: str | None
+    fit_abc: tuple[float, float, float] | None
+    metric_weight: float | None
+    residuals: np.ndarray
+    weights: np.ndarray
+    circle_points: np.ndarray | None
+    circle_centre: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
 class IterationEvent:
     iteration: int  # 1-based
     estimate_before: Pose2
@@ -112,6 +148,7 @@ class IterationEvent:
     threshold: float | None  # rejection threshold on pair distance [m] (MAD, trim cut, or None)
     error: float  # mean squared Euclidean residual of the kept pairs after the step [m^2]
     increment: Pose2  # the step composed this iteration (estimate_after = increment @ estimate_before)
+    polar: PolarStep | None = None  # PSM / PMWN only
 
 
 @dataclass(frozen=True, eq=False)

@@ -53,7 +53,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParam
         new_est = inc @ est
         if observer is not None:
             pairs = Correspondences(used, R.points[j], np.full(len(j), PairKind.POINT, dtype=np.int8),
-                                    np.column_stack((j, np.full(len(j), -1))), dist, status)
+                                    np.column_stack((j, np.full(len(j), -1))), dist, status, moved)
             observer(IterationEvent(it, est, new_est, moved, no_hidden, pairs, thr, error, inc))
         if step is None:
             reason = Termination.TOO_FEW_PAIRS

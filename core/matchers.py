@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from . import icp, mbicp
+from . import icp, mbicp, pmwn, psm
 from .events import Observer
-from .params import IcpParams, ImprovedParams, MbicpParams, Params
+from .params import IcpParams, ImprovedParams, MbicpParams, Params, PmwnParams, PsmParams
 from .result import MatchResult
 from .scan import Scan
 from .se2 import Pose2
@@ -27,6 +27,8 @@ MATCHERS: dict[str, Matcher] = {
         Matcher("icp", "ICP (point-to-point, Euclidean)", IcpParams, icp.match),
         Matcher("mbicp", "MbICP (Minguez et al. 2006)", MbicpParams, mbicp.match),
         Matcher("improved", "Improved MbICP (Li et al. 2018)", ImprovedParams, mbicp.match),
+        Matcher("psm", "PSM (Diosi & Kleeman 2007)", PsmParams, psm.match),
+        Matcher("pmwn", "PMWN (Huo et al. 2016)", PmwnParams, pmwn.match),
     )
 }
 

@@ -83,7 +83,8 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
         if observer is not None:
             observer(IterationEvent(
                 it, est, new_est, moved, used[np.setdiff1d(all_rows, rows, assume_unique=True)],
-                Correspondences(used[pairs.obj], pairs.target, pairs.kind, pairs.ref_index, pairs.dist, status),
+                Correspondences(used[pairs.obj], pairs.target, pairs.kind, pairs.ref_index, pairs.dist, status,
+                                moved[pairs.obj]),
                 thr, error, inc))
         if step is None:
             break

@@ -144,3 +144,47 @@ class ImprovedParams(MbicpParams):
     mad_k: float = param(2.0, unit="1", lo=0.0, hi=100.0, help="k in the rejection threshold median + k*MAD (eq. 5)")
     mad_floor: float = param(0.1, unit="m", lo=0.0, hi=100.0,
         help="never reject a pair closer than this (0: the paper's rule as published)")
+
+
+@dataclass(frozen=True)
+class PolarParams(Params):
+    """Preprocessing, projection and stopping shared by PSM and PMWN (Diosi's published values, in metres)."""
+
+    median_window: int = param(5, unit="count", lo=1, hi=21, help="median filter window on ranges (PSM §3.1)")
+    min_range: float = param(0.1, unit="m", lo=0.0, hi=100.0, help="readings closer than this are ignored")
+    max_range: float = param(30.0, unit="m", lo=0.1, hi=1000.0, help="readings farther than this are ignored")
+    max_jump: float = param(0.2, unit="m", lo=0.001, hi=100.0,
+        help="a new segment starts where consecutive ranges differ by more (scan projection interpolates "
+             "only inside segments)")
+    max_error: float = param(1.0, unit="m", lo=0.001, hi=100.0,
+        help="range residuals larger than this are excluded from the translation step")
+    search_window: float = param(math.radians(20.0), unit="rad", lo=0.0, hi=math.pi,
+        help="the orientation step tries rotations within +/- this")
+    min_pairs: int = param(40, unit="count", lo=3, hi=100000, help="fail with fewer range comparisons than this")
+    MaxIter: int = param(50, unit="count", lo=1, hi=10000, help="maximum number of iterations")
+    errx_out: float = param(5e-4, unit="m", lo=0.0, hi=1.0, help="a correction is small when |dx| is below this")
+    erry_out: float = param(5e-4, unit="m", lo=0.0, hi=1.0, help="... and |dy| below this")
+    errt_out: float = param(5e-4, unit="rad", lo=0.0, hi=1.0, help="... and |dtheta| below this")
+    stop_after: int = param(3, unit="count", lo=1, hi=100, help="stop after this many small corrections in a row")
+
+
+@dataclass(frozen=True)
+class PsmParams(PolarParams):
+    """Polar Scan Matching (Diosi & Kleeman, IJRR 2007)."""
+
+    C: float = param(0.49, unit="m^2", lo=1e-6, hi=100.0,
+        help="weight constant w = C / (C + e^2) of the translation step (Diosi: 70 cm squared)")
+    C_late: float = param(0.01, unit="m^2", lo=1e-6, hi=100.0, help="weight constant after C_switch iterations")
+    C_switch: int = param(10, unit="count", lo=0, hi=10000, help="iteration from which C_late is used")
+    orientation_every: int = param(2, unit="count", lo=1, hi=100,
+        help="run the orientation step on every n-th iteration (Diosi: every second)")
+
+
+@dataclass(frozen=True)
+class PmwnParams(PolarParams):
+    """Polar Metric-Weighted Norm (Huo et al. 2016, paper 003); equations reconstructed, see core/pmwn.py."""
+
+    C: float = param(0.49, unit="m^2", lo=1e-6, hi=100.0, help="weight constant of the projected-circle fit")
+    lambda0: float = param(0.0, unit="m/rad", lo=0.0, hi=1000.0,
+        help="metric weight of the first iteration (0: the first rotation is free)")
+    lambda_max: float = param(20.0, unit="m/rad", lo=0.0, hi=1e6, help="upper bound of the adaptive metric weight")

@@ -178,18 +178,29 @@ def eval_sequence(
     params: ParamsOpt = None,
     limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="match only the first N pairs")] = None,
     rrd: RrdOpt = None,
+    guess: Annotated[str, typer.Option("--guess", help="initial guess: stored (poses, else odometry, else "
+                                       "identity), pose, odometry or identity")] = "stored",
+    truth: Annotated[Optional[str], typer.Option("--truth", help="'pose': score against the log's scan poses "
+                                                 "(corrected logs)")] = None,
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
     from .inputs import make_params
     from .readers import read_log
-    from .sequence import match_sequence
+    from .sequence import GUESSES, match_sequence
 
+    if guess not in GUESSES:
+        raise InputError(f"choose one of {', '.join(GUESSES)}", field="--guess")
+    if truth not in (None, "pose"):
+        raise InputError("the only truth a log carries is 'pose'", field="--truth")
     p = make_params(algo, str(params) if params else None)
     lg = read_log(log)
-    rows = match_sequence(lg, p, limit)
+    rows = match_sequence(lg, p, limit, guess, truth)
     out.write_text(json.dumps(rows, indent=1) + "\n")
     conv = sum(r["converged"] for r in rows)
     typer.echo(f"{len(rows)} pairs matched with {algo}: {conv} converged; written to {out}")
+    if truth:
+        ok = sum(r["success"] for r in rows)
+        typer.echo(f"against the scan poses: {ok}/{len(rows)} within 0.1 m and 3 deg ({100.0 * ok / len(rows):.1f} %)")
     if rrd:
         from .rrd import record_sequence
 

@@ -112,9 +112,7 @@ def start_layers(ev: StartEvent) -> list[Layer]:
 def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
     """Layers of one iteration: where the object was, its pairs by kind and status, where it went."""
     p = ev.pairs
-    moved_of = np.empty(len(start.obj_points), dtype=np.int64)
-    moved_of[start.used] = np.arange(len(start.used))
-    src = ev.moved_points[moved_of[p.obj_index]]
+    src = p.source
     kept = p.status == PairStatus.KEPT
     point = kept & (p.kind == PairKind.POINT)
     inter = kept & (p.kind == PairKind.INTERPOLATED)
@@ -210,10 +208,7 @@ def teaching_layers(start: StartEvent, ev: IterationEvent, n_points: int = 6, bi
     L = getattr(start.params, "L", None)
     if L is not None and len(p.kind):
         pick = np.unique(np.linspace(0, len(p.kind) - 1, n_points).round().astype(int))
-        moved_of = np.empty(len(start.obj_points), dtype=np.int64)
-        moved_of[start.used] = np.arange(len(start.used))
-        src = ev.moved_points[moved_of[p.obj_index[pick]]]
-        tgt = p.target[pick]
+        src, tgt = p.source[pick], p.target[pick]
         layers.append(Strips(f"{SCANS}/{TEACH}/metric_isocurves",
                              [metric_isocurve(s, t, L) for s, t in zip(src, tgt)], ISO_METRIC, 0.004))
         layers.append(Strips(f"{SCANS}/{TEACH}/euclidean_circles",

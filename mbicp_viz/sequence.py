@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import math
 import time
 
-from core import MatchResult, Params, match
+from core import MatchResult, Params, Pose2, Scan, match, pose_error, relative
 
+from .errors import InputError
 from .inputs import consecutive_pairs, stored_guess
 from .readers import ScanLog
+
+GUESSES = ("stored", "pose", "odometry", "identity")
+# Paper 000 §3.1's failure threshold, used for the success rate against known poses.
+SUCCESS_M, SUCCESS_RAD = 0.1, math.radians(3.0)
 
 
 def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
@@ -16,16 +22,37 @@ def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
             "iterations": r.iterations, "converged": r.converged, "reason": r.reason.value, "time_ms": time_ms}
 
 
-def match_sequence(log: ScanLog, params: Params, limit: int | None = None, on_row=None) -> list[dict]:
-    """One row per consecutive pair; keys ``ref obj x y theta iterations converged reason time_ms`` (stable)."""
+def pair_guess(ref: Scan, obj: Scan, kind: str) -> tuple[Pose2, str]:
+    """The initial guess: ``stored`` (poses, else odometry, else identity), or one source explicitly."""
+    if kind == "stored":
+        return stored_guess(ref, obj)
+    if kind == "identity":
+        return Pose2(), "identity"
+    a, b = (ref.pose, obj.pose) if kind == "pose" else (ref.odometry, obj.odometry)
+    if a is None or b is None:
+        raise InputError(f"the log stores no {kind} for scans {ref.source.index} and {obj.source.index}",
+                         ref.source.path, field="--guess")
+    return relative(a, b), kind
+
+
+def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess: str = "stored",
+                   truth: str | None = None, on_row=None) -> list[dict]:
+    """One row per consecutive pair; with ``truth="pose"`` also the error against the log's scan poses."""
+    if truth == "pose" and guess in ("pose", "stored"):
+        raise InputError("the scan poses cannot be both the truth and the guess: use --guess identity or odometry",
+                         field="--truth")
     rows = []
     for i, j in consecutive_pairs(log, limit):
         ref, obj = log.scans[i], log.scans[j]
-        guess, source = stored_guess(ref, obj)
+        g, source = pair_guess(ref, obj, guess)
         t0 = time.perf_counter()
-        r = match(ref, obj, guess, params)
-        ms = 1000.0 * (time.perf_counter() - t0)
-        row = result_row(i, j, r, ms) | {"guess": source}
+        r = match(ref, obj, g, params)
+        row = result_row(i, j, r, 1000.0 * (time.perf_counter() - t0)) | {"guess": source}
+        if truth == "pose":
+            if ref.pose is None or obj.pose is None:
+                raise InputError(f"scan {i} or {j} has no pose to score against", log.path, field="--truth")
+            et, er = pose_error(r.pose, relative(ref.pose, obj.pose))
+            row |= {"error_xy": et, "error_theta": er, "success": et < SUCCESS_M and er < SUCCESS_RAD}
         rows.append(row)
         if on_row is not None:
             on_row(row)

@@ -40,7 +40,8 @@ def test_iterations_chain_and_moved_points(algo, intel):
         assert np.all(p.ref_index[pt, 1] == -1)
         est = e.estimate_after
     assert r.pose == est
-    last = rec.iterations[-1].pairs
+    # the result describes the last system that was solved (a final TOO_FEW_PAIRS event solves none)
+    last = [e for e in rec.iterations if np.isfinite(e.error)][-1].pairs
     assert r.pairs_kept == last.count(status=PairStatus.KEPT)
     assert r.pairs_rejected == len(last.kind) - r.pairs_kept
 

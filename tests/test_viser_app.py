@@ -119,7 +119,7 @@ def test_algorithm_dropdown_and_compare(session):
     session.h_algo.value = "icp"
     assert [r.name for r in session.runs] == ["icp"] and "Parameters: icp" in session.param_folder.label
     session.h_algo.value = COMPARE
-    assert [r.name for r in session.runs] == ["icp", "mbicp", "improved"]
+    assert [r.name for r in session.runs] == ["icp", "mbicp", "improved", "psm", "pmwn"]
     assert "/mbicp/scene/object" in session.nodes and "/icp/scene/object" in session.nodes
 
 

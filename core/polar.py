@@ -1,0 +1,304 @@
+"""Machinery shared by the polar matchers (PSM, Diosi & Kleeman 2007; PMWN, paper 003).
+
+Both work on ranges at the reference bearings instead of point pairs: the object scan is moved
+by the estimate, projected onto the reference bearings (scan projection), and compared range by
+range. The reference bearings must be uniformly spaced (rotation is a shift of bearing indices);
+a 360-degree reference wraps around.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+from .events import Correspondences, PairKind, PairStatus
+from .scan import Scan, ScanError
+from .se2 import Pose2
+
+
+@dataclass(frozen=True, eq=False)
+class PolarScan:
+    """A preprocessed scan: median-filtered ranges, validity, and segment ids (-1: not in a segment)."""
+
+    ranges: np.ndarray
+    bearings: np.ndarray
+    valid: np.ndarray
+    segment: np.ndarray
+    xy: np.ndarray  # (N, 2) every beam as a point (invalid ones too; ``valid`` says which count)
+
+    def points(self) -> np.ndarray:
+        return self.xy[self.valid]
+
+
+def preprocess(scan: Scan, median_window: int, min_range: float, max_range: float, max_jump: float) -> PolarScan:
+    """PSM §3 step 1 (also PMWN's): median filter, drop near/far readings, segment, drop lone points.
+
+    The median filter runs over valid readings in scan order (invalid ones neither vote nor get
+    filled); a new segment starts where consecutive valid ranges differ by more than max_jump.
+    """
+    valid = scan.valid & (scan.ranges > min_range) & (scan.ranges < max_range)
+    r = scan.ranges.copy()
+    idx = np.flatnonzero(valid)
+    if len(idx) and median_window > 1:
+        r[idx] = median_filter(scan.ranges[idx], size=median_window, mode="nearest")
+    seg = np.full(len(r), -1, dtype=np.int64)
+    if len(idx):
+        breaks = np.concatenate(([True], np.abs(np.diff(r[idx])) > max_jump))
+        ids = np.cumsum(breaks) - 1
+        counts = np.bincount(ids)
+        keep = counts[ids] >= 2  # one-point segments are dropped
+        seg[idx[keep]] = ids[keep]
+        valid = valid.copy()
+        valid[idx[~keep]] = False
+    return PolarScan(r, scan.bearings, valid, seg, np.column_stack((r * np.cos(scan.bearings), r * np.sin(scan.bearings))))
+
+
+@dataclass(frozen=True, eq=False)
+class Grid:
+    """The reference bearings as a uniform grid: b0 + i * step, i < n; ``full``: it wraps around."""
+
+    b0: float
+    step: float
+    n: int
+    full: bool
+
+    @staticmethod
+    def of(scan: Scan, name: str) -> "Grid":
+        b = scan.bearings
+        if len(b) < 3:
+            raise ScanError(scan.source, f"{name} needs at least 3 reference beams")
+        d = np.diff(b)
+        step = float(np.median(d))
+        if np.max(np.abs(d - step)) > 0.01 * step:
+            raise ScanError(scan.source, f"{name} needs uniformly spaced reference bearings (increments from "
+                            f"{np.degrees(d.min()):.4f} to {np.degrees(d.max()):.4f} deg); use icp, mbicp or improved")
+        return Grid(float(b[0]), step, len(b), scan.is_full_circle())
+
+    @property
+    def bearings(self) -> np.ndarray:
+        return self.b0 + self.step * np.arange(self.n)
+
+
+def project(grid: Grid, cur: PolarScan, pose: Pose2) -> np.ndarray:
+    """Scan projection (PSM §3 step 2): ranges of the moved object scan at the reference bearings.
+
+    Between consecutive points of one segment the range is interpolated linearly in bearing; where
+    several surfaces project onto one bearing the closest is kept (occlusion). NaN: nothing there.
+    """
+    out = np.full(grid.n, np.inf)
+    pts = pose.apply(cur.xy)
+    a = grid.b0 + np.mod(np.arctan2(pts[:, 1], pts[:, 0]) - grid.b0, 2 * np.pi)  # in [b0, b0 + 2pi)
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    k = np.flatnonzero(cur.valid[:-1] & cur.valid[1:] & (cur.segment[:-1] == cur.segment[1:]))
+    a1, a2, r1, r2 = a[k], a[k + 1], r[k], r[k + 1]
+    ok = np.abs(a2 - a1) < np.pi / 2  # an edge across the seam of the angle range is not a surface
+    a1, a2, r1, r2 = a1[ok], a2[ok], r1[ok], r2[ok]
+    lo, hi = np.minimum(a1, a2), np.maximum(a1, a2)
+    i0 = np.ceil((lo - grid.b0) / grid.step - 1e-9).astype(np.int64)
+    i1 = np.floor((hi - grid.b0) / grid.step + 1e-9).astype(np.int64)
+    count = np.maximum(i1 - i0 + 1, 0)
+    if count.sum() == 0:
+        return np.full(grid.n, np.nan)
+    edge = np.repeat(np.arange(len(i0)), count)
+    offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    i = i0[edge] + offset
+    phi = grid.b0 + i * grid.step
+    span = a2[edge] - a1[edge]
+    t = np.where(np.abs(span) > 1e-12, (phi - a1[edge]) / np.where(np.abs(span) > 1e-12, span, 1.0), 0.0)
+    rr = r1[edge] + t * (r2[edge] - r1[edge])
+    i = np.mod(i, grid.n) if grid.full else i
+    inside = (i >= 0) & (i < grid.n)
+    np.minimum.at(out, i[inside], rr[inside])
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
+def shift_costs(ref_r: np.ndarray, proj_r: np.ndarray, K: int, full: bool, min_pairs: int):
+    """Mean |r_ref(i) - r_proj(i + k)| and the pair count for every shift k in -K..K (PSM §3 step 4).
+
+    NaN marks missing ranges; a sliding window over the padded projection avoids any gather.
+    """
+    pad = np.concatenate((proj_r[-K:], proj_r, proj_r[:K])) if full and K else np.pad(
+        proj_r, K, constant_values=np.nan)
+    win = np.lib.stride_tricks.sliding_window_view(pad, 2 * K + 1)  # (n, 2K+1): win[i, K + k] = r_proj(i + k)
+    diff = np.abs(win - ref_r[:, None])
+    ok = ~np.isnan(diff)
+    count = ok.sum(axis=0)
+    cost = np.where(ok, diff, 0.0).sum(axis=0) / np.maximum(count, 1)
+    return np.where(count >= min_pairs, cost, np.nan), count
+
+
+def refine_parabola(a: float, b: float, c: float) -> float:
+    """Offset of the vertex of the parabola through (-1, a), (0, b), (1, c) (PSM's refinement)."""
+    den = a - 2.0 * b + c
+    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den > 0 else 0.0
+
+
+def refine_v(a: float, b: float, c: float) -> float:
+    """Vertex of the linear absolute-value function m|x - x0| + b0 through (-1, a), (0, b), (1, c).
+
+    Paper 003 §4.1 (its eqs. 20-22 are lost; this is the closed form of that model): with the
+    steeper side setting the slope m = max(a, c) - b, x0 = (a - c) / (2 m).
+    """
+    m = max(a, c) - b
+    return float(np.clip((a - c) / (2.0 * m), -0.5, 0.5)) if m > 0 else 0.0
+
+
+def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarray | None = None):
+    """The refined minimum of the cost curve (in shift units) and the three samples the fit used.
+
+    ``fit_cost`` (default: ``cost``) is the curve the sub-shift fit runs on: PMWN picks the shift
+    with its metric-weighted norm but refines it on the range term alone, since the weight's own
+    V at zero would pull every refinement towards no correction.
+    """
+    if not np.any(np.isfinite(cost)):
+        return None, None
+    j = int(np.nanargmin(cost))
+    f = cost if fit_cost is None else fit_cost
+    if 0 < j < len(f) - 1 and np.isfinite(f[j - 1]) and np.isfinite(f[j]) and np.isfinite(f[j + 1]):
+        abc = (float(f[j - 1]), float(f[j]), float(f[j + 1]))
+        return float(shifts[j]) + refine(*abc), abc
+    return float(shifts[j]), None
+
+
+def translation_residuals(grid: Grid, ref: PolarScan, proj_r: np.ndarray, max_error: float, C: float):
+    """Residuals e_i = r_ref - r_proj at shared bearings, PSM weights w = C / (C + e^2), and which are used."""
+    both = ref.valid & np.isfinite(proj_r)
+    i = np.flatnonzero(both)
+    e = ref.ranges[i] - proj_r[i]
+    used = np.abs(e) <= max_error
+    return i, e, C / (C + e * e), used
+
+
+def weighted_translation(phi: np.ndarray, e: np.ndarray, w: np.ndarray) -> np.ndarray | None:
+    """Weighted least squares of e_i ~ (cos phi_i, sin phi_i) . dt (PSM §3 step 3; PMWN's circle)."""
+    c, s = np.cos(phi), np.sin(phi)
+    a, b, d = (w * c * c).sum(), (w * c * s).sum(), (w * s * s).sum()
+    det = a * d - b * b
+    if det <= 1e-9 * (a + d) ** 2:  # all bearings alike: translation across them is unobservable
+        return None
+    rx, ry = (w * c * e).sum(), (w * s * e).sum()
+    return np.array([(d * rx - b * ry) / det, (a * ry - b * rx) / det])
+
+
+def polar_pairs(grid: Grid, ref: PolarScan, proj_r: np.ndarray, i: np.ndarray, e: np.ndarray,
+                used: np.ndarray, ref_point_of: np.ndarray) -> Correspondences:
+    """The range comparisons as point pairs: projected surface point -> reference point, one bearing each."""
+    phi = ref.bearings[i]
+    u = np.column_stack((np.cos(phi), np.sin(phi)))
+    src = proj_r[i, None] * u
+    tgt = ref.ranges[i, None] * u
+    status = np.where(used, PairStatus.KEPT, PairStatus.OUTSIDE_BR).astype(np.int8)
+    return Correspondences(np.full(len(i), -1), tgt, np.full(len(i), PairKind.POINT, dtype=np.int8),
+                           np.column_stack((ref_point_of[i], np.full(len(i), -1))), np.abs(e), status, src)
+
+
+@dataclass(frozen=True)
+class Strategy:
+    """How one polar matcher differs from the other inside the shared loop."""
+
+    name: str
+    orientation_due: object  # (iteration) -> bool
+    refine: object  # (a, b, c) -> fractional offset of the minimum
+    fit: str  # "parabola" | "V"
+    weight_C: object  # (iteration) -> C of the translation weights
+    metric: bool  # PMWN: add lambda * |shift angle| to the cost and adapt lambda
+
+
+def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, observer):
+    """Alternate orientation (shift the projected ranges) and translation (weighted LS) steps."""
+    from .events import FinishEvent, IterationEvent, PolarStep, StartEvent
+    from .result import MatchResult, Termination
+    from .uncertainty import degeneracy
+
+    grid = Grid.of(ref, strategy.name.upper())
+    pre = (params.median_window, params.min_range, params.max_range, params.max_jump)
+    R, O = preprocess(ref, *pre), preprocess(obj, *pre)
+    ref_pts, obj_pts = R.points(), O.points()
+    ref_point_of = np.cumsum(R.valid) - 1
+    ref_r = np.where(R.valid, R.ranges, np.nan)
+    K = int(round(params.search_window / grid.step))
+    shifts = np.arange(-K, K + 1)
+    if observer is not None:
+        observer(StartEvent(strategy.name, params, ref_pts, obj_pts, np.arange(len(obj_pts)), guess, None))
+    est, lam = guess, params.lambda0 if strategy.metric else None
+    n_small, it, reason, last = 0, 0, Termination.MAX_ITERATIONS, None
+    gain, last_fraction = 0.5, 0.0  # sub-bearing orientation steps (see below)
+    for it in range(1, params.MaxIter + 1):
+        before = est
+        proj0 = project(grid, O, est)
+        cost, k_best, abc, dtheta = np.full(len(shifts), np.nan), None, None, 0.0
+        if strategy.orientation_due(it) and K > 0:
+            range_cost, _ = shift_costs(ref_r, proj0, K, grid.full, params.min_pairs)
+            cost = range_cost + lam * np.abs(shifts) * grid.step if strategy.metric else range_cost
+            k_best, abc = best_shift(shifts, cost, strategy.refine, range_cost)
+            if k_best is not None:
+                # r_proj(i + k) matches r_ref(i): the projection sits k bearings too far; turn it back.
+                # Inside one bearing the fit's vertex depends on where the samples fall and jumps
+                # sign across the answer, so whole steps flip between two phases: sub-bearing steps
+                # are halved, and halved again at every flip (a bisection onto the answer).
+                if abs(k_best) < 1.0:
+                    if k_best * last_fraction < 0:
+                        gain *= 0.5
+                    last_fraction = k_best
+                    dtheta = -gain * k_best * grid.step
+                else:
+                    dtheta = -k_best * grid.step
+                est = Pose2(0.0, 0.0, dtheta) @ est
+        proj = project(grid, O, est) if dtheta else proj0
+        i, e, w, used = translation_residuals(grid, R, proj, params.max_error, strategy.weight_C(it))
+        if np.count_nonzero(used) < params.min_pairs:
+            reason = Termination.TOO_FEW_PAIRS
+            est = before
+            if observer is not None:
+                observer(IterationEvent(it, before, before, before.apply(obj_pts), np.empty(0, np.int64),
+                                        polar_pairs(grid, R, proj, i, e, used, ref_point_of), None, float("nan"),
+                                        Pose2(), None))
+            break
+        phi = R.bearings[i[used]]
+        dt = weighted_translation(phi, e[used], w[used])
+        if dt is None:
+            reason, est = Termination.SINGULAR, before
+            break
+        est = Pose2(float(dt[0]), float(dt[1]), 0.0) @ est
+        error = float(np.mean(e[used] ** 2))
+        if strategy.metric:
+            # Paper 003 eq. 17 (lost): the weight that balances the two terms of the norm at this
+            # iteration's solution, lambda = D / |theta|, D the mean |range difference| there.
+            d_mean = float(np.mean(np.abs(e[used])))
+            lam_used = lam
+            lam = min(d_mean / max(abs(dtheta), grid.step), params.lambda_max)
+        inc = est @ before.inverse()
+        if observer is not None:
+            u = np.column_stack((np.cos(phi), np.sin(phi)))
+            circle = e[used, None] * u if strategy.metric else None
+            observer(IterationEvent(
+                it, before, est, before.apply(obj_pts), np.empty(0, np.int64),
+                polar_pairs(grid, R, proj, i, e, used, ref_point_of), params.max_error, error, inc,
+                PolarStep(grid.bearings, ref_r, proj0, shifts, cost, k_best,
+                          strategy.fit if k_best is not None else None, abc, lam_used if strategy.metric else None,
+                          e, w, circle, 0.5 * dt if strategy.metric else None)))
+        last = (error, i[used], int(np.count_nonzero(used)), int(np.count_nonzero(~used)))
+        small = abs(inc.x) < params.errx_out and abs(inc.y) < params.erry_out and abs(inc.theta) < params.errt_out
+        n_small = n_small + 1 if small else 0
+        if n_small >= params.stop_after:
+            reason = Termination.CONVERGED
+            break
+    deg = None
+    if last is not None:
+        beams = last[1]
+        pts = ref_pts[ref_point_of[beams]]
+        tang = np.column_stack((-np.sin(grid.b0 + beams * grid.step), np.cos(grid.b0 + beams * grid.step)))
+        nxt = ref_pts[np.minimum(ref_point_of[beams] + 1, len(ref_pts) - 1)]
+        prv = ref_pts[np.maximum(ref_point_of[beams] - 1, 0)]
+        t = nxt - prv
+        norm = np.hypot(t[:, 0], t[:, 1])
+        tang = np.where(norm[:, None] > 0, t / np.where(norm > 0, norm, 1.0)[:, None], tang)
+        deg = degeneracy(pts, tang, 3.0)
+    result = MatchResult(strategy.name, est, reason is Termination.CONVERGED, reason, it,
+                         last[0] if last else float("nan"), last[2] if last else 0, last[3] if last else 0, None, deg)
+    if observer is not None:
+        observer(FinishEvent(result))
+    return result
