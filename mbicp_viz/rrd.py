@@ -35,9 +35,18 @@ def new_stream(recording_id: str, live: bool = False) -> rr.RecordingStream:
 ABOUT = "about"
 
 
+POLAR_ROOTS = ("psm", "pmwn")
+
+
 def blueprint(roots: list[str], teaching: bool = False, about: bool = False) -> rrb.Blueprint:
-    """Scans side by side, error and threshold plots, the text log; time panel on ``iteration``."""
+    """Scans side by side, error and threshold plots, the text log; time panel on ``iteration``.
+
+    Polar matchers add their cost-per-shift and range-per-bearing plots (x in degrees).
+    """
     scans = [rrb.Spatial2DView(origin=f"/{r}/{scene.SCANS}", name=f"{r}: scans") for r in roots]
+    polar = [rrb.Tabs(rrb.Spatial2DView(origin=f"/{r}/{scene.POLAR}/cost", name=f"{r}: cost per shift"),
+                      rrb.Spatial2DView(origin=f"/{r}/{scene.POLAR}/ranges", name=f"{r}: ranges per bearing"))
+             for r in roots if r in POLAR_ROOTS]
     log = rrb.TextLogView(origin="/", contents=[f"/{r}/{scene.LOG}" for r in roots], name="log")
     side = [rrb.TimeSeriesView(origin="/", contents=[f"/{r}/{scene.PLOTS}/**" for r in roots],
                                name="error and threshold"),
@@ -45,6 +54,7 @@ def blueprint(roots: list[str], teaching: bool = False, about: bool = False) -> 
     if teaching:
         side.insert(1, rrb.Tabs(*[rrb.Spatial2DView(origin=f"/{r}/{scene.TEACH}/histogram",
                                                     name=f"{r}: pair distances") for r in roots]))
+    side = polar + side
     main = scans[0] if len(scans) == 1 else rrb.Horizontal(*scans)
     return rrb.Blueprint(rrb.Horizontal(main, rrb.Vertical(*side), column_shares=[3, 2]),
                          rrb.TimePanel(timeline="iteration", expanded=True), collapse_panels=True)

@@ -130,7 +130,7 @@ def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
     ]
     if ev.threshold is not None:
         layers.append(Scalar(f"{PLOTS}/threshold", ev.threshold, THRESHOLD))
-    return layers
+    return layers + polar_layers(ev)
 
 
 def iteration_text(ev: IterationEvent) -> str:
@@ -257,4 +257,61 @@ def sequence_layers(k: int, pose: Pose2, points: np.ndarray, trajectory: np.ndar
                    Text(LOG, f"pair {row['ref']} -> {row['obj']}: ({row['x']:+.3f} m, {row['y']:+.3f} m, "
                              f"{math.degrees(row['theta']):+.2f} deg), {row['iterations']} iterations, "
                              f"{row['reason']}", "INFO" if row["converged"] else "WARN")]
+    return layers
+
+
+# Polar matchers (PSM, PMWN): how they think, in plot spaces of their own (x in degrees).
+POLAR = "polar"
+RANGE_REF: RGB = (220, 40, 40)
+RANGE_PROJ: RGB = (40, 90, 220)
+FIT: RGB = (0, 160, 90)
+
+
+def fitted_curve(polar, shift_deg: float, n: int = 21) -> np.ndarray | None:
+    """The V (PMWN) or parabola (PSM) through the three cost samples around the minimum."""
+    if polar.fit_abc is None or polar.best_shift is None:
+        return None
+    a, b, c = polar.fit_abc
+    k0 = round(polar.best_shift) if abs(polar.best_shift - round(polar.best_shift)) <= 0.5 else polar.best_shift
+    x = np.linspace(-1.0, 1.0, n)
+    if polar.fit == "V":
+        m = max(a, c) - b
+        x0 = (a - c) / (2 * m) if m > 0 else 0.0
+        y = m * np.abs(x - x0) + (b - m * abs(x0))
+    else:
+        y = 0.5 * (a - 2 * b + c) * x * x + 0.5 * (c - a) * x + b
+    return np.column_stack(((k0 + x) * shift_deg, y))
+
+
+# Plot scales, so that both axes of a 2-D plot space span similar numbers.
+COST_SCALE = 100.0  # cost plot: x shift [deg], y cost [cm]
+RANGE_SCALE = 10.0  # range plot: x bearing [deg], y range [dm]
+
+
+def polar_layers(ev: IterationEvent) -> list[Layer]:
+    """Cost per shift with the chosen minimum and its fit; ranges vs bearing; PMWN's projected circle."""
+    P = ev.polar
+    if P is None:
+        return []
+    step_deg = math.degrees(float(np.median(np.diff(P.bearings))))
+    layers: list[Layer] = []
+    ok = np.isfinite(P.cost)
+    if ok.any():
+        layers.append(Strips(f"{POLAR}/cost/curve",
+                             [np.column_stack((P.shifts[ok] * step_deg, P.cost[ok] * COST_SCALE))], HIST_BAR, 0.1))
+        fit = fitted_curve(P, step_deg)
+        if fit is not None:
+            fit = fit * [1.0, COST_SCALE]
+            layers.append(Strips(f"{POLAR}/cost/fit", [fit], FIT, 0.12))
+            layers.append(Points(f"{POLAR}/cost/minimum", np.array([[P.best_shift * step_deg, fit[:, 1].min()]]),
+                                 THRESHOLD, 0.4))
+    deg = np.degrees(P.bearings)
+    for name, r, color in (("reference", P.ref_ranges, RANGE_REF), ("projected", P.projected_ranges, RANGE_PROJ)):
+        pts = np.column_stack((deg, r * RANGE_SCALE))
+        layers.append(Points(f"{POLAR}/ranges/{name}", pts[np.isfinite(r)], color, 0.3))
+    if P.metric_weight is not None:
+        layers.append(Scalar(f"{PLOTS}/metric_weight", P.metric_weight, FIT))
+    if P.circle_points is not None:
+        layers.append(Points(f"{SCANS}/{POLAR}/circle_points", P.circle_points, FIT, 0.01))
+        layers.append(Points(f"{SCANS}/{POLAR}/circle_centre", P.circle_centre[None, :], THRESHOLD, 0.03))
     return layers

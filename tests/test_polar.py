@@ -147,3 +147,22 @@ def test_compare_prints_every_matcher_with_errors(tmp_path):
     assert set(rows) == {"icp", "mbicp", "improved", "psm", "pmwn"}
     for name, cols in rows.items():
         assert float(cols[4]) < 10.0 and float(cols[5]) < 0.2, (name, cols)  # err_mm, err_deg
+
+
+def test_polar_recording_carries_cost_curves_and_the_circle(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from mbicp_viz.rrd import Run, record
+
+    ref = scans("laserazos")[10]
+    obj = seen_from(ref, Pose2(0.05, -0.02, math.radians(4.0)))
+    path = tmp_path / "polar.rrd"
+    rec = Recorder()
+    record([Run("pmwn", ref, obj, Pose2(), PmwnParams())], str(path), extra_observer=rec)
+    counts = {}
+    for c in RrdReader(str(path)).stream().to_chunks():
+        counts[c.entity_path] = counts.get(c.entity_path, 0) + c.num_rows
+    n = len(rec.iterations)
+    assert counts["/pmwn/polar/cost/curve"] == n and counts["/pmwn/polar/cost/fit"] == n
+    assert counts["/pmwn/scene/polar/circle_points"] == n and counts["/pmwn/plots/metric_weight"] == n
+    assert counts["/pmwn/polar/ranges/projected"] == n
