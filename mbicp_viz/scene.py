@@ -196,18 +196,21 @@ class Strips:
     width: float
 
 
-def teaching_layers(start: StartEvent, ev: IterationEvent, n_points: int = 6, bins: int = 30) -> list[Layer]:
+def teaching_layers(start: StartEvent, ev: IterationEvent, n_points: int = 6, bins: int = 30,
+                    chosen: int | None = None) -> list[Layer]:
     """Iso-distance curves for a few object points and the histogram of pair distances.
 
     For every chosen point the metric ellipse and the Euclidean circle pass through its target,
     so a user sees why that target won; the histogram shows the distances with the median and
-    the rejection threshold (for improved MbICP: median + k MAD, Fig. 9b).
+    the rejection threshold (for improved MbICP: median + k MAD, Fig. 9b). ``chosen`` (an index
+    into ``start.obj_points``) shows that one point's curves instead of ``n_points`` spread ones.
     """
     layers: list[Layer] = []
     p = ev.pairs
     L = getattr(start.params, "L", None)
     if L is not None and len(p.kind):
-        pick = np.unique(np.linspace(0, len(p.kind) - 1, n_points).round().astype(int))
+        mine = np.flatnonzero(p.obj_index == chosen) if chosen is not None else np.empty(0, np.int64)
+        pick = mine[:1] if len(mine) else np.unique(np.linspace(0, len(p.kind) - 1, n_points).round().astype(int))
         src, tgt = p.source[pick], p.target[pick]
         layers.append(Strips(f"{SCANS}/{TEACH}/metric_isocurves",
                              [metric_isocurve(s, t, L) for s, t in zip(src, tgt)], ISO_METRIC, 0.004))

@@ -83,6 +83,7 @@ class Session:
         self.match_ms = 0.0
         self._quiet = False
         self.nodes: dict[str, object] = {}  # scene node name -> viser handle, as last drawn
+        self.iso_point: int | None = None  # object point whose iso-distance curves are shown
         self._build_gui()
         self.rematch()
         self._frame_camera()
@@ -154,7 +155,7 @@ class Session:
             return layers
         ev = run.iterations[min(k, len(run.iterations)) - 1]
         layers += scene.iteration_layers(start, ev)
-        layers += scene.teaching_layers(start, ev)
+        layers += scene.teaching_layers(start, ev, chosen=self.iso_point)
         return layers
 
     def redraw(self) -> None:
@@ -283,9 +284,14 @@ class Session:
                 for h in (self.h_ref, self.h_obj, self.h_consecutive):
                     h.on_update(lambda _: self._on_pair())
         with gui.add_folder("Layers"):
+            self.layer_boxes = {}
             for g in viser_draw.GROUPS:
                 cb = gui.add_checkbox(g, self.visible[g])
                 cb.on_update(lambda ev, g=g: self._on_layer(g, ev.target.value))
+                self.layer_boxes[g] = cb
+            self.h_iso = gui.add_number("iso-curves: object point (-1: spread)", -1, step=1, min=-1,
+                                        hint="click a blue point in the view, or type its index")
+            self.h_iso.on_update(lambda _: self._on_iso_number())
         with gui.add_folder("Plots"):
             self.h_error_plot = gui.add_uplot(
                 data=(np.zeros(1), np.zeros(1), np.zeros(1)),
@@ -307,6 +313,7 @@ class Session:
             "/guess", scale=0.8, disable_sliders=True, position=(self.guess.x, self.guess.y, 0.0),
             wxyz=viser_draw.yaw_to_wxyz(self.guess.theta))
         self.gizmo.on_update(lambda _: self._on_gizmo())
+        self.client.scene.on_click()(lambda ev: self._guarded(lambda: self.click(ev.ray_origin, ev.ray_direction)))
 
     def _build_param_panel(self) -> None:
         if self.param_folder is not None:
@@ -428,6 +435,29 @@ class Session:
             self.gizmo.wxyz = viser_draw.yaw_to_wxyz(self.guess.theta)
             self.rematch()
             self._frame_camera()
+
+    def click(self, origin, direction) -> int | None:
+        """Choose the object point nearest to where a view ray meets the scan plane (z = 0)."""
+        o, d = np.asarray(origin, float), np.asarray(direction, float)
+        if abs(d[2]) < 1e-9 or not self.runs:
+            return None
+        xy = (o - o[2] / d[2] * d)[:2]
+        run = self.runs[0]
+        k = min(self.iteration, len(run.iterations))
+        moved = run.iterations[k - 1].moved_points if k else run.start.initial_guess.apply(
+            run.start.obj_points[run.start.used])
+        j = int(np.argmin(np.hypot(*(moved - xy).T)))
+        self.h_iso.value = int(run.start.used[j])  # fires the redraw
+        return self.iso_point
+
+    def _on_iso_number(self) -> None:
+        with self.lock:
+            v = int(self.h_iso.value)
+            self.iso_point = None if v < 0 else v
+            if self.iso_point is not None and not self.visible["iso-distance curves"]:
+                self.layer_boxes["iso-distance curves"].value = True  # redraws
+            else:
+                self.redraw()
 
     def _on_layer(self, group: str, value: bool) -> None:
         with self.lock:

@@ -142,3 +142,26 @@ def test_plain_text_and_npz_round_trip(tmp_path, intel):
             np.testing.assert_array_equal(a.valid, b.valid)
             np.testing.assert_allclose(a.points(), b.points(), atol=1e-9)
     assert read_npz(str(npz)).scans[1].pose == scans[1].pose
+
+
+def test_rawlaser_and_robotlaser_lines_read_like_flaser(tmp_path, intel):
+    """No shared log has RAWLASER/ROBOTLASER lines: write real Intel scans in those formats."""
+    lines_raw, lines_robot = [], []
+    for s in intel.scans[:3]:
+        n = len(s.ranges)
+        head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n} " + " ".join(str(float(v)) for v in s.ranges)
+        lines_raw.append(f"RAWLASER1 {head} 0 {s.stamp} host {s.stamp}")
+        p, o = s.pose, s.odometry
+        lines_robot.append(f"ROBOTLASER1 {head} 0 {p.x} {p.y} {p.theta} {o.x} {o.y} {o.theta} 0 0 0 0 0 "
+                           f"{s.stamp} host {s.stamp}")
+    for name, lines in (("raw.log", lines_raw), ("robot.log", lines_robot)):
+        path = tmp_path / name
+        path.write_text("\n".join(lines) + "\n")
+        log = read_log(path)
+        assert len(log) == 3
+        for a, b in zip(log.scans, intel.scans[:3]):
+            np.testing.assert_array_equal(a.valid, b.valid)
+            np.testing.assert_allclose(a.points(), b.points(), atol=1e-9)
+            assert a.stamp == pytest.approx(b.stamp)
+        if name == "robot.log":
+            assert log.scans[1].pose.as_array() == pytest.approx(intel.scans[1].pose.as_array())

@@ -163,3 +163,19 @@ def test_log_source_picks_any_pair(server):
 def test_scenario_source():
     src = source_for(None, None, "partial-overlap")
     assert src.truth is not None and set(src.params) == {"mbicp", "improved"}
+
+
+def test_clicking_a_point_shows_its_iso_distance_curves(session):
+    session.h_iter.value = 2
+    run = session.runs[0]
+    ev = run.iterations[1]
+    j = 40
+    target = ev.moved_points[j]
+    # a view ray from above, straight down onto that point
+    chosen = session.click((target[0], target[1], 10.0), (0.0, 0.0, -1.0))
+    assert chosen == int(run.start.used[j])
+    assert session.visible["iso-distance curves"] and session.nodes["/improved/scene/teaching/metric_isocurves"].visible
+    row = np.flatnonzero(ev.pairs.obj_index == chosen)[0]
+    ellipse = session.nodes["/improved/scene/teaching/metric_isocurves"].points.reshape(-1, 3)[:, :2]
+    # one ellipse, centred on that point's target
+    np.testing.assert_allclose(ellipse.mean(axis=0), ev.pairs.target[row], atol=0.02)
