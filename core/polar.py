@@ -9,13 +9,17 @@ a 360-degree reference wraps around.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from scipy.ndimage import median_filter
 
-from .events import Correspondences, PairKind, PairStatus
+from .events import (Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, PolarStep,
+                     StartEvent)
+from .result import MatchResult, Termination
 from .scan import Scan, ScanError
 from .se2 import Pose2
+from .uncertainty import degeneracy
 
 
 @dataclass(frozen=True, eq=False)
@@ -200,19 +204,15 @@ class Strategy:
     """How one polar matcher differs from the other inside the shared loop."""
 
     name: str
-    orientation_due: object  # (iteration) -> bool
-    refine: object  # (a, b, c) -> fractional offset of the minimum
+    orientation_due: Callable[[int], bool]  # iteration -> run the orientation step?
+    refine: Callable[[float, float, float], float]  # three costs -> fractional offset of the minimum
     fit: str  # "parabola" | "V"
-    weight_C: object  # (iteration) -> C of the translation weights
+    weight_C: Callable[[int], float]  # iteration -> C of the translation weights
     metric: bool  # PMWN: add lambda * |shift angle| to the cost and adapt lambda
 
 
-def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, observer):
+def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, observer: Observer | None) -> MatchResult:
     """Alternate orientation (shift the projected ranges) and translation (weighted LS) steps."""
-    from .events import FinishEvent, IterationEvent, PolarStep, StartEvent
-    from .result import MatchResult, Termination
-    from .uncertainty import degeneracy
-
     grid = Grid.of(ref, strategy.name.upper())
     pre = (params.median_window, params.min_range, params.max_range, params.max_jump)
     R, O = preprocess(ref, *pre), preprocess(obj, *pre)
