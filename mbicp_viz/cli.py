@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Annotated, Optional
 
+import numpy as np
 import typer
 
 from core import MATCHERS, ParamError, Recorder, ScanError, match
@@ -235,6 +236,72 @@ def eval_protocol(
     its = sorted(c.iterations for c in res)
     typer.echo(f"{algo}: {ok}/{cases} within 1 cm and 0.1 deg ({100.0 * ok / cases:.1f} %); {gross} off by more than "
                f"0.1 m or 3 deg; median {its[len(its) // 2]} iterations")
+
+
+@eval_app.command("overlap")
+@user_errors
+def eval_overlap(
+    logs: Annotated[list[str], typer.Argument(help="scan logs; scenes are picked evenly from each")],
+    scenes_per_log: Annotated[int, typer.Option("--scenes-per-log", min=1, help="scenes taken from each log")] = 1,
+    scans: Annotated[Optional[str], typer.Option("--scans", help="explicit scene indices I,J,... (one log)")] = None,
+    ratios: Annotated[str, typer.Option("--ratios", help="kept fractions in %")] = "100,90,80,70,60",
+    runs: Annotated[int, typer.Option("--runs", min=1, help="random displacements per scene and ratio")] = 10,
+    removal: Annotated[str, typer.Option("--removal", help="block (occlusion-like) or random")] = "block",
+    algos: Annotated[str, typer.Option("--algos", help="comma-separated matchers")] = ",".join(MATCHERS),
+    params: ParamsOpt = None,
+    seed: Annotated[int, typer.Option("--seed", help="random seed")] = 0,
+    max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, help="largest |x|, |y| of a displacement [m]")] = 0.5,
+    max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
+                                                 help="largest |theta| of a displacement [deg]")] = 15.0,
+    csv: Annotated[Optional[Path], typer.Option("--csv", help="write every run as CSV")] = None,
+    png: Annotated[Optional[Path], typer.Option("--png", help="write a plot")] = None,
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="processes (default: all cores)")] = None,
+):
+    """Paper 000's partial-overlap protocol (§3.1): Tables 1-3 for each matcher, as Markdown."""
+    import math
+
+    from .inputs import make_params
+    from .overlap import csv_text, make_cases, markdown, plot_png, run_overlap, tables
+    from .readers import read_log
+
+    if removal not in ("block", "random"):
+        raise InputError("choose block or random", field="--removal")
+    try:
+        etas = [float(v) / 100.0 for v in ratios.split(",")]
+    except ValueError:
+        raise InputError(f"expected numbers like 100,90,80, got {ratios!r}", field="--ratios") from None
+    if not all(0.0 < e <= 1.0 for e in etas):
+        raise InputError("each ratio must lie in (0, 100]", field="--ratios")
+    names = [a.strip() for a in algos.split(",") if a.strip()]
+    ps = {a: make_params(a, str(params) if params else None) for a in names}
+    scenes = []
+    for lg in (read_log(p) for p in logs):
+        if scans:
+            idx = [int(v) for v in scans.split(",")]
+        else:
+            idx = [int(round(k)) for k in np.linspace(0, len(lg.scans) - 1, scenes_per_log + 2)[1:-1]]
+        scenes += [lg.scan(i) for i in idx]
+    cases = make_cases(scenes, etas, runs, removal, seed, max_xy, math.radians(max_theta_deg))
+    total = len(cases)
+    t0 = time.perf_counter()
+    with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:
+        done = [0]
+
+        def progress(rows):
+            n = len(rows) // len(ps)
+            bar.update(n - done[0])
+            done[0] = n
+
+        rows = run_overlap(scenes, ps, cases, workers, progress)
+    took = time.perf_counter() - t0
+    tab = tables(rows)
+    typer.echo(markdown(tab))
+    typer.echo(f"{len(rows)} matches ({len(rows) // max(len(ps), 1)}/{total} cases) in {took:.1f} s; "
+               f"{len(scenes)} scenes, removal {removal}, seed {seed}", err=True)
+    if csv:
+        csv.write_text(csv_text(rows))
+    if png:
+        plot_png(tab, str(png))
 
 
 @app.command("bench")
