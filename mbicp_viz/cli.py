@@ -304,6 +304,33 @@ def eval_overlap(
         plot_png(tab, str(png))
 
 
+@eval_app.command("relations")
+@user_errors
+def eval_relations(
+    log: Annotated[str, typer.Argument(help="scan log with time stamps")],
+    relations: Annotated[str, typer.Argument(help="relations file (t1 t2 x y z roll pitch yaw)")],
+    algo: AlgoOpt = "improved",
+    params: ParamsOpt = None,
+    offset: Annotated[float, typer.Option("--offset", help="seconds added to the log's stamps (Intel corrected: "
+                                          "976052857.337)")] = 0.0,
+    tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, help="largest stamp mismatch [s]")] = 0.025,
+    guess: Annotated[str, typer.Option("--guess", help="identity, pose or odometry")] = "identity",
+    out: Annotated[Optional[Path], typer.Option("--out", help="JSON file: one object per matched relation")] = None,
+):
+    """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""
+    from .inputs import make_params
+    from .readers import read_log
+    from .relations import match_relations, read_relations, summary
+
+    if guess not in ("identity", "pose", "odometry"):
+        raise InputError("choose identity, pose or odometry", field="--guess")
+    rows, missing = match_relations(read_log(log), read_relations(relations), make_params(algo, str(params) if params
+                                    else None), offset, tolerance, guess)
+    if out:
+        out.write_text(json.dumps(rows, indent=1) + "\n")
+    typer.echo(f"{algo}: {summary(rows)} ({missing} relations without a scan at both ends)")
+
+
 @app.command("bench")
 @user_errors
 def bench_cmd(
