@@ -187,4 +187,5 @@ class PmwnParams(PolarParams):
     C: float = param(0.49, unit="m^2", lo=1e-6, hi=100.0, help="weight constant of the projected-circle fit")
     lambda0: float = param(0.0, unit="m/rad", lo=0.0, hi=1000.0,
         help="metric weight of the first iteration (0: the first rotation is free)")
-    lambda_max: float = param(20.0, unit="m/rad", lo=0.0, hi=1e6, help="upper bound of the adaptive metric weight")
+    lambda_max: float = param(0.5, unit="m/rad", lo=0.0, hi=1e6,
+        help="upper bound of the adaptive metric weight (larger values lock the rotation when the translation is far off)")

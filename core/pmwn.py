@@ -9,9 +9,10 @@ The paper's equations were lost in our copy; what its prose fixes is implemented
   term averaged over the n_k bearings that have both ranges (the count varies with k), plus the
   metric-weighted angle term that prices rotation against translation, as MbICP's L does.
 - Adaptive metric weight (§3.2, eq. 17): lambda_{t+1} = D_t / max(|theta_t|, dphi), the weight
-  that balances both terms at iteration t's solution (D_t: mean |range difference| of the used
-  pairs, theta_t: the rotation found); the first iteration uses ``lambda0``; capped at
-  ``lambda_max``. Shown per iteration in the events (``PolarStep.metric_weight``).
+  that balances both terms at the rotation the range term points to (D_t: mean |range
+  difference| of the used pairs, theta_t: the shift where the range cost alone is least); the
+  first iteration uses ``lambda0``; capped at ``lambda_max``. Shown per iteration in the events
+  (``PolarStep.metric_weight``).
 - Rotation (§4.1): k* = argmin N(k), refined with the linear absolute-value (V) function through
   the minimum and its neighbours: offset = (a - c) / (2 (max(a, c) - b)).
 - Translation (§3.3, §4.2): under a pure translation T the range change along a ray u_i is

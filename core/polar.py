@@ -230,6 +230,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
         before = est
         proj0 = project(grid, O, est)
         cost, k_best, abc, dtheta = np.full(len(shifts), np.nan), None, None, 0.0
+        range_cost = cost
         if strategy.orientation_due(it) and K > 0:
             range_cost, _ = shift_costs(ref_r, proj0, K, grid.full, params.min_pairs)
             cost = range_cost + lam * np.abs(shifts) * grid.step if strategy.metric else range_cost
@@ -265,11 +266,15 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
         est = Pose2(float(dt[0]), float(dt[1]), 0.0) @ est
         error = float(np.mean(e[used] ** 2))
         if strategy.metric:
-            # Paper 003 eq. 17 (lost): the weight that balances the two terms of the norm at this
-            # iteration's solution, lambda = D / |theta|, D the mean |range difference| there.
+            # Paper 003 eq. 17 (lost): the weight that balances the two terms of the norm at the
+            # rotation the range term points to, lambda = D / |theta_r|: D the mean |range
+            # difference| of this iteration, theta_r the shift where the range cost alone is least.
+            # (Balancing at the step actually taken would lock: a small step raises lambda, which
+            # keeps the next step small.)
             d_mean = float(np.mean(np.abs(e[used])))
             lam_used = lam
-            lam = min(d_mean / max(abs(dtheta), grid.step), params.lambda_max)
+            theta_r = abs(float(shifts[np.nanargmin(range_cost)])) * grid.step if np.any(np.isfinite(range_cost)) else 0.0
+            lam = min(d_mean / max(theta_r, grid.step), params.lambda_max)
         inc = est @ before.inverse()
         if observer is not None:
             u = np.column_stack((np.cos(phi), np.sin(phi)))

@@ -331,6 +331,51 @@ def eval_relations(
     typer.echo(f"{algo}: {summary(rows)} ({missing} relations without a scan at both ends)")
 
 
+@eval_app.command("basin")
+@user_errors
+def eval_basin(
+    first: FirstArg,
+    second: SecondArg = None,
+    pair: PairOpt = None,
+    truth: Annotated[Optional[tuple[float, float, float]], typer.Option(
+        "--truth", help="the answer X Y THETA_DEG (default: the stored poses, else each matcher's own)")] = None,
+    algos: Annotated[str, typer.Option("--algos", help="comma-separated matchers")] = ",".join(MATCHERS),
+    params: ParamsOpt = None,
+    range_xy: Annotated[float, typer.Option("--range-xy", min=0.0, help="largest |dx|, |dy| offset [m]")] = 1.0,
+    steps: Annotated[int, typer.Option("--steps", min=2, max=201, help="grid points per axis")] = 11,
+    thetas_deg: Annotated[str, typer.Option("--thetas-deg", help="theta offsets [deg]")] = "-30,-15,0,15,30",
+    png: Annotated[Optional[Path], typer.Option("--png", help="write the atlas as a PNG")] = None,
+    rrd: RrdOpt = None,
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="processes (default: all cores)")] = None,
+):
+    """A convergence atlas: every matcher from a grid of initial offsets, coloured by outcome."""
+    import math
+
+    from .basin import basin, plot_png, record_rrd, summary
+    from .inputs import guess_from_deg, load_pair, make_params
+
+    try:
+        thetas = [math.radians(float(v)) for v in thetas_deg.split(",")]
+    except ValueError:
+        raise InputError(f"expected numbers like -15,0,15, got {thetas_deg!r}", field="--thetas-deg") from None
+    names = [a.strip() for a in algos.split(",") if a.strip()]
+    ps = {a: make_params(a, str(params) if params else None) for a in names}
+    sp = load_pair(first, second, pair)
+    answer = guess_from_deg(truth)
+    if answer is None and sp.ref.pose is not None and sp.obj.pose is not None:
+        from core import relative
+
+        answer = relative(sp.ref.pose, sp.obj.pose)
+    t0 = time.perf_counter()
+    atlas = basin(sp.ref, sp.obj, ps, answer, range_xy, steps, thetas, workers)
+    typer.echo(summary(atlas))
+    typer.echo(f"{len(ps) * len(thetas) * steps * steps} matches in {time.perf_counter() - t0:.1f} s", err=True)
+    if png:
+        plot_png(atlas, str(png))
+    if rrd:
+        record_rrd(atlas, str(rrd))
+
+
 @app.command("bench")
 @user_errors
 def bench_cmd(
