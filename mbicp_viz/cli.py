@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -183,6 +184,12 @@ def eval_sequence(
                                        "identity), pose, odometry or identity")] = "stored",
     truth: Annotated[Optional[str], typer.Option("--truth", help="'pose': score against the log's scan poses "
                                                  "(corrected logs)")] = None,
+    png: Annotated[Optional[Path], typer.Option("--png", help="plot the trajectories and the map")] = None,
+    tum: Annotated[Optional[Path], typer.Option("--tum", help="write the trajectory in TUM format (for evo)")] = None,
+    tum_ref: Annotated[Optional[Path], typer.Option("--tum-ref", help="write the log's scan poses in TUM format")]
+    = None,
+    kalman: Annotated[bool, typer.Option("--kalman", help="fuse the matches with the log's odometry (EKF, "
+                                         "paper 003 §5.3); the TUM file and map then use the fused track")] = False,
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
     from .inputs import make_params
@@ -202,12 +209,41 @@ def eval_sequence(
     if truth:
         ok = sum(r["success"] for r in rows)
         typer.echo(f"against the scan poses: {ok}/{len(rows)} within 0.1 m and 3 deg ({100.0 * ok / len(rows):.1f} %)")
+    if png or tum or tum_ref or kalman:
+        _trajectories(lg, rows, png, tum, tum_ref, kalman)
     if rrd:
         from .rrd import record_sequence
 
         record_sequence(lg, rows, str(rrd))
         typer.echo(f"sequence recording written to {rrd}; open a pair's iterations with: "
                    f"mbicp-viz match {log} --pair I J --algo {algo} --rrd pair.rrd", err=True)
+
+
+def _trajectories(lg, rows, png, tum, tum_ref, use_kalman) -> None:
+    from .trajectory import accumulate, kalman, log_poses, plot_png, tum_text
+
+    idx = [rows[0]["ref"]] + [r["obj"] for r in rows]
+    tracks = {"matcher": accumulate(rows)}
+    ref = log_poses(lg, rows)
+    if ref is not None:
+        tracks["log poses"] = ref
+    main = "matcher"
+    if use_kalman:
+        odo = [lg.scans[i].odometry for i in idx]
+        if any(o is None for o in odo):
+            raise InputError("--kalman needs odometry for every scan; this log has none", lg.path, field="--kalman")
+        tracks["kalman (matcher + odometry)"] = kalman(rows, odo, (0.05, 0.05, math.radians(2.0)),
+                                                       (0.02, 0.02, math.radians(0.5)))
+        main = "kalman (matcher + odometry)"
+    stamps = [lg.scans[i].stamp if lg.scans[i].stamp is not None else float(i) for i in idx]
+    if tum:
+        tum.write_text(tum_text(tracks[main], stamps))
+    if tum_ref:
+        if ref is None:
+            raise InputError("the log stores no scan poses to export", lg.path, field="--tum-ref")
+        tum_ref.write_text(tum_text(ref, stamps))
+    if png:
+        plot_png(lg, rows, tracks, str(png), main)
 
 
 @eval_app.command("protocol")

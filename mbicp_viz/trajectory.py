@@ -1,0 +1,101 @@
+"""Trajectories from consecutive matches: accumulation, a Kalman filter with odometry, TUM files, plots.
+
+The world frame is the first scan's sensor frame. Paper 003 §5.3 builds its maps with a Kalman
+filter fusing the matcher with odometry; ``kalman`` does that on SE(2): odometry increments
+predict, the matcher's increments (composed on the previous estimate) correct.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from core import Pose2, relative
+
+from .readers import ScanLog
+
+
+def accumulate(rows: list[dict]) -> list[Pose2]:
+    """Poses of scans rows[0]['ref'], rows[k]['obj'] ... composed from the matched increments."""
+    poses = [Pose2()]
+    for r in rows:
+        poses.append(poses[-1] @ Pose2(r["x"], r["y"], r["theta"]))
+    return poses
+
+
+def log_poses(log: ScanLog, rows: list[dict]) -> list[Pose2] | None:
+    """The log's own scan poses for the same scans, in the first scan's frame (None if missing)."""
+    idx = [rows[0]["ref"]] + [r["obj"] for r in rows]
+    if any(log.scans[i].pose is None for i in idx):
+        return None
+    first = log.scans[idx[0]].pose
+    return [relative(first, log.scans[i].pose) for i in idx]
+
+
+def _jacobians(x: Pose2, u: Pose2):
+    """d(x (+) u)/dx and d(x (+) u)/du for SE(2) composition."""
+    c, s = math.cos(x.theta), math.sin(x.theta)
+    Jx = np.array([[1.0, 0.0, -s * u.x - c * u.y], [0.0, 1.0, c * u.x - s * u.y], [0.0, 0.0, 1.0]])
+    Ju = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return Jx, Ju
+
+
+def kalman(rows: list[dict], odometry: list[Pose2], q_sigma: tuple[float, float, float],
+           r_sigma: tuple[float, float, float]) -> list[Pose2]:
+    """EKF over the scan poses: predict with the odometry increment (noise ``q_sigma`` per axis:
+    m, m, rad), update with the matcher's increment composed on the previous estimate (noise
+    ``r_sigma``). A match that did not converge is skipped (prediction only)."""
+    Q, R = np.diag(np.square(q_sigma)), np.diag(np.square(r_sigma))
+    x, P = Pose2(), np.zeros((3, 3))
+    out = [x]
+    for k, row in enumerate(rows):
+        u = relative(odometry[k], odometry[k + 1])
+        Jx, Ju = _jacobians(x, u)
+        prior, Pp = x @ u, Jx @ P @ Jx.T + Ju @ Q @ Ju.T
+        if row["converged"]:
+            m = Pose2(row["x"], row["y"], row["theta"])
+            Jx_m, Ju_m = _jacobians(x, m)
+            z = x @ m
+            Rz = Ju_m @ R @ Ju_m.T
+            innov = np.array([z.x - prior.x, z.y - prior.y, (z.theta - prior.theta + math.pi) % (2 * math.pi) - math.pi])
+            K = Pp @ np.linalg.inv(Pp + Rz)
+            prior = Pose2.from_array(prior.as_array() + K @ innov)
+            Pp = (np.eye(3) - K) @ Pp
+        x, P = prior, Pp
+        out.append(x)
+    return out
+
+
+def tum_text(poses: list[Pose2], stamps: list[float]) -> str:
+    """TUM trajectory format (``timestamp tx ty tz qx qy qz qw``), which evo reads."""
+    lines = ["# timestamp tx ty tz qx qy qz qw  (mbicp-viz; world = first scan's sensor frame)"]
+    for t, p in zip(stamps, poses):
+        lines.append(f"{t:.6f} {p.x:.6f} {p.y:.6f} 0.000000 0.000000 0.000000 "
+                     f"{math.sin(p.theta / 2):.9f} {math.cos(p.theta / 2):.9f}")
+    return "\n".join(lines) + "\n"
+
+
+def plot_png(log: ScanLog, rows: list[dict], tracks: dict[str, list[Pose2]], path: str, map_track: str) -> None:
+    """Trajectories, and the map: every scan drawn at its pose on ``map_track``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    idx = [rows[0]["ref"]] + [r["obj"] for r in rows]
+    fig, ax = plt.subplots(figsize=(8, 8))
+    for i, pose in zip(idx, tracks[map_track]):
+        pts = pose.apply(log.scans[i].points()[::2])
+        ax.plot(pts[:, 0], pts[:, 1], ",", color=(0.85, 0.15, 0.15), alpha=0.5)
+    for name, poses in tracks.items():
+        xy = np.array([[p.x, p.y] for p in poses])
+        ax.plot(xy[:, 0], xy[:, 1], "-", lw=1.5, label=name)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend()
+    ax.set_title(f"{log.path}: map on the {map_track} trajectory")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
