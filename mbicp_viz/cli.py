@@ -202,10 +202,15 @@ def eval_sequence(
         raise InputError("the only truth a log carries is 'pose'", field="--truth")
     p = make_params(algo, str(params) if params else None)
     lg = read_log(log)
-    rows = match_sequence(lg, p, limit, guess, truth)
+    total = min(limit or len(lg.scans) - 1, len(lg.scans) - 1)
+    with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:
+        rows = match_sequence(lg, p, limit, guess, truth, on_row=lambda _: bar.update(1))
+    if not rows:
+        raise InputError("interrupted before the first pair was matched", log)
     out.write_text(json.dumps(rows, indent=1) + "\n")
     conv = sum(r["converged"] for r in rows)
-    typer.echo(f"{len(rows)} pairs matched with {algo}: {conv} converged; written to {out}")
+    cut = "" if len(rows) == total else f" (interrupted after {len(rows)} of {total}: the rows so far are kept)"
+    typer.echo(f"{len(rows)} pairs matched with {algo}: {conv} converged; written to {out}{cut}")
     if truth:
         ok = sum(r["success"] for r in rows)
         typer.echo(f"against the scan poses: {ok}/{len(rows)} within 0.1 m and 3 deg ({100.0 * ok / len(rows):.1f} %)")

@@ -42,18 +42,25 @@ def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess
         raise InputError("the scan poses cannot be both the truth and the guess: use --guess identity or odometry",
                          field="--truth")
     rows = []
-    for i, j in consecutive_pairs(log, limit):
-        ref, obj = log.scans[i], log.scans[j]
-        g, source = pair_guess(ref, obj, guess)
-        t0 = time.perf_counter()
-        r = match(ref, obj, g, params)
-        row = result_row(i, j, r, 1000.0 * (time.perf_counter() - t0)) | {"guess": source}
-        if truth == "pose":
-            if ref.pose is None or obj.pose is None:
-                raise InputError(f"scan {i} or {j} has no pose to score against", log.path, field="--truth")
-            et, er = pose_error(r.pose, relative(ref.pose, obj.pose))
-            row |= {"error_xy": et, "error_theta": er, "success": et < SUCCESS_M and er < SUCCESS_RAD}
-        rows.append(row)
-        if on_row is not None:
-            on_row(row)
+    try:
+        for i, j in consecutive_pairs(log, limit):
+            rows.append(_match_row(log, i, j, params, guess, truth))
+            if on_row is not None:
+                on_row(rows[-1])
+    except KeyboardInterrupt:  # Ctrl-C: keep the rows already computed
+        pass
     return rows
+
+
+def _match_row(log: ScanLog, i: int, j: int, params: Params, guess: str, truth: str | None) -> dict:
+    ref, obj = log.scans[i], log.scans[j]
+    g, source = pair_guess(ref, obj, guess)
+    t0 = time.perf_counter()
+    r = match(ref, obj, g, params)
+    row = result_row(i, j, r, 1000.0 * (time.perf_counter() - t0)) | {"guess": source}
+    if truth == "pose":
+        if ref.pose is None or obj.pose is None:
+            raise InputError(f"scan {i} or {j} has no pose to score against", log.path, field="--truth")
+        et, er = pose_error(r.pose, relative(ref.pose, obj.pose))
+        row |= {"error_xy": et, "error_theta": er, "success": et < SUCCESS_M and er < SUCCESS_RAD}
+    return row

@@ -85,3 +85,22 @@ def test_eval_protocol_reports_the_success_rate():
 def test_bench_gui_reports_step_and_change_latency():
     out = ok("bench-gui")
     assert "iteration step redraw" in out and "parameter change" in out and "p95" in out
+
+
+def test_eval_sequence_keeps_the_rows_when_interrupted(monkeypatch, tmp_path):
+    import mbicp_viz.sequence as seq
+
+    real = seq._match_row
+    calls = []
+
+    def interrupt_on_fourth(*a):
+        calls.append(1)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return real(*a)
+
+    monkeypatch.setattr(seq, "_match_row", interrupt_on_fourth)
+    out_file = tmp_path / "seq.json"
+    out = ok("eval", "sequence", LASERAZOS, "--out", out_file, "--limit", 10)
+    assert "interrupted after 3 of 10" in out
+    assert len(json.loads(out_file.read_text())) == 3
