@@ -9,8 +9,8 @@ from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
 
-DOC = Path(__file__).parent.parent / "docs" / "results.md"
-SHARED = Path(__file__).parent.parent.parent / "shared" / "data"
+ROOT = Path(__file__).parent.parent
+DOC = ROOT / "docs" / "results.md"
 
 
 def overlap_blocks():
@@ -19,16 +19,46 @@ def overlap_blocks():
         yield m.group(1), m.group(2).strip()
 
 
-def test_the_doc_has_both_overlap_tables():
+def console_commands():
+    """($ command, the lines it printed) from every console block."""
+    for block in re.findall(r"```console\n(.*?)```", DOC.read_text(), re.S):
+        cmd, out = None, []
+        for line in block.splitlines():
+            if line.startswith("$ "):
+                if cmd:
+                    yield cmd, out
+                cmd, out = line[2:], []
+            else:
+                out.append(line)
+        if cmd:
+            yield cmd, out
+
+
+def run(command: str, tmp_path=None) -> str:
+    args = shlex.split(command)[1:]
+    if tmp_path is not None and "--out" in args:  # keep written files out of the checkout
+        k = args.index("--out") + 1
+        args[k] = str(tmp_path / args[k])
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    return res.stdout
+
+
+def test_the_doc_lists_every_evaluation():
     assert len(list(overlap_blocks())) == 2
+    kinds = {shlex.split(c)[2] for c, _ in console_commands()}
+    assert kinds == {"protocol", "sequence", "relations", "basin"}
 
 
 @pytest.mark.parametrize("command, table", list(overlap_blocks()))
-def test_overlap_tables_regenerate_exactly(command, table):
-    if not SHARED.exists():
-        pytest.fail("the results use the full logs in ../shared/data, beside the checkout")
-    args = shlex.split(command)[1:]
-    res = CliRunner().invoke(app, args)
-    assert res.exit_code == 0, res.output
-    printed = res.stdout.strip() if hasattr(res, "stdout") else res.output
-    assert table in printed
+def test_overlap_tables_regenerate_exactly(command, table, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    assert table in run(command)
+
+
+@pytest.mark.parametrize("command, lines", list(console_commands()))
+def test_console_outputs_regenerate_exactly(command, lines, monkeypatch, tmp_path):
+    monkeypatch.chdir(ROOT)
+    printed = run(command, tmp_path).replace(str(tmp_path) + "/", "")
+    for line in lines:
+        assert line in printed
