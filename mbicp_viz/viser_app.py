@@ -171,6 +171,7 @@ class Session:
                     name = f"/{run.name}/{layer.path}"
                     self.nodes[name] = viser_draw.draw(self.client.scene, name, layer, self.visible[group])
             self._update_histogram()
+            self._update_cost_plot()
             self.h_iter_info.content = self._iteration_text()
 
     def _iteration_text(self) -> str:
@@ -221,6 +222,23 @@ class Session:
         err = np.array([e.error for e in run.iterations], dtype=float)
         thr = np.array([np.nan if e.threshold is None else e.threshold for e in run.iterations], dtype=float)
         self.h_error_plot.data = (x, err, thr)
+
+    def _update_cost_plot(self) -> None:
+        """PSM/PMWN: the orientation step's cost per shift and the V or parabola fitted at its minimum."""
+        run = self.runs[0]
+        k = min(self.iteration, len(run.iterations))
+        polar = run.iterations[k - 1].polar if k else None
+        if polar is None or not np.any(np.isfinite(polar.cost)):
+            self.h_cost.data = (np.zeros(1), np.zeros(1), np.zeros(1))
+            return
+        step_deg = math.degrees(float(np.median(np.diff(polar.bearings))))
+        x = polar.shifts * step_deg
+        fit = np.full(len(x), np.nan)
+        curve = scene.fitted_curve(polar, step_deg, n=201)
+        if curve is not None:
+            near = np.abs(x - curve[:, 0].mean()) <= step_deg * 1.0001
+            fit[near] = np.interp(x[near], curve[:, 0], curve[:, 1])
+        self.h_cost.data = (x.astype(float), polar.cost.astype(float), fit)
 
     def _update_histogram(self) -> None:
         run = self.runs[0]
@@ -304,6 +322,11 @@ class Session:
                         uplot.Series(label="median", stroke="black", width=2),
                         uplot.Series(label="threshold", stroke="orange", width=2)),
                 title="pair distances (current iteration)", aspect=1.6)
+            self.h_cost = gui.add_uplot(
+                data=(np.zeros(1), np.zeros(1), np.zeros(1)),
+                series=(uplot.Series(label="shift [deg]"), uplot.Series(label="cost [m]", stroke="gray", width=2),
+                        uplot.Series(label="fit", stroke="green", width=2)),
+                title="polar matchers: cost per shift (current iteration)", aspect=1.6)
         with gui.add_folder("Export"):
             b_rrd = gui.add_button("export .rrd")
             b_rrd.on_click(lambda _: self._guarded(self.export_rrd))

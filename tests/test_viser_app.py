@@ -179,3 +179,14 @@ def test_clicking_a_point_shows_its_iso_distance_curves(session):
     ellipse = session.nodes["/improved/scene/teaching/metric_isocurves"].points.reshape(-1, 3)[:, :2]
     # one ellipse, centred on that point's target
     np.testing.assert_allclose(ellipse.mean(axis=0), ev.pairs.target[row], atol=0.02)
+
+
+def test_polar_cost_plot_follows_the_iteration(session):
+    session.h_algo.value = "pmwn"
+    session.h_iter.value = 1
+    x, cost, fit = session.h_cost.data
+    polar = session.runs[0].iterations[0].polar
+    np.testing.assert_allclose(cost, polar.cost)
+    assert np.isfinite(fit).sum() >= 2  # the V drawn at the minimum
+    session.h_algo.value = "mbicp"
+    assert len(session.h_cost.data[0]) == 1  # no cost curve for the MbICP family
