@@ -30,7 +30,11 @@ class ReferenceIndex:
     ext_bearings: np.ndarray  # (3N,)
     ext_map: np.ndarray  # (3N,)
     sq_norm_L2: np.ndarray  # (N,) |q|^2 + L^2, the metric's denominator
-    max_sq_norm: float
+    ext_x: np.ndarray  # (3N,) x, y and |q|^2 + L^2 of ``ext_map``'s points: the search reads them
+    ext_y: np.ndarray  # without a second gather
+    ext_sq_norm_L2: np.ndarray
+    max_factor: float  # sqrt(max|q|^2 + L^2) / L: the Euclidean radius per unit of metric distance
+    max_step: float  # the widest bearing gap between consecutive reference points [rad]
     full_circle: bool
     tangents: np.ndarray  # (N, 2) unit surface tangent (central differences), for degeneracy
     tree: cKDTree  # Euclidean k-d tree over ``points``
@@ -52,7 +56,9 @@ class ReferenceIndex:
         norm = np.hypot(t[:, 0], t[:, 1])
         t = np.where(norm[:, None] > 0, t / np.where(norm > 0, norm, 1.0)[:, None], np.array([1.0, 0.0]))
         sq = np.einsum("ij,ij->i", pts, pts)
-        return ReferenceIndex(pts, b, ext_b, ext_map, sq + L * L, float(sq.max()), full, t, cKDTree(pts))
+        k = sq + L * L
+        return ReferenceIndex(pts, b, ext_b, ext_map, k, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
+                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, t, cKDTree(pts))
 
     def neighbour(self, j: np.ndarray, step: int) -> np.ndarray:
         """Index of the scan-order neighbour j+step, or -1 past the ends of a partial scan."""
@@ -63,69 +69,83 @@ class ReferenceIndex:
         return np.where((k >= 0) & (k < n), k, -1)
 
 
-def _windows(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float, hint: np.ndarray | None):
-    """Per point, the slice [lo, hi) of ``ext_bearings`` that can hold its metric-nearest neighbour.
-
-    The angular window +/-Bw of MbICP, narrowed without changing any pair within the radial
-    window Br: the metric-nearest point q* is no farther (metrically) than d0 = min(Br, d(h)) for
-    any reference point h inside the window; and since d^2(p, q) >= |p - q|^2 L^2 / (|q|^2 + L^2),
-    q* lies within the Euclidean radius rho = d0 sqrt(max|q|^2 + L^2) / L of p, i.e. within
-    asin(rho / |p|) of its bearing. ``hint`` proposes h per point (the previous iteration's
-    nearest point, -1 for none); without it h is the Euclidean-nearest point (k-d tree).
-    """
-    alpha = np.arctan2(moved[:, 1], moved[:, 0])
-    rng = np.hypot(moved[:, 0], moved[:, 1])
-    h = ref.tree.query(moved, k=1)[1] if hint is None else hint
-    has = h >= 0
-    h = np.where(has, h, 0)
-    in_window = has & (np.abs((ref.bearings[h] - alpha + np.pi) % (2 * np.pi) - np.pi) <= Bw)
-    d_h = np.sqrt(np.maximum(metric_distance_sq(moved, ref.points[h], L), 0.0))
-    d0 = np.where(in_window, np.minimum(d_h, Br), Br)
-    rho = d0 * np.sqrt(ref.max_sq_norm + L * L) / L
-    # no np.errstate here: it costs more than the arithmetic in this hot loop
-    half = np.where(rho < rng, np.arcsin(np.minimum(rho / np.maximum(rng, 1e-300), 1.0)), np.pi)
-    half = np.minimum(half, Bw) + 1e-12
-    lo = np.searchsorted(ref.ext_bearings, alpha - half, side="left")
-    hi = np.searchsorted(ref.ext_bearings, alpha + half, side="right")
-    return lo, np.minimum(hi, lo + len(ref.points))  # at most one turn: never a point twice
+# Candidates tried first around each point's bearing: the K reference beams on either side.
+_NEAR_K = 4
+# Windows up to this many beams are searched in one padded pass; wider ones (a large Br, a poor
+# guess) are grouped by width so that a few wide windows do not pad every row.
+_ONE_PASS_WIDTH = 64
+_WIDTH_BUCKETS = np.array([_ONE_PASS_WIDTH, 512])
 
 
-# Rows are grouped by window width so that a few wide windows do not pad every row.
-_WIDTH_BUCKETS = np.array([8, 32, 128, 512])
-
-
-def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float,
-            hint: np.ndarray | None = None):
-    """Metric-nearest reference point of each moved point within the angular window.
-
-    Exact for every pair whose metric distance is at most Br (see ``_windows``); a point with
-    no candidate gets index -1 and distance inf. Returns (index, squared metric distance).
-    """
-    lo, hi = _windows(ref, moved, Bw, Br, L, hint)
-    width = hi - lo
-    best = np.full(len(moved), -1, dtype=np.int64)
-    best_d2 = np.full(len(moved), np.inf)
+def _width_groups(width: np.ndarray):
+    """Row groups of similar window width (one group, no sorting, in the common narrow case)."""
+    if width.max(initial=0) <= _ONE_PASS_WIDTH:
+        yield np.flatnonzero(width > 0)
+        return
     by_width = np.argsort(width, kind="stable")
     cuts = np.searchsorted(width[by_width], _WIDTH_BUCKETS, side="right")
     for a, b in zip((np.searchsorted(width[by_width], 1), *cuts), (*cuts, len(width))):
-        if b <= a:
-            continue
-        rows = by_width[a:b]
-        w = int(width[rows[-1]])
-        ext = lo[rows, None] + np.arange(w)
-        idx = ref.ext_map[np.minimum(ext, len(ref.ext_map) - 1)]
-        p = moved[rows]
-        px, py = p[:, :1], p[:, 1:]
-        qx, qy = ref.points[idx, 0], ref.points[idx, 1]
-        cross = px * qy - py * qx
-        d2 = (px - qx) ** 2 + (py - qy) ** 2 - cross * cross / ref.sq_norm_L2[idx]
-        d2[ext >= hi[rows, None]] = np.inf
-        k = np.argmin(d2, axis=1)
-        r = np.arange(len(rows))
-        best[rows] = idx[r, k]
-        best_d2[rows] = np.maximum(d2[r, k], 0.0)
-    best[~np.isfinite(best_d2)] = -1
-    return best, best_d2
+        if b > a:
+            yield by_width[a:b]
+
+
+def _best_in(ref: ReferenceIndex, p: np.ndarray, lo: np.ndarray, hi: np.ndarray, w: int):
+    """Metric-nearest of the reference points ext[lo, hi) for each row of ``p`` (w >= hi - lo).
+
+    Returns (ext index, squared metric distance), inf where the slice is empty.
+    """
+    ext = lo[:, None] + np.arange(w)
+    np.minimum(ext, len(ref.ext_map) - 1, out=ext)
+    px, py = p[:, :1], p[:, 1:]
+    qx, qy = ref.ext_x[ext], ref.ext_y[ext]
+    cross = px * qy - py * qx
+    d2 = (px - qx) ** 2 + (py - qy) ** 2 - cross * cross / ref.ext_sq_norm_L2[ext]
+    d2[ext >= hi[:, None]] = np.inf
+    k = np.argmin(d2, axis=1)
+    r = np.arange(len(p))
+    return ext[r, k], d2[r, k]
+
+
+def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float):
+    """Metric-nearest reference point of each moved point within MbICP's angular window +/-Bw.
+
+    Exact for every pair whose metric distance is at most Br. First the 2K beams around the
+    point's bearing (inside +/-Bw) give a candidate at distance d*; the window that can hold a
+    closer point is then bounded: with d0 = min(d*, Br), since d^2(p, q) >= |p - q|^2 L^2 /
+    (|q|^2 + L^2), any q with d(p, q) <= d0 has |p - q| <= d0 sqrt(|q|^2 + L^2) / L
+    <= d0 (|p| + |p - q| + L) / L, i.e. |p - q| <= d0 (|p| + L) / (L - d0) when d0 < L (and
+    always <= d0 sqrt(max|q|^2 + L^2) / L): within the smaller radius rho of the two, so within
+    asin(rho / |p|) of p's bearing. Points whose bounded window reaches beyond the 2K beams are
+    searched again over the whole bounded window. A point with no candidate gets index -1 and
+    distance inf. Returns (index, squared metric distance).
+    """
+    x, y = moved[:, 0], moved[:, 1]
+    alpha = np.arctan2(y, x)
+    rng = np.hypot(x, y)
+    eb = ref.ext_bearings
+    pos = np.searchsorted(eb, alpha)
+    lo, hi = pos - _NEAR_K, pos + _NEAR_K
+    if Bw < _NEAR_K * ref.max_step:  # the 2K beams may reach beyond +/-Bw: clip them
+        lo = np.maximum(lo, np.searchsorted(eb, alpha - Bw, side="left"))
+        hi = np.maximum(np.minimum(hi, np.searchsorted(eb, alpha + Bw, side="right")), lo)
+    best, d2 = _best_in(ref, moved, lo, hi, 2 * _NEAR_K)
+    # the window that can hold anything closer (see above), never wider than +/-Bw
+    d0 = np.sqrt(np.clip(d2, 0.0, Br * Br))
+    rho = d0 * np.minimum((rng + L) / np.maximum(L - d0, 1e-12), ref.max_factor)
+    # no np.errstate here: it costs more than the arithmetic in this hot loop
+    half = np.minimum(np.where(rho < rng, np.arcsin(np.minimum(rho / rng, 1.0)), np.pi), Bw) + 1e-12
+    wlo = np.searchsorted(eb, alpha - half, side="left")
+    whi = np.minimum(np.searchsorted(eb, alpha + half, side="right"), wlo + len(ref.points))  # a point once
+    again = np.flatnonzero((wlo < lo) | (whi > hi))
+    if len(again):
+        width = whi[again] - wlo[again]
+        for g in _width_groups(width):
+            rows = again[g]
+            b, d = _best_in(ref, moved[rows], wlo[rows], whi[rows], int(width[g].max()))
+            better = d < d2[rows]
+            best[rows[better]], d2[rows[better]] = b[better], d[better]
+    found = d2 < np.inf
+    return np.where(found, ref.ext_map[best], -1), np.where(found, np.maximum(d2, 0.0), np.inf)
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,20 +159,19 @@ class Pairs:
     dist: np.ndarray  # (K,) metric distance [m]
 
 
-def _nearest_found(ref, moved, rows, Bw, Br, L, hint):
+def _nearest_found(ref, moved, rows, Bw, Br, L):
     """Rows of ``moved`` that found a metric-nearest point, their points, the point, and d^2."""
     p = moved[rows]
-    best, d2 = nearest(ref, p, Bw, Br, L, None if hint is None else hint[rows])
+    best, d2 = nearest(ref, p, Bw, Br, L)
     found = best >= 0
     return rows[found], p[found], best[found], d2[found]
 
 
 def _closer_neighbour(ref, p, j, L):
     """The scan neighbour (j - 1 or j + 1) of each j metrically closer to p, or -1 if none."""
-    prev, nxt = ref.neighbour(j, -1), ref.neighbour(j, 1)
-    d_prev = np.where(prev >= 0, metric_distance_sq(p, ref.points[prev], L), np.inf)
-    d_next = np.where(nxt >= 0, metric_distance_sq(p, ref.points[nxt], L), np.inf)
-    return np.where(d_prev <= d_next, prev, nxt)
+    both = np.stack((ref.neighbour(j, -1), ref.neighbour(j, 1)))  # (2, K): previous, next
+    d = np.where(both >= 0, metric_distance_sq(p, ref.points[both], L), np.inf)
+    return np.where(d[0] <= d[1], both[0], both[1])
 
 
 def _segment_candidate(ref, p, j, other, L, max_len):
@@ -168,14 +187,14 @@ def _segment_candidate(ref, p, j, other, L, max_len):
 
 
 def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, Bw: float, Br: float, L: float,
-                max_dist_inter: float, hint: np.ndarray | None = None) -> Pairs:
+                max_dist_inter: float) -> Pairs:
     """MbICP correspondences: metric-nearest reference point, or a point interpolated on a segment.
 
     The original searches every segment in the window; here the two segments adjacent to the
     metric-nearest point are tried, which is where the nearest segment lies except at folds.
     Segments longer than MaxDistInter bridge a gap between surfaces and are not interpolated.
     """
-    rows, p, best, d2 = _nearest_found(ref, moved, rows, Bw, Br, L, hint)
+    rows, p, best, d2 = _nearest_found(ref, moved, rows, Bw, Br, L)
     target = ref.points[best].copy()
     kind = np.full(len(rows), PairKind.POINT, dtype=np.int8)
     ref_index = np.column_stack((best, np.full(len(best), -1)))
@@ -191,7 +210,7 @@ def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, Bw: fl
 
 
 def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, Bw: float, Br: float, L: float,
-                     max_dist_inter: float, hint: np.ndarray | None = None) -> Pairs:
+                     max_dist_inter: float) -> Pairs:
     """Paper 000 §2.4.1: point-to-point pairs, point-to-line for object points sharing a target.
 
     Every object point takes its metric-nearest reference point m_j. Among the points sharing one
@@ -201,24 +220,24 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, B
     it lies but at occlusion edges. Segments longer than MaxDistInter would bridge two surfaces:
     such a point keeps m_j.
     """
-    rows, p, best, d2 = _nearest_found(ref, moved, rows, Bw, Br, L, hint)
-    second = _closer_neighbour(ref, p, best, L)
-    target = ref.points[best].copy()
-    kind = np.full(len(rows), PairKind.POINT, dtype=np.int8)
-    ref_index = np.column_stack((best, np.full(len(best), -1)))
-    order = np.lexsort((d2, best))  # by target, then distance
-    loser = np.zeros(len(rows), dtype=bool)
-    loser[order[1:]] = best[order[1:]] == best[order[:-1]]
-    a = ref.points[best]
-    b = ref.points[np.where(second >= 0, second, best)]
-    short = (second >= 0) & (np.einsum("ij,ij->i", b - a, b - a) <= max_dist_inter * max_dist_inter)
-    inter = loser & short
-    if inter.any():
-        t = euclidean_project_on_segment(p[inter], a[inter], b[inter])
-        target[inter] = a[inter] + t[:, None] * (b[inter] - a[inter])
+    rows, p, best, d2 = _nearest_found(ref, moved, rows, Bw, Br, L)
+    target = ref.points[best]
+    kind = np.zeros(len(rows), dtype=np.int8)  # PairKind.POINT
+    ref_index = np.stack((best, np.full(len(best), -1)), axis=1)
+    order = np.lexsort((d2, best))  # by target, then distance: the first of each run keeps m_j
+    losers = order[1:][best[order[1:]] == best[order[:-1]]]
+    if len(losers):
+        pl, a = p[losers], target[losers]
+        second = _closer_neighbour(ref, pl, best[losers], L)
+        b = ref.points[second]
+        e = b - a
+        ok = (second >= 0) & (e[:, 0] ** 2 + e[:, 1] ** 2 <= max_dist_inter * max_dist_inter)
+        inter, pl, a, e = losers[ok], pl[ok], a[ok], e[ok]
+        c = a + euclidean_project_on_segment(pl, a, a + e)[:, None] * e
+        target[inter] = c
         kind[inter] = PairKind.INTERPOLATED
-        ref_index[inter, 1] = second[inter]
-        d2[inter] = np.maximum(metric_distance_sq(p[inter], target[inter], L), 0.0)
+        ref_index[inter, 1] = second[ok]
+        d2[inter] = np.maximum(metric_distance_sq(pl, c, L), 0.0)
     return Pairs(rows, target, kind, ref_index, np.sqrt(d2))
 
 
@@ -231,11 +250,7 @@ def visible_from_reference(moved: np.ndarray, bin_start: float, bin_width: float
     """
     alpha = np.arctan2(moved[:, 1], moved[:, 0])
     r = np.hypot(moved[:, 0], moved[:, 1])
-    bins = np.floor(((alpha - bin_start) % (2 * np.pi)) / bin_width).astype(np.int64)
-    order = np.lexsort((r, bins))
-    sb = bins[order]
-    starts = np.flatnonzero(np.concatenate(([True], sb[1:] != sb[:-1])))
-    nearest = np.repeat(r[order][starts], np.diff(np.append(starts, len(sb))))
-    vis = np.empty(len(r), dtype=bool)
-    vis[order] = r[order] <= nearest + margin
-    return vis
+    bins = ((alpha - bin_start) % (2 * np.pi) / bin_width).astype(np.int64)  # non-negative: truncation floors
+    zbuf = np.full(int(2 * np.pi / bin_width) + 2, np.inf)
+    np.minimum.at(zbuf, bins, r)
+    return r <= zbuf[bins] + margin

@@ -7,6 +7,8 @@ rejection (§2.4.2) — each on its own, so their effect can be seen one at a ti
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 from .correspondence import ReferenceIndex, mbicp_pairs, point_line_pairs, visible_from_reference
@@ -17,11 +19,27 @@ from .params import ImprovedParams, MbicpParams
 from .resample import grid_resample
 from .result import MatchResult, Termination
 from .scan import Scan
-from .se2 import Pose2
+from .se2 import Pose2, relative
 from .uncertainty import FinalSystem, build_result
 
 # Projection filter: a point more than this behind the nearest one in its bearing bin is hidden.
 PROJECTION_MARGIN_M = 0.2
+# Cycles of the estimate up to this period (in iterations) end the match as settled.
+CYCLE_PERIOD_MAX = 4
+
+
+def rejection_floor(params: ImprovedParams, iteration: int) -> float:
+    """The distance below which MAD never rejects a pair at this (1-based) iteration [m].
+
+    Paper 000 §2.4.2 treats the pairs above median + k MAD as "a few incorrect correspondences",
+    which holds once the scans are roughly aligned; far from the answer the pairs that would pull
+    the scan home (frontal structure in a corridor) are the long ones, and rejecting them leaves
+    the local minimum that §2.4.2 and §3.3 warn of. So the floor starts at the radial window Br
+    (MAD rejects nothing Br keeps) and shrinks geometrically to ``mad_floor``; ``mad_anneal`` = 0
+    applies the published rule from the first iteration.
+    """
+    decay = params.mad_anneal ** (iteration - 1) if params.mad_anneal > 0 else 0.0
+    return max(params.mad_floor, params.Br * decay)
 
 
 def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpParams | None = None,
@@ -43,12 +61,12 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
         observer(StartEvent(name, params, R.points, obj_pts, used, initial_guess, resampling))
 
     est = initial_guess
+    recent: deque[Pose2] = deque(maxlen=CYCLE_PERIOD_MAX - 1)  # estimates before ``est``, for the cycle test
     prev_error = None
-    n_conv = 0
+    n_conv = n_cycle = 0
     reason = Termination.MAX_ITERATIONS
     it = 0
     last = None
-    hint = None
     for it in range(1, params.MaxIter + 1):
         moved = est.apply(P)
         if params.ProjectionFilter:
@@ -56,12 +74,10 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
             rows = all_rows[vis]
         else:
             rows = all_rows
-        pairs = pair_fn(R, moved, rows, params.Bw, params.Br, params.L, params.MaxDistInter, hint)
-        hint = np.full(len(P), -1)
-        hint[pairs.obj] = pairs.ref_index[:, 0]  # bounds next iteration's search (see nearest)
+        pairs = pair_fn(R, moved, rows, params.Bw, params.Br, params.L, params.MaxDistInter)
         status, thr = reject(pairs.dist, params.Br, params.filter,
                              params.mad_k if improved and params.mad_rejection else None,
-                             params.mad_floor if improved else 0.0)
+                             rejection_floor(params, it) if improved else 0.0)
         kept = status == PairStatus.KEPT
         n_kept = int(np.count_nonzero(kept))
         step = None
@@ -88,16 +104,23 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
                 thr, error, inc))
         if step is None:
             break
+        # A short cycle (the projection filter or the threshold flipping a few pairs in turn) never
+        # passes MbICP's counted rule: it is caught when the estimate keeps returning to where it was.
+        returned = any(params.small(relative(e, new_est)) for e in recent)
+        recent.appendleft(est)
         est = new_est
         last = FinalSystem(A, error, c_k, pairs.ref_index[kept, 0], n_kept, len(status) - n_kept)
         # MbICP's counted convergence: error ratio OR every increment component small.
         small_ratio = prev_error is not None and (
             abs(1.0 - error / prev_error) <= params.errorRatio if prev_error > 0 else error == 0.0)
-        small_step = abs(inc.x) < params.errx_out and abs(inc.y) < params.erry_out and abs(inc.theta) < params.errt_out
-        n_conv = n_conv + 1 if (small_ratio or small_step) else 0
+        n_conv = n_conv + 1 if (small_ratio or params.small(inc)) else 0
+        n_cycle = n_cycle + 1 if (returned and n_conv == 0) else 0
         prev_error = error
         if n_conv > params.IterSmoothConv:
             reason = Termination.CONVERGED
+            break
+        if n_cycle > params.IterSmoothConv:
+            reason = Termination.CYCLE
             break
 
     result = build_result(name, est, reason, it, last, R.tangents, params.L)

@@ -10,20 +10,17 @@ from __future__ import annotations
 import numpy as np
 
 
-def cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 def metric_distance_sq(p: np.ndarray, q: np.ndarray, L: float) -> np.ndarray:
     """Squared metric distance of the motion taking reference point ``q`` onto point ``p``.
 
     d^2 = |p - q|^2 - (p x q)^2 / (|q|^2 + L^2)   (MbICP eq. 12 with delta = p - q; note that
     delta x q = p x q). The original C code scores candidates this way, with the reference point
-    in the denominator. Broadcasts over leading axes.
+    in the denominator. Broadcasts over leading axes; written out by component (hot loop).
     """
-    d = p - q
-    c = cross2(p, q)
-    return np.einsum("...i,...i->...", d, d) - c * c / (np.einsum("...i,...i->...", q, q) + L * L)
+    px, py, qx, qy = p[..., 0], p[..., 1], q[..., 0], q[..., 1]
+    dx, dy = px - qx, py - qy
+    c = px * qy - py * qx
+    return dx * dx + dy * dy - c * c / (qx * qx + qy * qy + L * L)
 
 
 def metric_exact_sq(p1: np.ndarray, p2: np.ndarray, L: float, max_theta: float = np.pi) -> float:
@@ -107,23 +104,12 @@ def metric_normal_equations(p: np.ndarray, c: np.ndarray, L: float) -> tuple[np.
     cx, cy = c[:, 0], c[:, 1]
     dx, dy = cx - px, cy - py
     k = cx * cx + cy * cy + L * L
-    # M = [[m11, m12], [m12, m22]]
-    m11 = 1.0 - cy * cy / k
-    m12 = cx * cy / k
-    m22 = 1.0 - cx * cx / k
-    # rows of J^T M: for columns x, y, theta
-    jx = (m11, m12)
-    jy = (m12, m22)
-    jt = (-py * m11 + px * m12, -py * m12 + px * m22)
-    A = np.empty((3, 3))
-    A[0, 0] = m11.sum()
-    A[0, 1] = A[1, 0] = m12.sum()
-    A[1, 1] = m22.sum()
-    A[0, 2] = A[2, 0] = (jx[0] * -py + jx[1] * px).sum()
-    A[1, 2] = A[2, 1] = (jy[0] * -py + jy[1] * px).sum()
-    A[2, 2] = (jt[0] * -py + jt[1] * px).sum()
-    b = np.array([(jx[0] * dx + jx[1] * dy).sum(), (jy[0] * dx + jy[1] * dy).sum(), (jt[0] * dx + jt[1] * dy).sum()])
-    return A, b
+    m11, m12, m22 = 1.0 - cy * cy / k, cx * cy / k, 1.0 - cx * cx / k  # M = [[m11, m12], [m12, m22]]
+    g1, g2 = px * m12 - py * m11, px * m22 - py * m12  # theta column of J^T M
+    s = np.stack((m11, m12, m22, g1, g2, px * g2 - py * g1, m11 * dx + m12 * dy, m12 * dx + m22 * dy,
+                  g1 * dx + g2 * dy)).sum(axis=1)
+    A = np.array([[s[0], s[1], s[3]], [s[1], s[2], s[4]], [s[3], s[4], s[5]]])
+    return A, s[6:]
 
 
 def svd_fit(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, float]:

@@ -97,6 +97,10 @@ class StopParams(Params):
     AsocError: float = param(0.1, unit="1", lo=0.0, hi=1.0,
         help="fail when fewer than this fraction of object points find a pair")
 
+    def small(self, motion) -> bool:
+        """Whether a motion (an increment, or the gap between two estimates) is below every threshold."""
+        return abs(motion.x) < self.errx_out and abs(motion.y) < self.erry_out and abs(motion.theta) < self.errt_out
+
 
 @dataclass(frozen=True)
 class IcpParams(StopParams):
@@ -144,6 +148,9 @@ class ImprovedParams(MbicpParams):
     mad_k: float = param(2.0, unit="1", lo=0.0, hi=100.0, help="k in the rejection threshold median + k*MAD (eq. 5)")
     mad_floor: float = param(0.1, unit="m", lo=0.0, hi=100.0,
         help="never reject a pair closer than this (0: the paper's rule as published)")
+    mad_anneal: float = param(0.0, unit="1", lo=0.0, hi=0.999,
+        help="0: MAD from the first iteration, as published; else the rejection floor starts at Br and shrinks by "
+             "this factor each iteration down to mad_floor (a wider basin from a poor guess, more iterations)")
 
 
 @dataclass(frozen=True)

@@ -302,7 +302,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
         norm = np.hypot(t[:, 0], t[:, 1])
         tang = np.where(norm[:, None] > 0, t / np.where(norm > 0, norm, 1.0)[:, None], tang)
         deg = degeneracy(pts, tang, 3.0)
-    result = MatchResult(strategy.name, est, reason is Termination.CONVERGED, reason, it,
+    result = MatchResult(strategy.name, est, reason.converged, reason, it,
                          last[0] if last else float("nan"), last[2] if last else 0, last[3] if last else 0, None, deg)
     if observer is not None:
         observer(FinishEvent(result))

@@ -17,8 +17,9 @@ def reject(dist: np.ndarray, max_dist: float, keep_fraction: float,
     (MbICP's ``filter``) — or, when ``mad_k`` is given, paper 000 eq. 5: reject pairs above
     median + mad_k * MAD of the remaining distances (§2.4.2), but never below ``mad_floor``.
     """
-    status = np.where(dist > max_dist, PairStatus.OUTSIDE_BR, PairStatus.KEPT).astype(np.int8)
-    inside = np.flatnonzero(status == PairStatus.KEPT)
+    outside = dist > max_dist
+    status = outside.astype(np.int8) * np.int8(PairStatus.OUTSIDE_BR)  # KEPT is 0
+    inside = np.flatnonzero(~outside)
     if len(inside) == 0:
         return status, None
     d_in = dist[inside]

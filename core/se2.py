@@ -7,6 +7,7 @@ A ``Pose2`` ``T_a_b`` maps points given in frame ``b`` into frame ``a``:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,9 +56,8 @@ class Pose2:
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Map an (N, 2) array of child-frame points into the parent frame."""
-        c, s = np.cos(self.theta), np.sin(self.theta)
-        px, py = points[:, 0], points[:, 1]
-        return np.column_stack((c * px - s * py + self.x, s * px + c * py + self.y))
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return points @ np.array([[c, s], [-s, c]]) + np.array([self.x, self.y])
 
     def translation_norm(self) -> float:
         return float(np.hypot(self.x, self.y))

@@ -64,5 +64,5 @@ def build_result(name: str, est: Pose2, reason: Termination, iterations: int, la
     if last is None:
         return MatchResult(name, est, False, reason, iterations, float("nan"), 0, 0, None, None)
     return MatchResult(
-        name, est, reason is Termination.CONVERGED, reason, iterations, last.error, last.n_kept, last.n_rejected,
+        name, est, reason.converged, reason, iterations, last.error, last.n_kept, last.n_rejected,
         covariance(last.A, last.error, last.n_kept), degeneracy(last.targets, tangents[last.ref_index], L))
