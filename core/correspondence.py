@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 from .events import PairKind
 from .metric import euclidean_project_on_segment, metric_distance_sq, metric_project_on_segment
 from .scan import Scan
+from .uncertainty import surface_tangents
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,14 +48,7 @@ class ReferenceIndex:
         ext_b = np.concatenate((b - 2 * np.pi, b, b + 2 * np.pi))
         ext_map = np.tile(np.arange(n), 3)
         full = scan.is_full_circle()
-        if full:
-            nxt, prv = np.roll(pts, -1, axis=0), np.roll(pts, 1, axis=0)
-        else:
-            nxt = np.vstack((pts[1:], pts[-1:]))
-            prv = np.vstack((pts[:1], pts[:-1]))
-        t = nxt - prv
-        norm = np.hypot(t[:, 0], t[:, 1])
-        t = np.where(norm[:, None] > 0, t / np.where(norm > 0, norm, 1.0)[:, None], np.array([1.0, 0.0]))
+        t = surface_tangents(pts, full)
         sq = np.einsum("ij,ij->i", pts, pts)
         k = sq + L * L
         return ReferenceIndex(pts, b, ext_b, ext_map, k, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),

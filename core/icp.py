@@ -16,11 +16,8 @@ from .rejection import reject
 from .result import MatchResult, Termination
 from .scan import Scan
 from .se2 import Pose2
-from .uncertainty import FinalSystem, build_result
+from .uncertainty import DEGENERACY_LENGTH_M, FinalSystem, build_result
 
-# Length that scales rotation in the degeneracy indicator, as MbICP's default L does, so that
-# indicators compare across matchers.
-DEGENERACY_LENGTH_M = 3.0
 
 
 def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParams | None = None,

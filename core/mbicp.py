@@ -7,8 +7,6 @@ rejection (§2.4.2) — each on its own, so their effect can be seen one at a ti
 
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 
 from .correspondence import ReferenceIndex, mbicp_pairs, point_line_pairs, visible_from_reference
@@ -19,13 +17,12 @@ from .params import ImprovedParams, MbicpParams
 from .resample import grid_resample
 from .result import MatchResult, Termination
 from .scan import Scan
-from .se2 import Pose2, relative
+from .se2 import Pose2
+from .stopping import CycleWatch
 from .uncertainty import FinalSystem, build_result
 
 # Projection filter: a point more than this behind the nearest one in its bearing bin is hidden.
 PROJECTION_MARGIN_M = 0.2
-# Cycles of the estimate up to this period (in iterations) end the match as settled.
-CYCLE_PERIOD_MAX = 4
 
 
 def rejection_floor(params: ImprovedParams, iteration: int) -> float:
@@ -61,9 +58,9 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
         observer(StartEvent(name, params, R.points, obj_pts, used, initial_guess, resampling))
 
     est = initial_guess
-    recent: deque[Pose2] = deque(maxlen=CYCLE_PERIOD_MAX - 1)  # estimates before ``est``, for the cycle test
+    cycles = CycleWatch(params)
     prev_error = None
-    n_conv = n_cycle = 0
+    n_conv = 0
     reason = Termination.MAX_ITERATIONS
     it = 0
     last = None
@@ -104,22 +101,17 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
                 thr, error, inc))
         if step is None:
             break
-        # A short cycle (the projection filter or the threshold flipping a few pairs in turn) never
-        # passes MbICP's counted rule: it is caught when the estimate keeps returning to where it was.
-        returned = any(params.small(relative(e, new_est)) for e in recent)
-        recent.appendleft(est)
-        est = new_est
+        before, est = est, new_est
         last = FinalSystem(A, error, c_k, pairs.ref_index[kept, 0], n_kept, len(status) - n_kept)
         # MbICP's counted convergence: error ratio OR every increment component small.
         small_ratio = prev_error is not None and (
             abs(1.0 - error / prev_error) <= params.errorRatio if prev_error > 0 else error == 0.0)
         n_conv = n_conv + 1 if (small_ratio or params.small(inc)) else 0
-        n_cycle = n_cycle + 1 if (returned and n_conv == 0) else 0
         prev_error = error
         if n_conv > params.IterSmoothConv:
             reason = Termination.CONVERGED
             break
-        if n_cycle > params.IterSmoothConv:
+        if cycles.step(before, est) > params.IterSmoothConv:
             reason = Termination.CYCLE
             break
 

@@ -71,6 +71,11 @@ def check_value(spec: FieldSpec, value) -> Any:
 class Params:
     """Mixin for the parameter dataclasses: validation on construction, typed copies."""
 
+    def small(self, motion) -> bool:
+        """Whether a motion (an increment, or the gap between two estimates) is below every stopping
+        threshold ``errx_out``, ``erry_out``, ``errt_out`` (every matcher declares them)."""
+        return abs(motion.x) < self.errx_out and abs(motion.y) < self.erry_out and abs(motion.theta) < self.errt_out
+
     def __post_init__(self):
         for spec in field_specs(type(self)):
             object.__setattr__(self, spec.name, check_value(spec, getattr(self, spec.name)))
@@ -96,10 +101,6 @@ class StopParams(Params):
     errt_out: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="... |dtheta| of the increment below this")
     AsocError: float = param(0.1, unit="1", lo=0.0, hi=1.0,
         help="fail when fewer than this fraction of object points find a pair")
-
-    def small(self, motion) -> bool:
-        """Whether a motion (an increment, or the gap between two estimates) is below every threshold."""
-        return abs(motion.x) < self.errx_out and abs(motion.y) < self.erry_out and abs(motion.theta) < self.errt_out
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,10 @@ from .metric import linearised_jacobians
 from .result import Degeneracy, MatchResult, Termination
 from .se2 import Pose2
 
+# Length that scales rotation in the degeneracy indicator of the matchers without a metric length
+# (ICP, PSM, PMWN): MbICP's default L, so that indicators compare across matchers.
+DEGENERACY_LENGTH_M = 3.0
+
 
 def covariance(A: np.ndarray, error: float, n_pairs: int) -> np.ndarray | None:
     """sigma^2 A^-1 with sigma^2 the residual per degree of freedom (n_pairs pairs, 3 unknowns).
@@ -24,6 +28,17 @@ def covariance(A: np.ndarray, error: float, n_pairs: int) -> np.ndarray | None:
         return None
     sigma2 = error * n_pairs / (2 * n_pairs - 3)  # two scalar residuals per pair
     return sigma2 * inv
+
+
+def surface_tangents(points: np.ndarray, full_circle: bool) -> np.ndarray:
+    """Unit surface direction at each point of a scan (central differences in scan order; one-sided
+    at the ends of a partial scan); (1, 0) where neighbours coincide."""
+    if full_circle:
+        t = np.roll(points, -1, axis=0) - np.roll(points, 1, axis=0)
+    else:
+        t = np.vstack((points[1:], points[-1:])) - np.vstack((points[:1], points[:-1]))
+    norm = np.hypot(t[:, 0], t[:, 1])
+    return np.where(norm[:, None] > 0, t / np.where(norm > 0, norm, 1.0)[:, None], np.array([1.0, 0.0]))
 
 
 def degeneracy(targets: np.ndarray, tangents: np.ndarray, L: float) -> Degeneracy | None:

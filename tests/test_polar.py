@@ -166,3 +166,20 @@ def test_polar_recording_carries_cost_curves_and_the_circle(tmp_path):
     assert counts["/pmwn/polar/cost/curve"] == n and counts["/pmwn/polar/cost/fit"] == n
     assert counts["/pmwn/scene/polar/circle_points"] == n and counts["/pmwn/plots/metric_weight"] == n
     assert counts["/pmwn/polar/ranges/projected"] == n
+
+
+def test_projection_compares_only_surfaces_facing_the_reference():
+    """A wall seen from its back (the object sensor moved through it and turned round) still
+    occludes but is never compared: Diosi's occlusion rule in the scan projection."""
+    from core.polar import Grid, preprocess, project
+
+    b = np.linspace(-0.45, 0.45, 41)
+    wall = make_scan(2.0 / np.cos(b), b)  # the wall x = 2, seen from the origin
+    grid = Grid.of(wall, "psm")
+    cur = preprocess(wall, 1, 0.0, 30.0, 0.2)
+    facing = project(grid, cur, Pose2())
+    assert np.count_nonzero(np.isfinite(facing)) >= 39
+    np.testing.assert_allclose(facing[np.isfinite(facing)], wall.ranges[np.isfinite(facing)], atol=1e-9)
+    # the same wall after a half turn about (2, 0): it lies where it was, but its back faces us
+    behind = project(grid, cur, Pose2(4.0, 0.0, math.pi))
+    assert not np.isfinite(behind).any()
