@@ -90,6 +90,8 @@ def match_cmd(
     connect: ConnectOpt = None,
     serve: ServeOpt = False,
     port: PortOpt = 9090,
+    search: Annotated[bool, typer.Option("--search", help="first search the pose within +/-1.5 m, +/-40 deg of "
+                                         "the guess (correlative search), then match from the best")] = False,
 ):
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from .inputs import guess_from_deg, load_pair, make_params, stored_guess
@@ -97,6 +99,13 @@ def match_cmd(
     p = make_params(algo, str(params) if params else None)
     sp = load_pair(first, second, pair)
     guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
+    if search:
+        from core.search import correlative_search
+
+        found = correlative_search(sp.ref, sp.obj, guess)
+        if not as_json:
+            typer.echo(f"searched around {guess}: best {found.pose} (score {found.score:.1f})")
+        guess = found.pose
     indices = (0, 0) if second else (pair or (0, 1))  # scan index within each file
     _print_match(sp.ref, sp.obj, guess, p, sp.label, as_json, indices)
     if rrd or connect or serve:
@@ -181,7 +190,8 @@ def eval_sequence(
     limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="match only the first N pairs")] = None,
     rrd: RrdOpt = None,
     guess: Annotated[str, typer.Option("--guess", help="initial guess: stored (poses, else odometry, else "
-                                       "identity), pose, odometry or identity")] = "stored",
+                                       "identity), pose, odometry, identity, or search (a correlative search "
+                                       "within +/-1.5 m, +/-40 deg of the identity)")] = "stored",
     truth: Annotated[Optional[str], typer.Option("--truth", help="'pose': score against the log's scan poses "
                                                  "(corrected logs)")] = None,
     png: Annotated[Optional[Path], typer.Option("--png", help="plot the trajectories and the map")] = None,
