@@ -293,6 +293,10 @@ class Session:
                 h.on_update(lambda _: self._on_guess_numbers())
             self.h_gizmo_on = gui.add_checkbox("drag the guess in the view", True)
             self.h_gizmo_on.on_update(lambda _: setattr(self.gizmo, "visible", self.h_gizmo_on.value))
+            b_search = gui.add_button("search the guess (+/-1.5 m, +/-40 deg)",
+                                      hint="correlative search around the current guess; the match restarts from "
+                                           "its best pose")
+            b_search.on_click(lambda _: self._guarded(self.search_guess))
         if self.source.pick_pair:
             with gui.add_folder("Scans"):
                 n = len(self.source.log.scans)
@@ -416,10 +420,30 @@ class Session:
     def set_guess(self, guess: Pose2, move_gizmo: bool = True) -> None:
         with self.lock:
             self.guess = guess
-            if move_gizmo:
-                self.gizmo.position = (guess.x, guess.y, 0.0)
-                self.gizmo.wxyz = viser_draw.yaw_to_wxyz(guess.theta)
+            self._show_guess(guess, move_gizmo)
             self.rematch()
+
+    def _show_guess(self, guess: Pose2, move_gizmo: bool = True) -> None:
+        """Put the number fields (and the gizmo) on ``guess``, without each field re-running the match."""
+        if move_gizmo:
+            self.gizmo.position = (guess.x, guess.y, 0.0)
+            self.gizmo.wxyz = viser_draw.yaw_to_wxyz(guess.theta)
+        self._quiet = True
+        try:
+            for h, v in ((self.h_gx, guess.x), (self.h_gy, guess.y), (self.h_gt, math.degrees(guess.theta))):
+                h.value = v
+        finally:
+            self._quiet = False
+
+    def search_guess(self) -> Pose2:
+        """Replace the guess by the best pose of the correlative search around it (core/search.py)."""
+        from core.search import correlative_search
+
+        with self.lock:
+            found = correlative_search(self.ref, self.obj, self.guess)
+            self.set_guess(found.pose)
+            self._say(f"searched around the guess: best {found.pose} (score {found.score:.1f})")
+            return found.pose
 
     def _on_guess_numbers(self) -> None:
         if self._quiet:
@@ -433,15 +457,7 @@ class Session:
     def _on_gizmo(self) -> None:
         x, y, _ = (float(v) for v in self.gizmo.position)
         theta = viser_draw.wxyz_to_yaw(self.gizmo.wxyz)
-        with self.lock:
-            # keep the number fields in step without each of them re-running the match
-            self._quiet = True
-            try:
-                for h, v in ((self.h_gx, x), (self.h_gy, y), (self.h_gt, math.degrees(theta))):
-                    h.value = v
-            finally:
-                self._quiet = False
-            self.set_guess(Pose2(x, y, theta), move_gizmo=False)
+        self.set_guess(Pose2(x, y, theta), move_gizmo=False)
 
     def _on_pair(self) -> None:
         with self.lock:
@@ -454,8 +470,7 @@ class Session:
             self.pair = (i, j)
             self._clear_runs()
             self.guess = self._initial_guess()
-            self.gizmo.position = (self.guess.x, self.guess.y, 0.0)
-            self.gizmo.wxyz = viser_draw.yaw_to_wxyz(self.guess.theta)
+            self._show_guess(self.guess)
             self.rematch()
             self._frame_camera()
 

@@ -190,3 +190,29 @@ def test_polar_cost_plot_follows_the_iteration(session):
     assert np.isfinite(fit).sum() >= 2  # the V drawn at the minimum
     session.h_algo.value = "mbicp"
     assert len(session.h_cost.data[0]) == 1  # no cost curve for the MbICP family
+
+
+def test_search_button_finds_the_guess_a_corridor_needs(server):
+    """Intel 12 -> 13: ~1 m along a corridor. From the identity improved MbICP shortens the motion;
+    the search button puts the guess (numbers and gizmo) near the truth and the match succeeds."""
+    from core import pose_error
+
+    from .conftest import INTEL
+
+    s = Session(server, Source("intel", read_log(INTEL), pair=(12, 13), pick_pair=True, guess=Pose2()))
+    truth = s.truth()
+    assert pose_error(s.runs[0].result.pose, truth)[0] > 0.5  # the failed match a user opens
+    found = s.search_guess()
+    assert pose_error(found, truth)[0] < 0.15
+    assert (s.h_gx.value, s.h_gy.value) == pytest.approx((found.x, found.y))
+    assert tuple(s.gizmo.position[:2]) == pytest.approx((found.x, found.y))
+    et, er = pose_error(s.runs[0].result.pose, truth)
+    assert et < 0.05 and er < math.radians(1.0) and "searched around the guess" in s.h_status.content
+
+
+def test_picking_a_pair_puts_its_guess_in_the_fields(server):
+    s = Session(server, Source("intel", read_log(EXAMPLES / "intel-excerpt.log.gz"), pick_pair=True))
+    s.h_ref.value = 12  # consecutive: object 13; the guess comes from the stored poses
+    assert s.pair == (12, 13)
+    assert (s.h_gx.value, s.h_gy.value) == pytest.approx((s.guess.x, s.guess.y))
+    assert s.h_gt.value == pytest.approx(math.degrees(s.guess.theta))
