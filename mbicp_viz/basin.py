@@ -9,13 +9,14 @@ relative pose of the scans' stored poses, else each matcher's own answer from th
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from core import Params, Pose2, Scan, match, pose_error
+
+from .errors import InputError
+from .pool import ordered_map
 
 CORRECT, WRONG, NOT_CONVERGED = 0, 1, 2
 OUTCOME_NAMES = ("correct", "converged wrong", "not converged")
@@ -48,15 +49,14 @@ def basin(ref: Scan, obj: Scan, params: dict[str, Params], truth: Pose2 | None, 
     answers = {}
     for name, p in params.items():
         answers[name] = truth if truth is not None else match(ref, obj, Pose2(), p).pose
-    outcome = {}
-    workers = workers or os.cpu_count() or 1
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        for name, p in params.items():
-            a = answers[name]
-            jobs = [(ref, obj, [Pose2(a.x + dx, a.y + dy, a.theta + th) for dx in xy], p, a)
-                    for th in thetas_rad for dy in xy]
-            rows = list(pool.map(_run, jobs))
-            outcome[name] = np.array(rows, dtype=np.int8).reshape(len(thetas_rad), steps, steps)
+    jobs = [(ref, obj, [Pose2(a.x + dx, a.y + dy, a.theta + th) for dx in xy], p, a)
+            for name, p in params.items() for a in [answers[name]] for th in thetas_rad for dy in xy]
+    rows = ordered_map(_run, jobs, workers)
+    if len(rows) < len(jobs):
+        raise InputError(f"interrupted after {len(rows)} of {len(jobs)} rows of the atlas; nothing was written")
+    per = len(thetas_rad) * steps
+    outcome = {name: np.array(rows[k * per:(k + 1) * per], dtype=np.int8).reshape(len(thetas_rad), steps, steps)
+               for k, name in enumerate(params)}
     return Atlas(xy, np.array(thetas_rad), answers, outcome)
 
 

@@ -36,6 +36,7 @@ ConnectOpt = Annotated[Optional[str], typer.Option(
     "--connect", help="stream into a running rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")]
 ServeOpt = Annotated[bool, typer.Option("--serve", help="serve rerun's web viewer on 127.0.0.1 with the run")]
 PortOpt = Annotated[int, typer.Option("--port", min=1, max=65534, help="web viewer port for --serve (data: PORT+1)")]
+WorkersOpt = Annotated[Optional[int], typer.Option("--workers", min=1, help="processes (default: all cores)")]
 EXAMPLES = Path(__file__).parent / "examples"
 DEMO_PAIR = EXAMPLES / "hokuyo-125-130.npz"
 
@@ -200,6 +201,7 @@ def eval_sequence(
     = None,
     kalman: Annotated[bool, typer.Option("--kalman", help="fuse the matches with the log's odometry (EKF, "
                                          "paper 003 §5.3); the TUM file and map then use the fused track")] = False,
+    workers: WorkersOpt = None,
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
     from .inputs import make_params
@@ -214,7 +216,7 @@ def eval_sequence(
     lg = read_log(log)
     total = min(limit or len(lg.scans) - 1, len(lg.scans) - 1)
     with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:
-        rows = match_sequence(lg, p, limit, guess, truth, on_row=lambda _: bar.update(1))
+        rows = match_sequence(lg, p, limit, guess, truth, on_row=lambda _: bar.update(1), workers=workers)
     if not rows:
         raise InputError("interrupted before the first pair was matched", log)
     out.write_text(json.dumps(rows, indent=1) + "\n")
@@ -306,7 +308,7 @@ def eval_overlap(
                                                  help="largest |theta| of a displacement [deg]")] = 15.0,
     csv: Annotated[Optional[Path], typer.Option("--csv", help="write every run as CSV")] = None,
     png: Annotated[Optional[Path], typer.Option("--png", help="write a plot")] = None,
-    workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="processes (default: all cores)")] = None,
+    workers: WorkersOpt = None,
 ):
     """Paper 000's partial-overlap protocol (§3.1): Tables 1-3 for each matcher, as Markdown."""
     import math
@@ -397,7 +399,7 @@ def eval_basin(
     thetas_deg: Annotated[str, typer.Option("--thetas-deg", help="theta offsets [deg]")] = "-30,-15,0,15,30",
     png: Annotated[Optional[Path], typer.Option("--png", help="write the atlas as a PNG")] = None,
     rrd: RrdOpt = None,
-    workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="processes (default: all cores)")] = None,
+    workers: WorkersOpt = None,
 ):
     """A convergence atlas: every matcher from a grid of initial offsets, coloured by outcome."""
     import math

@@ -11,14 +11,13 @@ converged, wrong). Tables 1-3 of the paper come out per matcher.
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from core import MATCHERS, Params, Pose2, Scan, match, pose_error
 
+from .pool import ordered_map
 from .scenarios import block_mask, seen_from
 
 FAIL_M, FAIL_RAD = 0.1, math.radians(3.14)  # paper 000 §3.1
@@ -92,22 +91,13 @@ def run_overlap(scenes: list[Scan], params: dict[str, Params], cases: list[Overl
     ``on_done(rows)`` is called as each case finishes (progress); interrupting keeps the rows so far.
     """
     rows: list[OverlapRow] = []
-    jobs = [(scenes[c.scene], c, params) for c in cases]
-    workers = workers or os.cpu_count() or 1
-    try:
-        if workers == 1:
-            for j in jobs:
-                rows += run_case(j)
-                if on_done:
-                    on_done(rows)
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                for out in pool.map(run_case, jobs, chunksize=max(1, len(jobs) // (8 * workers))):
-                    rows += out
-                    if on_done:
-                        on_done(rows)
-    except KeyboardInterrupt:
-        pass
+
+    def collect(out: list[OverlapRow]) -> None:
+        rows.extend(out)
+        if on_done:
+            on_done(rows)
+
+    ordered_map(run_case, [(scenes[c.scene], c, params) for c in cases], workers, collect)
     return rows
 
 

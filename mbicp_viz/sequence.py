@@ -10,6 +10,7 @@ from core.search import correlative_search
 
 from .errors import InputError
 from .inputs import consecutive_pairs, stored_guess
+from .pool import ordered_map
 from .readers import ScanLog
 
 GUESSES = ("stored", "pose", "odometry", "identity", "search")
@@ -40,24 +41,19 @@ def pair_guess(ref: Scan, obj: Scan, kind: str) -> tuple[Pose2, str]:
 
 
 def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess: str = "stored",
-                   truth: str | None = None, on_row=None) -> list[dict]:
-    """One row per consecutive pair; with ``truth="pose"`` also the error against the log's scan poses."""
+                   truth: str | None = None, on_row=None, workers: int | None = None) -> list[dict]:
+    """One row per consecutive pair, in order; with ``truth="pose"`` also the error against the log's
+    scan poses. Pairs are spread over ``workers`` processes (default: every core; the standard
+    library's pool); ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
     if truth == "pose" and guess in ("pose", "stored"):
         raise InputError("the scan poses cannot be both the truth and the guess: use --guess identity or odometry",
                          field="--truth")
-    rows = []
-    try:
-        for i, j in consecutive_pairs(log, limit):
-            rows.append(_match_row(log, i, j, params, guess, truth))
-            if on_row is not None:
-                on_row(rows[-1])
-    except KeyboardInterrupt:  # Ctrl-C: keep the rows already computed
-        pass
-    return rows
+    jobs = [(log.path, i, j, log.scans[i], log.scans[j], params, guess, truth) for i, j in consecutive_pairs(log, limit)]
+    return ordered_map(_match_row, jobs, workers, on_row)
 
 
-def _match_row(log: ScanLog, i: int, j: int, params: Params, guess: str, truth: str | None) -> dict:
-    ref, obj = log.scans[i], log.scans[j]
+def _match_row(job) -> dict:
+    path, i, j, ref, obj, params, guess, truth = job
     t0 = time.perf_counter()
     g, source = pair_guess(ref, obj, guess)
     t1 = time.perf_counter()
@@ -67,7 +63,7 @@ def _match_row(log: ScanLog, i: int, j: int, params: Params, guess: str, truth: 
         row["guess_ms"] = 1000.0 * (t1 - t0)
     if truth == "pose":
         if ref.pose is None or obj.pose is None:
-            raise InputError(f"scan {i} or {j} has no pose to score against", log.path, field="--truth")
+            raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
         et, er = pose_error(r.pose, relative(ref.pose, obj.pose))
         row |= {"error_xy": et, "error_theta": er, "success": bool(et < SUCCESS_M and er < SUCCESS_RAD)}
     return row
