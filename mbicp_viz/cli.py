@@ -357,6 +357,32 @@ def eval_overlap(
         plot_png(tab, str(png))
 
 
+@eval_app.command("ceiling")
+@user_errors
+def eval_ceiling(
+    log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
+    algos: Annotated[str, typer.Option("--algos", help="comma-separated matchers")] = ",".join(MATCHERS),
+    limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="only the first N pairs")] = None,
+    workers: WorkersOpt = None,
+):
+    """How well any guess could do on a log: each matcher started at the truth, and the search alone."""
+    from .inputs import make_params
+    from .readers import read_log
+    from .sequence import ceiling
+
+    names = [a.strip() for a in algos.split(",") if a.strip()]
+    ps = [make_params(a, None) for a in names]
+    lg = read_log(log)
+    total = min(limit or len(lg.scans) - 1, len(lg.scans) - 1)
+    with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:
+        found, kept, n = ceiling(lg, ps, limit, workers, on_row=lambda _: bar.update(1))
+    if n == 0:
+        raise InputError("interrupted before the first pair was matched", log)
+    typer.echo(f"correlative search alone: {found}/{n} within 0.1 m and 3 deg ({100 * found / n:.1f} %)")
+    for name, k in zip(names, kept):
+        typer.echo(f"{name} started at the scan poses: {k}/{n} stay within 0.1 m and 3 deg ({100 * k / n:.1f} %)")
+
+
 @eval_app.command("relations")
 @user_errors
 def eval_relations(
@@ -367,7 +393,8 @@ def eval_relations(
     offset: Annotated[float, typer.Option("--offset", help="seconds added to the log's stamps (Intel corrected: "
                                           "976052857.337)")] = 0.0,
     tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, help="largest stamp mismatch [s]")] = 0.025,
-    guess: Annotated[str, typer.Option("--guess", help="identity, pose or odometry")] = "identity",
+    guess: Annotated[str, typer.Option("--guess", help="identity, pose, odometry or search (a correlative search "
+                                       "within +/-1.5 m, +/-40 deg of the identity)")] = "identity",
     out: Annotated[Optional[Path], typer.Option("--out", help="JSON file: one object per matched relation")] = None,
 ):
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""
@@ -375,8 +402,8 @@ def eval_relations(
     from .readers import read_log
     from .relations import match_relations, read_relations, summary
 
-    if guess not in ("identity", "pose", "odometry"):
-        raise InputError("choose identity, pose or odometry", field="--guess")
+    if guess not in ("identity", "pose", "odometry", "search"):
+        raise InputError("choose identity, pose, odometry or search", field="--guess")
     rows, missing = match_relations(read_log(log), read_relations(relations), make_params(algo, str(params) if params
                                     else None), offset, tolerance, guess)
     if out:

@@ -67,3 +67,27 @@ def _match_row(job) -> dict:
         et, er = pose_error(r.pose, relative(ref.pose, obj.pose))
         row |= {"error_xy": et, "error_theta": er, "success": bool(et < SUCCESS_M and er < SUCCESS_RAD)}
     return row
+
+
+def _ceiling_row(job) -> tuple[bool, list[bool]]:
+    ref, obj, params = job
+    truth = relative(ref.pose, obj.pose)
+
+    def ok(pose: Pose2) -> bool:
+        et, er = pose_error(pose, truth)
+        return bool(et < SUCCESS_M and er < SUCCESS_RAD)
+
+    return ok(correlative_search(ref, obj).pose), [ok(match(ref, obj, truth, p).pose) for p in params]
+
+
+def ceiling(log: ScanLog, params: list[Params], limit: int | None = None, workers: int | None = None,
+            on_row=None) -> tuple[int, list[int], int]:
+    """What a log allows on its consecutive pairs, against its scan poses: how many pairs the
+    correlative search alone finds, and how many each matcher keeps when started at the truth itself
+    (its fixed point: no guess can do better). Returns (search hits, hits per matcher, pairs)."""
+    pairs = consecutive_pairs(log, limit)
+    for i, j in pairs:
+        if log.scans[i].pose is None or log.scans[j].pose is None:
+            raise InputError(f"scan {i} or {j} has no pose to score against", log.path, field="poses")
+    rows = ordered_map(_ceiling_row, [(log.scans[i], log.scans[j], params) for i, j in pairs], workers, on_row)
+    return sum(r[0] for r in rows), [sum(r[1][k] for r in rows) for k in range(len(params))], len(rows)

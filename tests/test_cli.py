@@ -126,3 +126,17 @@ def test_ctrl_c_stops_a_parallel_run_and_keeps_its_rows(tmp_path):
     assert 0 < len(rows) < 359 and [r["ref"] for r in rows] == list(range(len(rows)))
     assert f"interrupted after {len(rows)} of 359" in stdout
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
+
+
+def test_eval_ceiling_separates_what_the_data_allows_from_the_matcher():
+    import re
+
+    out = ok("eval", "ceiling", INTEL, "--algos", "improved,psm")
+    hits = {name: int(n) for name, n in re.findall(r"(\w+) started at the scan poses: (\d+)/59", out)}
+    search = int(re.search(r"correlative search alone: (\d+)/59", out).group(1))
+    assert hits["improved"] == 59 and hits["psm"] < 50 and search >= 53
+
+
+def test_eval_ceiling_needs_scan_poses():
+    res = runner.invoke(app, ["eval", "ceiling", str(HOKUYO_BAG), "--limit", "3"])
+    assert res.exit_code == 2 and "no pose to score against" in res.output and "Traceback" not in res.output

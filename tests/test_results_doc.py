@@ -45,9 +45,9 @@ def run(command: str, tmp_path=None) -> str:
 
 
 def test_the_doc_lists_every_evaluation():
-    assert len(list(overlap_blocks())) == 2
+    assert len(list(overlap_blocks())) == 4
     kinds = {shlex.split(c)[2] for c, _ in console_commands()}
-    assert kinds == {"protocol", "sequence", "relations", "basin"}
+    assert kinds == {"protocol", "sequence", "ceiling", "relations", "basin"}
 
 
 @pytest.mark.parametrize("command, table", list(overlap_blocks()))
