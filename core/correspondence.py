@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .events import PairKind
 from .metric import euclidean_project_on_segment, metric_distance_sq, metric_project_on_segment
@@ -38,7 +37,6 @@ class ReferenceIndex:
     max_step: float  # the widest bearing gap between consecutive reference points [rad]
     full_circle: bool
     tangents: np.ndarray  # (N, 2) unit surface tangent (central differences), for degeneracy
-    tree: cKDTree  # Euclidean k-d tree over ``points``
 
     @staticmethod
     def build(scan: Scan, L: float) -> "ReferenceIndex":
@@ -52,7 +50,7 @@ class ReferenceIndex:
         sq = np.einsum("ij,ij->i", pts, pts)
         k = sq + L * L
         return ReferenceIndex(pts, b, ext_b, ext_map, k, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
-                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, t, cKDTree(pts))
+                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, t)
 
     def neighbour(self, j: np.ndarray, step: int) -> np.ndarray:
         """Index of the scan-order neighbour j+step, or -1 past the ends of a partial scan."""

@@ -7,6 +7,7 @@ large rotations pull it into local minima.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .correspondence import ReferenceIndex
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, StartEvent
@@ -25,6 +26,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParam
     """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
     params = params if params is not None else IcpParams()
     R = ReferenceIndex.build(ref, DEGENERACY_LENGTH_M)
+    tree = cKDTree(R.points)
     P = obj.points()
     used = np.arange(len(P))
     min_pairs = max(3, int(np.ceil(params.AsocError * len(P))))
@@ -38,7 +40,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParam
     it = 0
     for it in range(1, params.MaxIter + 1):
         moved = est.apply(P)
-        dist, j = R.tree.query(moved, k=1)
+        dist, j = tree.query(moved, k=1)
         status, thr = reject(dist, params.max_correspondence_dist, params.filter)
         kept = status == PairStatus.KEPT
         n_kept = int(np.count_nonzero(kept))
