@@ -60,6 +60,16 @@ def machine_line() -> str:
     return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
+def speed_probe_us() -> float:
+    """Time of a fixed small numpy workload [us] (best of several): how fast the machine runs right
+    now. Shared virtual machines drift by tens of percent from one minute to the next; printed
+    beside a benchmark, it tells a slow minute from a slow matcher."""
+    import timeit
+
+    a = np.random.default_rng(0).normal(size=300)
+    return 1e6 * min(timeit.repeat(lambda: np.sort(a) + np.arctan2(a, a), number=2000, repeat=5)) / 2000
+
+
 def time_recordings(log: ScanLog, params: Params, limit: int | None, repeat: int, teaching: bool):
     """Time for matching and writing each pair to an .rrd (rerun front end), and the file sizes [bytes]."""
     import os

@@ -470,15 +470,19 @@ def bench_cmd(
     """Time per match on consecutive pairs: median, p90, matches per second; events off and on."""
     import numpy as np
 
-    from .bench import bench, machine_line
+    from .bench import bench, machine_line, speed_probe_us
     from .inputs import make_params
     from .readers import read_log
 
     lg = read_log(log)
     typer.echo(f"{algo} on {log}: {len(lg.scans[0].ranges)} beams; {machine_line()}")
+    before = speed_probe_us()
     timings = bench(lg, make_params(algo, str(params) if params else None), limit, repeat)
+    after = speed_probe_us()
     for t in timings:
         typer.echo(t.line())
+    typer.echo(f"machine speed probe    {before:.2f} us before, {after:.2f} us after (a fixed numpy workload; "
+               "lower is faster)")
     typer.echo(f"observer overhead      {100.0 * (timings[1].median / timings[0].median - 1.0):+.0f} % (median)")
     if rrd:
         from .bench import time_recordings

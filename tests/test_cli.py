@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 
 import pytest
 from typer.testing import CliRunner
@@ -56,6 +57,8 @@ def test_bench_reports_median_p90_and_rate():
     out = ok("bench", LASERAZOS, "--algo", "icp", "--limit", 3, "--repeat", 1)
     assert "events off" in out and "recording observer" in out
     assert "median" in out and "p90" in out and "matches/s" in out
+    probe = re.search(r"machine speed probe +([\d.]+) us before, ([\d.]+) us after", out)
+    assert probe and 0 < float(probe.group(1)) < 1000 and 0 < float(probe.group(2)) < 1000
 
 
 @pytest.mark.parametrize("algo", list(MATCHERS))
@@ -129,8 +132,6 @@ def test_ctrl_c_stops_a_parallel_run_and_keeps_its_rows(tmp_path):
 
 
 def test_eval_ceiling_separates_what_the_data_allows_from_the_matcher():
-    import re
-
     out = ok("eval", "ceiling", INTEL, "--algos", "improved,psm")
     hits = {name: int(n) for name, n in re.findall(r"(\w+) started at the scan poses: (\d+)/59", out)}
     search = int(re.search(r"correlative search alone: (\d+)/59", out).group(1))
