@@ -99,13 +99,13 @@ def make_scan(
     if r.shape != b.shape:
         raise ScanError(source, f"{len(r)} ranges but {len(b)} bearings")
     if len(r) == 0:
-        raise ScanError(source, f"empty scan (no beams)")
+        raise ScanError(source, "empty scan (no beams)")
     if not np.all(np.isfinite(b)):
-        raise ScanError(source, f"bearings contain NaN or inf")
+        raise ScanError(source, "bearings contain NaN or inf")
     if len(b) > 1 and not np.all(np.diff(b) > 0):
-        raise ScanError(source, f"bearings must be strictly increasing")
+        raise ScanError(source, "bearings must be strictly increasing")
     if b[-1] - b[0] > 2.0 * np.pi + 1e-9:
-        raise ScanError(source, f"bearings span more than 360 degrees")
+        raise ScanError(source, "bearings span more than 360 degrees")
     with np.errstate(invalid="ignore"):
         ok = np.isfinite(r) & (r > max(range_min, 0.0)) & (r < range_max)
         for lo, hi in invalid_values:
