@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core import MATCHERS, Params, Pose2, Scan, match, pose_error
+from core import Params, Pose2, Scan, match, pose_error
 
 from .pool import ordered_map
 from .scenarios import block_mask, seen_from
@@ -161,6 +161,3 @@ def plot_png(tab: dict[str, list[dict]], path: str) -> None:
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
-
-def default_matchers() -> list[str]:
-    return list(MATCHERS)
