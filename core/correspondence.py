@@ -29,9 +29,8 @@ class ReferenceIndex:
     bearings: np.ndarray  # (N,) increasing
     ext_bearings: np.ndarray  # (3N,)
     ext_map: np.ndarray  # (3N,)
-    sq_norm_L2: np.ndarray  # (N,) |q|^2 + L^2, the metric's denominator
-    ext_x: np.ndarray  # (3N,) x, y and |q|^2 + L^2 of ``ext_map``'s points: the search reads them
-    ext_y: np.ndarray  # without a second gather
+    ext_x: np.ndarray  # (3N,) x, y and |q|^2 + L^2 (the metric's denominator) of ``ext_map``'s
+    ext_y: np.ndarray  # points: the search reads them without a second gather
     ext_sq_norm_L2: np.ndarray
     max_factor: float  # sqrt(max|q|^2 + L^2) / L: the Euclidean radius per unit of metric distance
     max_step: float  # the widest bearing gap between consecutive reference points [rad]
@@ -49,7 +48,7 @@ class ReferenceIndex:
         t = surface_tangents(pts, full)
         sq = np.einsum("ij,ij->i", pts, pts)
         k = sq + L * L
-        return ReferenceIndex(pts, b, ext_b, ext_map, k, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
+        return ReferenceIndex(pts, b, ext_b, ext_map, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
                               float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, t)
 
     def neighbour(self, j: np.ndarray, step: int) -> np.ndarray:
@@ -224,8 +223,8 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, B
         b = ref.points[second]
         e = b - a
         ok = (second >= 0) & (e[:, 0] ** 2 + e[:, 1] ** 2 <= max_dist_inter * max_dist_inter)
-        inter, pl, a, e = losers[ok], pl[ok], a[ok], e[ok]
-        c = a + euclidean_project_on_segment(pl, a, a + e)[:, None] * e
+        inter, pl, a, b = losers[ok], pl[ok], a[ok], b[ok]
+        c = a + euclidean_project_on_segment(pl, a, b)[:, None] * (b - a)
         target[inter] = c
         kind[inter] = PairKind.INTERPOLATED
         ref_index[inter, 1] = second[ok]

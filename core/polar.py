@@ -174,6 +174,13 @@ def refine_v(a: float, b: float, c: float) -> float:
     return float(np.clip((a - c) / (2.0 * m), -0.5, 0.5)) if m > 0 else 0.0
 
 
+def least(cost: np.ndarray) -> int | None:
+    """Index of the smallest cost, NaN meaning "too few pairs at that shift"; None if all are NaN."""
+    finite = np.where(cost == cost, cost, np.inf)
+    j = int(np.argmin(finite))
+    return j if finite[j] < np.inf else None
+
+
 def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarray | None = None):
     """The refined minimum of the cost curve (in shift units) and the three samples the fit used.
 
@@ -181,9 +188,8 @@ def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarra
     with its metric-weighted norm but refines it on the range term alone, since the weight's own
     V at zero would pull every refinement towards no correction.
     """
-    finite = np.where(cost == cost, cost, np.inf)  # NaN: too few pairs at that shift
-    j = int(np.argmin(finite))
-    if finite[j] == np.inf:
+    j = least(cost)
+    if j is None:
         return None, None
     f = cost if fit_cost is None else fit_cost
     if 0 < j < len(f) - 1 and np.isfinite(f[j - 1]) and np.isfinite(f[j]) and np.isfinite(f[j + 1]):
@@ -256,7 +262,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
         before = est
         proj_ext = project(grid, O, est, K)
         proj0 = proj_ext[K: K + grid.n]
-        cost, k_best, abc, dtheta = np.full(len(shifts), np.nan), None, None, 0.0
+        cost, k_best, abc = np.full(len(shifts), np.nan), None, None
         range_cost = cost
         if strategy.orientation_due(it) and K > 0:
             range_cost, _ = shift_costs(ref_r, proj_ext, K, params.min_pairs)
@@ -274,8 +280,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                     gain *= 0.5
                 last_fraction = k_best
                 k_turn = gain * k_best
-            dtheta = -k_turn * grid.step
-            est = Pose2(0.0, 0.0, dtheta) @ est
+            est = Pose2(0.0, 0.0, -k_turn * grid.step) @ est
             proj = project(grid, O, est)
         i, e, w, used = translation_residuals(grid, R, proj, params.max_error, strategy.weight_C(it))
         if np.count_nonzero(used) < params.min_pairs:
@@ -301,8 +306,8 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
             # (Balancing at the step actually taken would lock: a small step raises lambda, which
             # keeps the next step small.)
             d_mean = float(np.mean(np.abs(e[used])))
-            finite = np.where(range_cost == range_cost, range_cost, np.inf)
-            theta_r = abs(float(shifts[np.argmin(finite)])) * grid.step if finite.min() < np.inf else 0.0
+            j = least(range_cost)
+            theta_r = abs(float(shifts[j])) * grid.step if j is not None else 0.0
             lam = min(d_mean / max(theta_r, grid.step), params.lambda_max)
         inc = est @ before.inverse()
         if observer is not None:

@@ -12,15 +12,14 @@ from .se2 import Pose2
 
 class Termination(enum.Enum):
     CONVERGED = "converged"  # the algorithm's stopping rule held
-    CYCLE = "cycle"  # the estimate alternates between two poses closer than the stopping thresholds
+    CYCLE = "cycle"  # the estimate cycles among 2-4 poses closer than the stopping thresholds
     MAX_ITERATIONS = "max_iterations"  # MaxIter reached first
     TOO_FEW_PAIRS = "too_few_pairs"  # fewer pairs than AsocError * points (or fewer than 3)
     SINGULAR = "singular"  # the normal equations could not be solved
 
-
     @property
     def converged(self) -> bool:
-        """Whether the estimate settled: a 2-cycle below the thresholds settles as well as a fixed point."""
+        """Whether the estimate settled: a short cycle below the thresholds settles as well as a fixed point."""
         return self in (Termination.CONVERGED, Termination.CYCLE)
 
 

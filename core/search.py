@@ -77,13 +77,13 @@ def correlative_search(ref: Scan, obj: Scan, guess: Pose2 = Pose2(), params: Sea
     angles = np.arange(-k, k + 1) * p.angle_step
     best_per_angle = np.empty(len(angles))
     best, best_pose = -1.0, guess
+    # every (2n+1)^2 window of the field, as a view: a point at cell u scores window u - n
+    windows = np.lib.stride_tricks.sliding_window_view(field, (2 * n + 1, 2 * n + 1))
     for a, dth in enumerate(angles):
         theta = guess.theta + dth
         moved = Pose2(guess.x, guess.y, theta).apply(O)
-        u = np.round((moved - origin) / p.cell).astype(np.int64)
-        score = np.zeros((2 * n + 1, 2 * n + 1))
-        for (i, j), wi in zip(u, w):
-            score += wi * field[i - n: i + n + 1, j - n: j + n + 1]
+        u = np.round((moved - origin) / p.cell).astype(np.int64) - n
+        score = np.einsum("p,pij->ij", w, windows[u[:, 0], u[:, 1]])
         ij = np.unravel_index(int(np.argmax(score)), score.shape)
         best_per_angle[a] = score[ij]
         if score[ij] > best:

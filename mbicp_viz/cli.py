@@ -16,6 +16,7 @@ import typer
 from core import MATCHERS, ParamError, Recorder, ScanError, match
 
 from .errors import InputError
+from .inputs import search_window_text
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
                   help="Visual debugger and teaching tool for 2-D laser scan matching (ICP, MbICP, improved MbICP).")
@@ -23,6 +24,7 @@ eval_app = typer.Typer(no_args_is_help=True, help="Evaluate matchers on whole lo
 app.add_typer(eval_app, name="eval")
 
 ALGOS = ", ".join(MATCHERS)
+SEARCH = search_window_text()
 FirstArg = Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")]
 SecondArg = Annotated[Optional[str], typer.Argument(help="object scan file")]
 AlgoOpt = Annotated[str, typer.Option("--algo", help=f"matcher: {ALGOS}")]
@@ -91,8 +93,8 @@ def match_cmd(
     connect: ConnectOpt = None,
     serve: ServeOpt = False,
     port: PortOpt = 9090,
-    search: Annotated[bool, typer.Option("--search", help="first search the pose within +/-1.5 m, +/-40 deg of "
-                                         "the guess (correlative search), then match from the best")] = False,
+    search: Annotated[bool, typer.Option("--search", help=f"first search the pose within {SEARCH} of the guess "
+                                         "(correlative search), then match from the best")] = False,
 ):
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from .inputs import guess_from_deg, load_pair, make_params, stored_guess
@@ -192,7 +194,7 @@ def eval_sequence(
     rrd: RrdOpt = None,
     guess: Annotated[str, typer.Option("--guess", help="initial guess: stored (poses, else odometry, else "
                                        "identity), pose, odometry, identity, or search (a correlative search "
-                                       "within +/-1.5 m, +/-40 deg of the identity)")] = "stored",
+                                       f"within {SEARCH} of the identity)")] = "stored",
     truth: Annotated[Optional[str], typer.Option("--truth", help="'pose': score against the log's scan poses "
                                                  "(corrected logs)")] = None,
     png: Annotated[Optional[Path], typer.Option("--png", help="plot the trajectories and the map")] = None,
@@ -394,7 +396,7 @@ def eval_relations(
                                           "976052857.337)")] = 0.0,
     tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, help="largest stamp mismatch [s]")] = 0.025,
     guess: Annotated[str, typer.Option("--guess", help="identity, pose, odometry or search (a correlative search "
-                                       "within +/-1.5 m, +/-40 deg of the identity)")] = "identity",
+                                       f"within {SEARCH} of the identity)")] = "identity",
     out: Annotated[Optional[Path], typer.Option("--out", help="JSON file: one object per matched relation")] = None,
 ):
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 from core import MATCHERS, Params, Pose2, Scan, relative
+from core.search import SearchParams
 
 from .errors import InputError
 from .params_io import load_params
@@ -47,6 +48,11 @@ def guess_from_deg(init: tuple[float, float, float] | None) -> Pose2 | None:
         if not math.isfinite(v):
             raise InputError(f"must be finite, got {v}", field=f"--init {name}")
     return Pose2(x, y, math.radians(th))
+
+
+def search_window_text(params: SearchParams = SearchParams()) -> str:
+    """The correlative search's window as users read it (degrees at the edge)."""
+    return f"+/-{params.window_xy:g} m, +/-{math.degrees(params.window_theta):g} deg"
 
 
 def make_params(algorithm: str, params_file: str | None) -> Params:

@@ -18,6 +18,11 @@ GUESSES = ("stored", "pose", "odometry", "identity", "search")
 SUCCESS_M, SUCCESS_RAD = 0.1, math.radians(3.0)
 
 
+def succeeded(et: float, er: float) -> bool:
+    """Translation error et [m] and rotation error er [rad] within the success thresholds."""
+    return bool(et < SUCCESS_M and er < SUCCESS_RAD)
+
+
 def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
     """The stable JSON record of one match (``match --json``, ``eval sequence``): scripts rely on these keys."""
     return {"ref": ref, "obj": obj, "x": r.pose.x, "y": r.pose.y, "theta": r.pose.theta,
@@ -65,18 +70,14 @@ def _match_row(job) -> dict:
         if ref.pose is None or obj.pose is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
         et, er = pose_error(r.pose, relative(ref.pose, obj.pose))
-        row |= {"error_xy": et, "error_theta": er, "success": bool(et < SUCCESS_M and er < SUCCESS_RAD)}
+        row |= {"error_xy": et, "error_theta": er, "success": succeeded(et, er)}
     return row
 
 
 def _ceiling_row(job) -> tuple[bool, list[bool]]:
     ref, obj, params = job
     truth = relative(ref.pose, obj.pose)
-
-    def ok(pose: Pose2) -> bool:
-        et, er = pose_error(pose, truth)
-        return bool(et < SUCCESS_M and er < SUCCESS_RAD)
-
+    ok = lambda pose: succeeded(*pose_error(pose, truth))  # noqa: E731
     return ok(correlative_search(ref, obj).pose), [ok(match(ref, obj, truth, p).pose) for p in params]
 
 

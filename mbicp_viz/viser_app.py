@@ -25,7 +25,7 @@ from core.params import check_value
 
 from . import scene, viser_draw
 from .errors import InputError
-from .inputs import stored_guess
+from .inputs import search_window_text, stored_guess
 from .params_io import params_to_toml
 from .readers import ScanLog
 
@@ -293,7 +293,7 @@ class Session:
                 h.on_update(lambda _: self._on_guess_numbers())
             self.h_gizmo_on = gui.add_checkbox("drag the guess in the view", True)
             self.h_gizmo_on.on_update(lambda _: setattr(self.gizmo, "visible", self.h_gizmo_on.value))
-            b_search = gui.add_button("search the guess (+/-1.5 m, +/-40 deg)",
+            b_search = gui.add_button(f"search the guess ({search_window_text()})",
                                       hint="correlative search around the current guess; the match restarts from "
                                            "its best pose")
             b_search.on_click(lambda _: self._guarded(self.search_guess))

@@ -11,13 +11,13 @@ from core import ImprovedParams, Pose2, match, pose_error, relative
 from core.search import SearchParams, correlative_search
 from mbicp_viz.cli import app
 from mbicp_viz.scenarios import seen_from
+from mbicp_viz.sequence import succeeded
 
 from .conftest import INTEL
 
 
 def success(pose: Pose2, truth: Pose2) -> bool:
-    et, er = pose_error(pose, truth)
-    return et < 0.1 and er < math.radians(3.0)
+    return succeeded(*pose_error(pose, truth))
 
 
 @settings(max_examples=12, deadline=None)
