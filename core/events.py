@@ -119,7 +119,7 @@ class PolarStep:
     its two neighbours, through which the fit passes. metric_weight: PMWN's adaptive lambda
     [m/rad], None for PSM. residuals, weights: (K,) translation residuals [m] and their weights.
     circle_points: (K, 2) PMWN's projected-circle points Delta r_i u_i, circle_centre: (2,) its
-    fitted centre (T/2); None for PSM.
+    fitted centre (T/2); None for PSM and with ``surface_jacobian`` (the circle holds for Diosi's model only).
     """
 
     bearings: np.ndarray

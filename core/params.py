@@ -173,6 +173,9 @@ class PolarParams(Params):
     errx_out: float = param(5e-4, unit="m", lo=0.0, hi=1.0, help="a correction is small when |dx| is below this")
     erry_out: float = param(5e-4, unit="m", lo=0.0, hi=1.0, help="... and |dy| below this")
     errt_out: float = param(5e-4, unit="rad", lo=0.0, hi=1.0, help="... and |dtheta| below this")
+    surface_jacobian: bool = param(False, unit="bool",
+        help="translation step with the reference surface normals instead of Diosi's range change u.dt "
+             "(not published; holds corridors, see core/polar.py translation_system)")
     stop_after: int = param(3, unit="count", lo=1, hi=100, help="stop after this many small corrections in a row")
 
 

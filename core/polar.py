@@ -207,15 +207,47 @@ def translation_residuals(grid: Grid, ref: PolarScan, proj_r: np.ndarray, max_er
     return i, e, C / (C + e * e), used
 
 
-def weighted_translation(phi: np.ndarray, e: np.ndarray, w: np.ndarray) -> np.ndarray | None:
-    """Weighted least squares of e_i ~ (cos phi_i, sin phi_i) . dt (PSM §3 step 3; PMWN's circle)."""
-    c, s = np.cos(phi), np.sin(phi)
+def beam_normals(scan: PolarScan) -> np.ndarray:
+    """Unit surface normal at every beam, from its neighbours in the same segment (central
+    differences, one-sided at a segment's ends); the beam's own direction where it has none."""
+    k = np.arange(len(scan.ranges))
+    joined = np.zeros(len(k), dtype=bool)  # joined[j]: beams j and j + 1 lie on one segment
+    joined[scan.edges] = True
+    lo = np.where(np.roll(joined, 1) & (k > 0), k - 1, k)
+    hi = np.where(joined, k + 1, k)
+    t = scan.xy[hi] - scan.xy[lo]
+    norm = np.hypot(t[:, 0], t[:, 1])
+    ray = np.column_stack((np.cos(scan.bearings), np.sin(scan.bearings)))
+    normal = np.column_stack((-t[:, 1], t[:, 0])) / np.where(norm > 0, norm, 1.0)[:, None]
+    return np.where((norm > 0)[:, None], normal, ray)
+
+
+def weighted_translation(rows: np.ndarray, e: np.ndarray, w: np.ndarray) -> np.ndarray | None:
+    """Weighted least squares of e_i ~ rows_i . dt (PSM §3 step 3; PMWN's circle); None when singular."""
+    c, s = rows[:, 0], rows[:, 1]
     a, b, d = (w * c * c).sum(), (w * c * s).sum(), (w * s * s).sum()
     det = a * d - b * b
-    if det <= 1e-9 * (a + d) ** 2:  # all bearings alike: translation across them is unobservable
+    if det <= 1e-9 * (a + d) ** 2:  # all rows alike: translation across them is unobservable
         return None
     rx, ry = (w * c * e).sum(), (w * s * e).sum()
     return np.array([(d * rx - b * ry) / det, (a * ry - b * rx) / det])
+
+
+def translation_system(phi: np.ndarray, e: np.ndarray, normals: np.ndarray | None):
+    """Rows and right-hand side of the translation step for range residuals e at bearings phi.
+
+    Diosi's model (``normals`` None): moving the scan by dt changes the range along ray u by
+    u . dt — exact for a surface facing the sensor, wrong for a wall seen at a grazing angle, whose
+    range changes by (n . dt) / (n . u). With the reference normals n the step solves the
+    surface-aware form n . dt = e (n . u) instead, i.e. point-to-line distances along the ray's
+    surface. It has the same fixed point (all residuals zero) but a model of the right size in
+    corridors, where Diosi's under-estimates the range change of the walls, over-corrects and
+    drifts (his code's own limitation note; `eval ceiling` measures it).
+    """
+    u = np.column_stack((np.cos(phi), np.sin(phi)))
+    if normals is None:
+        return u, e
+    return normals, e * np.einsum("ij,ij->i", normals, u)
 
 
 def polar_pairs(grid: Grid, ref: PolarScan, proj_r: np.ndarray, i: np.ndarray, e: np.ndarray,
@@ -249,12 +281,14 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
     R, O = preprocess(ref, *pre), preprocess(obj, *pre)
     ref_pts, obj_pts = R.points(), O.points()
     ref_point_of = np.cumsum(R.valid) - 1
+    normals = beam_normals(R) if params.surface_jacobian else None
     ref_r = np.where(R.valid, R.ranges, np.nan)
     K = int(round(params.search_window / grid.step))
     shifts = np.arange(-K, K + 1)
     if observer is not None:
         observer(StartEvent(strategy.name, params, ref_pts, obj_pts, np.arange(len(obj_pts)), guess, None))
     est, lam = guess, params.lambda0 if strategy.metric else None
+    projected_circle = strategy.metric and normals is None  # PMWN's circle picture holds for Diosi's model only
     n_small, it, reason, last = 0, 0, Termination.MAX_ITERATIONS, None
     cycles = CycleWatch(params)
     gain, last_fraction = 0.5, 0.0  # sub-bearing orientation steps (see below)
@@ -292,7 +326,8 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                                         Pose2(), None))
             break
         phi = R.bearings[i[used]]
-        dt = weighted_translation(phi, e[used], w[used])
+        rows, rhs = translation_system(phi, e[used], normals[i[used]] if normals is not None else None)
+        dt = weighted_translation(rows, rhs, w[used])
         if dt is None:
             reason, est = Termination.SINGULAR, before
             break
@@ -311,14 +346,13 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
             lam = min(d_mean / max(theta_r, grid.step), params.lambda_max)
         inc = est @ before.inverse()
         if observer is not None:
-            u = np.column_stack((np.cos(phi), np.sin(phi)))
-            circle = e[used, None] * u if strategy.metric else None
+            circle = e[used, None] * np.column_stack((np.cos(phi), np.sin(phi))) if projected_circle else None
             observer(IterationEvent(
                 it, before, est, before.apply(obj_pts), np.empty(0, np.int64),
                 polar_pairs(grid, R, proj, i, e, used, ref_point_of), params.max_error, error, inc,
                 PolarStep(grid.bearings, ref_r, proj0, shifts, cost, k_best,
                           strategy.fit if k_best is not None else None, abc, lam_used,
-                          e, w, circle, 0.5 * dt if strategy.metric else None)))
+                          e, w, circle, 0.5 * dt if projected_circle else None)))
         last = (error, i[used], int(np.count_nonzero(used)), int(np.count_nonzero(~used)))
         n_small = n_small + 1 if params.small(inc) else 0
         if n_small >= params.stop_after:

@@ -206,9 +206,11 @@ def eval_sequence(
     workers: WorkersOpt = None,
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
+    from core.agreement import INLIER_RADIUS_M
+
     from .inputs import make_params
     from .readers import read_log
-    from .sequence import GUESSES, match_sequence
+    from .sequence import GUESSES, match_sequence, truth_doubted
 
     if guess not in GUESSES:
         raise InputError(f"choose one of {', '.join(GUESSES)}", field="--guess")
@@ -228,6 +230,9 @@ def eval_sequence(
     if truth:
         ok = sum(r["success"] for r in rows)
         typer.echo(f"against the scan poses: {ok}/{len(rows)} within 0.1 m and 3 deg ({100.0 * ok / len(rows):.1f} %)")
+        doubted = sum(truth_doubted(r) for r in rows)
+        typer.echo(f"failures where more object points lie within {100 * INLIER_RADIUS_M:.0f} cm of the reference "
+                   f"at the matched pose than at the scan poses: {doubted} of {len(rows) - ok}")
     if png or tum or tum_ref or kalman:
         _trajectories(lg, rows, png, tum, tum_ref, kalman)
     if rrd:
@@ -364,6 +369,7 @@ def eval_overlap(
 def eval_ceiling(
     log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
     algos: Annotated[str, typer.Option("--algos", help="comma-separated matchers")] = ",".join(MATCHERS),
+    params: ParamsOpt = None,
     limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="only the first N pairs")] = None,
     workers: WorkersOpt = None,
 ):
@@ -373,7 +379,7 @@ def eval_ceiling(
     from .sequence import ceiling
 
     names = [a.strip() for a in algos.split(",") if a.strip()]
-    ps = [make_params(a, None) for a in names]
+    ps = [make_params(a, params) for a in names]
     lg = read_log(log)
     total = min(limit or len(lg.scans) - 1, len(lg.scans) - 1)
     with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:

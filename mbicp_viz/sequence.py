@@ -6,6 +6,7 @@ import math
 import time
 
 from core import MatchResult, Params, Pose2, Scan, match, pose_error, relative
+from core.agreement import inlier_fraction
 from core.search import correlative_search
 
 from .errors import InputError
@@ -21,6 +22,12 @@ SUCCESS_M, SUCCESS_RAD = 0.1, math.radians(3.0)
 def succeeded(et: float, er: float) -> bool:
     """Translation error et [m] and rotation error er [rad] within the success thresholds."""
     return bool(et < SUCCESS_M and er < SUCCESS_RAD)
+
+
+def truth_doubted(row: dict) -> bool:
+    """A failed pair where more object points land on the reference at the matched pose than at
+    the stored one: the scans themselves side with the matcher (or cannot tell the two apart)."""
+    return not row["success"] and row["inliers_match"] > row["inliers_truth"]
 
 
 def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
@@ -69,8 +76,12 @@ def _match_row(job) -> dict:
     if truth == "pose":
         if ref.pose is None or obj.pose is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
-        et, er = pose_error(r.pose, relative(ref.pose, obj.pose))
+        truth_pose = relative(ref.pose, obj.pose)
+        et, er = pose_error(r.pose, truth_pose)
         row |= {"error_xy": et, "error_theta": er, "success": succeeded(et, er)}
+        if not row["success"]:  # is the matcher wrong, or the stored pose? Ask the points.
+            row |= {"inliers_match": inlier_fraction(ref, obj, r.pose),
+                    "inliers_truth": inlier_fraction(ref, obj, truth_pose)}
     return row
 
 

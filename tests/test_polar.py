@@ -8,11 +8,12 @@ from hypothesis import given
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from core import PmwnParams, Pose2, PsmParams, Recorder, ScanError, make_scan, match, pose_error
+from core import PmwnParams, Pose2, PsmParams, Recorder, ScanError, make_scan, match, pose_error, relative
 from core.polar import refine_parabola, refine_v
 from mbicp_viz.cli import app
 from mbicp_viz.readers import read_log
 from mbicp_viz.scenarios import seen_from
+from mbicp_viz.sequence import succeeded
 
 from .conftest import DATA, EXAMPLES
 
@@ -183,3 +184,19 @@ def test_projection_compares_only_surfaces_facing_the_reference():
     # the same wall after a half turn about (2, 0): it lies where it was, but its back faces us
     behind = project(grid, cur, Pose2(4.0, 0.0, math.pi))
     assert not np.isfinite(behind).any()
+
+
+@pytest.mark.parametrize("params", [PsmParams, PmwnParams])
+def test_surface_jacobian_holds_intel_corridors_where_diosis_model_drifts(params):
+    """Started at the corrected poses of Intel's consecutive pairs (the fixed point any guess can
+    hope for), Diosi's translation model (range change u.dt) walks off along the corridors; the
+    surface-aware step keeps the truth."""
+    ss = scans("intel")
+
+    def held(p):
+        truths = [relative(a.pose, b.pose) for a, b in zip(ss, ss[1:])]
+        return sum(succeeded(*pose_error(match(a, b, t, p).pose, t)) for a, b, t in zip(ss, ss[1:], truths))
+
+    diosi, surface = held(params()), held(params(surface_jacobian=True))
+    assert surface >= 0.93 * (len(ss) - 1)
+    assert surface > diosi
