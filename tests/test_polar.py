@@ -148,6 +148,7 @@ def test_compare_prints_every_matcher_with_errors(tmp_path):
     assert set(rows) == {"icp", "mbicp", "improved", "psm", "pmwn"}
     for name, cols in rows.items():
         assert float(cols[4]) < 10.0 and float(cols[5]) < 0.2, (name, cols)  # err_mm, err_deg
+        assert float(cols[6]) > 95.0, (name, cols)  # on_ref_%: the scan lies on itself
 
 
 def test_polar_recording_carries_cost_curves_and_the_circle(tmp_path):
