@@ -58,6 +58,8 @@ def user_errors(fn):
 
 
 def _print_match(ref, obj, guess, params, label: str, as_json: bool, indices=(0, 0)) -> None:
+    from core.agreement import INLIER_RADIUS_M, inlier_fraction
+
     from .report import ITERATION_HEADER, iteration_line, result_lines
     from .sequence import result_row
 
@@ -65,8 +67,9 @@ def _print_match(ref, obj, guess, params, label: str, as_json: bool, indices=(0,
     t0 = time.perf_counter()
     result = match(ref, obj, guess, params, rec)
     ms = 1000.0 * (time.perf_counter() - t0)
+    on_ref = inlier_fraction(ref, obj, result.pose)
     if as_json:
-        typer.echo(json.dumps(result_row(*indices, result, ms) | result.as_dict()))
+        typer.echo(json.dumps(result_row(*indices, result, ms) | result.as_dict() | {"on_ref": on_ref}))
         return
     typer.echo(f"{label}\ninitial guess {guess}\n")
     typer.echo(ITERATION_HEADER)
@@ -75,6 +78,8 @@ def _print_match(ref, obj, guess, params, label: str, as_json: bool, indices=(0,
     typer.echo("")
     for line in result_lines(result):
         typer.echo(line)
+    typer.echo(f"on ref      {100 * on_ref:.1f} % of the object points lie within {100 * INLIER_RADIUS_M:.0f} cm "
+               "of a reference point")
     typer.echo(f"time        {ms:.1f} ms (with the recording observer)")
 
 

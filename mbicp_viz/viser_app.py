@@ -21,6 +21,7 @@ import viser
 import viser.uplot as uplot
 
 from core import (MATCHERS, ParamError, Params, Pose2, Recorder, ScanError, field_specs, pose_error, relative)
+from core.agreement import INLIER_RADIUS_M, inlier_fraction
 from core.params import check_value
 
 from . import scene, viser_draw
@@ -208,9 +209,13 @@ class Session:
                 d = r.degeneracy
                 s += (f"  \ndegeneracy: condition number {d.condition_number:.1f}, weakest direction "
                       f"heading {d.weakest_heading_deg:+.0f}°")
+            s += (f"  \nobject points within {100 * INLIER_RADIUS_M:.0f} cm of the reference: "
+                  f"{100 * inlier_fraction(self.ref, self.obj, r.pose):.1f} %")
             if truth is not None:
                 et, er = pose_error(r.pose, truth)
-                s += f"  \nerror against the known answer: {et * 1000:.1f} mm, {math.degrees(er):.3f}°"
+                s += (f"  \nerror against the known answer: {et * 1000:.1f} mm, {math.degrees(er):.3f}° "
+                      f"(there: {100 * inlier_fraction(self.ref, self.obj, truth):.1f} % within "
+                      f"{100 * INLIER_RADIUS_M:.0f} cm)")
             lines.append(s)
         lines.append(f"match time {self.match_ms:.1f} ms")
         self.h_result.content = "\n\n".join(lines)

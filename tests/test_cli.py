@@ -29,12 +29,14 @@ def test_match_json_has_the_stable_keys():
     assert ROW_KEYS <= set(row)
     assert (row["ref"], row["obj"]) == (5, 6) and row["converged"] is True
     assert row["reason"] == "converged" and row["iterations"] > 0
+    assert 0.9 < row["on_ref"] <= 1.0  # consecutive scans 0.1 s apart: most points land on the reference
 
 
 def test_match_two_files_prints_every_iteration(tmp_path):
     out = ok("match", DATA / "datos.off", DATA / "datos.off", "--algo", "improved")
     assert "threshold_m" in out and "converged" in out
     assert "pose        (x=+0.0000 m, y=+0.0000 m, theta=+0.000 deg)" in out
+    assert "on ref      100.0 % of the object points" in out  # a scan against itself
 
 
 def test_demo_serves_the_bundled_pair_on_loopback():

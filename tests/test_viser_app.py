@@ -1,6 +1,7 @@
 """The viser debugger driven from Python: the real server, GUI handles and scene nodes, no browser."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -34,6 +35,8 @@ def test_opens_on_the_final_iteration_with_a_result(session):
     assert n > 5 and session.h_iter.value == n and session.h_iter.max == n
     assert "improved" in session.h_result.content and "converged" in session.h_result.content
     assert "condition number" in session.h_result.content
+    on_ref = re.search(r"within 5 cm of the reference: ([0-9.]+) %", session.h_result.content)
+    assert on_ref and 90.0 < float(on_ref.group(1)) <= 100.0  # the hand-held pair, matched
 
 
 def test_iteration_slider_redraws_without_rematching(session, monkeypatch):
