@@ -187,8 +187,9 @@ class PsmParams(PolarParams):
         help="weight constant w = C / (C + e^2) of the translation step (Diosi: 70 cm squared)")
     C_late: float = param(0.01, unit="m^2", lo=1e-6, hi=100.0, help="weight constant after C_switch iterations")
     C_switch: int = param(10, unit="count", lo=0, hi=10000, help="iteration from which C_late is used")
-    orientation_every: int = param(2, unit="count", lo=1, hi=100,
-        help="run the orientation step on every n-th iteration (Diosi: every second)")
+    orientation_every: int = param(1, unit="count", lo=1, hi=100,
+        help="run the orientation step on every n-th iteration; each iteration has a translation step "
+             "(Diosi's code alternates one orientation and one translation pass: 1)")
 
 
 @dataclass(frozen=True)

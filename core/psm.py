@@ -1,9 +1,11 @@
 """PSM — Polar Scan Matching (Diosi & Kleeman, IJRR 2007), as summarised in docs/algorithms.md.
 
-Median filter and segmentation, scan projection with occlusion, a weighted translation step
-(w = C / (C + e^2), C lowered after C_switch iterations) and, every ``orientation_every``-th
-iteration, an orientation step that shifts the projected ranges and refines the best shift with
-a parabola; alternated until ``stop_after`` small corrections in a row.
+Median filter and segmentation, scan projection with occlusion, an orientation step that shifts
+the projected ranges and refines the best shift with a parabola, and a weighted translation step
+(w = C / (C + e^2), C lowered after C_switch iterations), alternated until ``stop_after`` small
+corrections in a row. Diosi's pm_psm alternates one orientation pass and one translation pass,
+re-projecting before each; one iteration here holds both (``orientation_every`` = 1; with n > 1
+only every n-th iteration turns the scan).
 """
 
 from __future__ import annotations

@@ -137,7 +137,7 @@ def test_eval_ceiling_separates_what_the_data_allows_from_the_matcher():
     out = ok("eval", "ceiling", INTEL, "--algos", "improved,psm")
     hits = {name: int(n) for name, n in re.findall(r"(\w+) started at the scan poses: (\d+)/59", out)}
     search = int(re.search(r"correlative search alone: (\d+)/59", out).group(1))
-    assert hits["improved"] == 59 and hits["psm"] < 50 and search >= 53
+    assert hits["improved"] == 59 and hits["psm"] < hits["improved"] and search >= 53  # PSM walks off some
 
 
 def test_eval_ceiling_needs_scan_poses():

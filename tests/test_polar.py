@@ -121,12 +121,17 @@ def test_pmwn_events_show_cost_fit_weight_and_circle():
                                atol=1e-9)
 
 
-def test_psm_events_use_the_parabola_every_second_iteration():
+def test_psm_turns_with_the_parabola_on_every_iteration_as_diosi_alternates():
     ref = scans("intel")[10]
-    rec = Recorder()
-    match(ref, seen_from(ref, Pose2(0.05, 0.02, math.radians(-6.0))), Pose2(), PsmParams(), rec)
-    fits = [e.polar.fit for e in rec.iterations]
-    assert fits[0] == "parabola" and fits[1] is None and all(e.polar.metric_weight is None for e in rec.iterations)
+    obj = seen_from(ref, Pose2(0.05, 0.02, math.radians(-6.0)))
+    fits = {}
+    for every in (1, 2):
+        rec = Recorder()
+        match(ref, obj, Pose2(), PsmParams(orientation_every=every), rec)
+        fits[every] = [e.polar.fit for e in rec.iterations]
+        assert all(e.polar.metric_weight is None for e in rec.iterations)
+    assert PsmParams().orientation_every == 1 and set(fits[1]) == {"parabola"}
+    assert fits[2][0] == "parabola" and fits[2][1] is None  # the option still skips
 
 
 @pytest.mark.parametrize("algo", ["psm", "pmwn"])
