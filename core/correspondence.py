@@ -36,6 +36,7 @@ class ReferenceIndex:
     max_step: float  # the widest bearing gap between consecutive reference points [rad]
     full_circle: bool
     tangents: np.ndarray  # (N, 2) unit surface tangent (central differences), for degeneracy
+    neighbours: np.ndarray  # (N, 2) scan-order previous and next point, -1 past the ends of a partial scan
 
     @staticmethod
     def build(scan: Scan, L: float) -> "ReferenceIndex":
@@ -48,30 +49,25 @@ class ReferenceIndex:
         t = surface_tangents(pts, full)
         sq = np.einsum("ij,ij->i", pts, pts)
         k = sq + L * L
+        nb = np.arange(n)[:, None] + np.array([-1, 1])
+        nb = nb % n if full else np.where((nb >= 0) & (nb < n), nb, -1)
         return ReferenceIndex(pts, b, ext_b, ext_map, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
-                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, t)
-
-    def neighbour(self, j: np.ndarray, step: int) -> np.ndarray:
-        """Index of the scan-order neighbour j+step, or -1 past the ends of a partial scan."""
-        n = len(self.points)
-        k = j + step
-        if self.full_circle:
-            return k % n
-        return np.where((k >= 0) & (k < n), k, -1)
+                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, t, nb)
 
 
 # Candidates tried first around each point's bearing: the K reference beams on either side.
-_NEAR_K = 4
-# Windows up to this many beams are searched in one padded pass; wider ones (a large Br, a poor
-# guess) are grouped by width so that a few wide windows do not pad every row.
-_ONE_PASS_WIDTH = 64
-_WIDTH_BUCKETS = np.array([_ONE_PASS_WIDTH, 512])
+_NEAR_K = 3
+# Windows are searched in one pass padded to the widest while that pads to at most this many
+# candidates (a numpy call costs about as much as a few thousand); otherwise (a large Br, a poor
+# guess) rows are grouped by width so that a few wide windows do not pad every row.
+_ONE_PASS_CANDIDATES = 4096
+_WIDTH_BUCKETS = np.array([64, 512])
 
 
 def _width_groups(width: np.ndarray):
-    """Row groups of similar window width (one group, no sorting, in the common narrow case)."""
-    if width.max(initial=0) <= _ONE_PASS_WIDTH:
-        yield np.flatnonzero(width > 0)
+    """Row groups of similar window width (one group, no sorting, in the common case)."""
+    if width.max(initial=0) * len(width) <= _ONE_PASS_CANDIDATES:
+        yield slice(None)  # empty windows too: _best_in gives them inf
         return
     by_width = np.argsort(width, kind="stable")
     cuts = np.searchsorted(width[by_width], _WIDTH_BUCKETS, side="right")
@@ -86,15 +82,25 @@ def _best_in(ref: ReferenceIndex, p: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     Returns (ext index, squared metric distance), inf where the slice is empty.
     """
     ext = lo[:, None] + np.arange(w)
-    np.minimum(ext, len(ref.ext_map) - 1, out=ext)
+    # past the end of its slice a row repeats the slice's last point, which leaves its minimum as it is
+    np.minimum(ext, np.minimum(hi, len(ref.ext_map))[:, None] - 1, out=ext)
     px, py = p[:, :1], p[:, 1:]
     qx, qy = ref.ext_x[ext], ref.ext_y[ext]
-    cross = px * qy - py * qx
-    d2 = (px - qx) ** 2 + (py - qy) ** 2 - cross * cross / ref.ext_sq_norm_L2[ext]
-    d2[ext >= hi[:, None]] = np.inf
+    # d^2 = |p - q|^2 - (p x q)^2 / (|q|^2 + L^2) (see metric_distance_sq), in place: the hot loop
+    cross = px * qy
+    cross -= py * qx
+    cross *= cross
+    cross /= ref.ext_sq_norm_L2[ext]
+    qx -= px
+    qy -= py
+    qx *= qx
+    qy *= qy
+    d2 = qx
+    d2 += qy
+    d2 -= cross
     k = np.argmin(d2, axis=1)
     r = np.arange(len(p))
-    return ext[r, k], d2[r, k]
+    return ext[r, k], np.where(hi > lo, d2[r, k], np.inf)
 
 
 def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float):
@@ -160,9 +166,9 @@ def _nearest_found(ref, moved, rows, Bw, Br, L):
 
 def _closer_neighbour(ref, p, j, L):
     """The scan neighbour (j - 1 or j + 1) of each j metrically closer to p, or -1 if none."""
-    both = np.stack((ref.neighbour(j, -1), ref.neighbour(j, 1)))  # (2, K): previous, next
-    d = np.where(both >= 0, metric_distance_sq(p, ref.points[both], L), np.inf)
-    return np.where(d[0] <= d[1], both[0], both[1])
+    both = ref.neighbours[j]  # (K, 2): previous, next
+    d = np.where(both >= 0, metric_distance_sq(p[:, None, :], ref.points[both], L), np.inf)
+    return np.where(d[:, 0] <= d[:, 1], both[:, 0], both[:, 1])
 
 
 def _segment_candidate(ref, p, j, other, L, max_len):
@@ -189,8 +195,7 @@ def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, Bw: fl
     target = ref.points[best].copy()
     kind = np.full(len(rows), PairKind.POINT, dtype=np.int8)
     ref_index = np.column_stack((best, np.full(len(best), -1)))
-    for step in (-1, 1):
-        other = ref.neighbour(best, step)
+    for other in ref.neighbours[best].T:
         c, ds, t = _segment_candidate(ref, p, best, other, L, max_dist_inter)
         better = (ds < d2) & (t > 0.0) & (t < 1.0)
         target[better] = c[better]
@@ -214,7 +219,8 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, B
     rows, p, best, d2 = _nearest_found(ref, moved, rows, Bw, Br, L)
     target = ref.points[best]
     kind = np.zeros(len(rows), dtype=np.int8)  # PairKind.POINT
-    ref_index = np.stack((best, np.full(len(best), -1)), axis=1)
+    ref_index = np.full((len(best), 2), -1)
+    ref_index[:, 0] = best
     order = np.lexsort((d2, best))  # by target, then distance: the first of each run keeps m_j
     losers = order[1:][best[order[1:]] == best[order[:-1]]]
     if len(losers):

@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from .correspondence import ReferenceIndex
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, StartEvent
-from .metric import linearised_jacobians, svd_fit
+from .metric import linearised_jacobians, mean_sq_residual, svd_fit
 from .params import IcpParams
 from .rejection import reject
 from .result import MatchResult, Termination
@@ -48,7 +48,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParam
         inc = Pose2(*step) if step is not None else Pose2()
         error = float("nan")
         if step is not None:
-            error = float(np.mean(np.sum((inc.apply(moved[kept]) - R.points[j[kept]]) ** 2, axis=1)))
+            error = mean_sq_residual(inc.apply(moved[kept]), R.points[j[kept]])
         new_est = inc @ est
         if observer is not None:
             pairs = Correspondences(used, R.points[j], np.full(len(j), PairKind.POINT, dtype=np.int8),

@@ -12,7 +12,7 @@ import numpy as np
 from .correspondence import ReferenceIndex, mbicp_pairs, point_line_pairs, visible_from_reference
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairStatus, StartEvent
 from .rejection import reject
-from .metric import metric_normal_equations
+from .metric import mean_sq_residual, metric_normal_equations, solve3
 from .params import ImprovedParams, MbicpParams
 from .resample import grid_resample
 from .result import MatchResult, Termination
@@ -81,17 +81,13 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
         if n_kept >= min_pairs:
             p_k, c_k = moved[pairs.obj[kept]], pairs.target[kept]
             A, b = metric_normal_equations(p_k, c_k, params.L)
-            try:
-                step = np.linalg.solve(A, b)
-            except np.linalg.LinAlgError:
+            step = solve3(A, b)
+            if step is None:
                 reason = Termination.SINGULAR
-            else:
-                if not np.all(np.isfinite(step)):
-                    step, reason = None, Termination.SINGULAR
         else:
             reason = Termination.TOO_FEW_PAIRS
         inc = Pose2.from_array(step) if step is not None else Pose2()
-        error = float(np.mean(np.sum((inc.apply(p_k) - c_k) ** 2, axis=1))) if step is not None else float("nan")
+        error = mean_sq_residual(inc.apply(p_k), c_k) if step is not None else float("nan")
         new_est = inc @ est
         if observer is not None:
             observer(IterationEvent(

@@ -18,7 +18,7 @@ def reject(dist: np.ndarray, max_dist: float, keep_fraction: float,
     median + mad_k * MAD of the remaining distances (§2.4.2), but never below ``mad_floor``.
     """
     outside = dist > max_dist
-    status = np.where(outside, PairStatus.OUTSIDE_BR, PairStatus.KEPT).astype(np.int8)
+    status = np.where(outside, np.int8(PairStatus.OUTSIDE_BR), np.int8(PairStatus.KEPT))
     inside = np.flatnonzero(~outside)
     if len(inside) == 0:
         return status, None

@@ -43,7 +43,7 @@ class Pose2:
         return np.array([[c, -s], [s, c]])
 
     def __matmul__(self, other: "Pose2") -> "Pose2":
-        c, s = np.cos(self.theta), np.sin(self.theta)
+        c, s = math.cos(self.theta), math.sin(self.theta)
         return Pose2(
             self.x + c * other.x - s * other.y,
             self.y + s * other.x + c * other.y,
@@ -51,7 +51,7 @@ class Pose2:
         )
 
     def inverse(self) -> "Pose2":
-        c, s = np.cos(self.theta), np.sin(self.theta)
+        c, s = math.cos(self.theta), math.sin(self.theta)
         return Pose2(-c * self.x - s * self.y, s * self.x - c * self.y, wrap_angle(-self.theta))
 
     def apply(self, points: np.ndarray) -> np.ndarray:
