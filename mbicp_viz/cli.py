@@ -388,12 +388,13 @@ def eval_ceiling(
     lg = read_log(log)
     total = min(limit or len(lg.scans) - 1, len(lg.scans) - 1)
     with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:
-        found, kept, n = ceiling(lg, ps, limit, workers, on_row=lambda _: bar.update(1))
+        found, kept, doubted, n = ceiling(lg, ps, limit, workers, on_row=lambda _: bar.update(1))
     if n == 0:
         raise InputError("interrupted before the first pair was matched", log)
     typer.echo(f"correlative search alone: {found}/{n} within 0.1 m and 3 deg ({100 * found / n:.1f} %)")
-    for name, k in zip(names, kept):
-        typer.echo(f"{name} started at the scan poses: {k}/{n} stay within 0.1 m and 3 deg ({100 * k / n:.1f} %)")
+    for name, k, d in zip(names, kept, doubted):
+        typer.echo(f"{name} started at the scan poses: {k}/{n} stay within 0.1 m and 3 deg ({100 * k / n:.1f} %); "
+                   f"of the {n - k} it leaves, {d} lay more object points within 5 cm of the reference")
 
 
 @eval_app.command("relations")

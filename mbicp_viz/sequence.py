@@ -85,21 +85,30 @@ def _match_row(job) -> dict:
     return row
 
 
-def _ceiling_row(job) -> tuple[bool, list[bool]]:
+def _ceiling_row(job) -> tuple[bool, list[tuple[bool, bool]]]:
     ref, obj, params = job
     truth = relative(ref.pose, obj.pose)
     ok = lambda pose: succeeded(*pose_error(pose, truth))  # noqa: E731
-    return ok(correlative_search(ref, obj).pose), [ok(match(ref, obj, truth, p).pose) for p in params]
+    kept = []
+    for p in params:
+        pose = match(ref, obj, truth, p).pose
+        stays = ok(pose)
+        kept.append((stays, not stays and inlier_fraction(ref, obj, pose) > inlier_fraction(ref, obj, truth)))
+    return ok(correlative_search(ref, obj).pose), kept
 
 
 def ceiling(log: ScanLog, params: list[Params], limit: int | None = None, workers: int | None = None,
-            on_row=None) -> tuple[int, list[int], int]:
+            on_row=None) -> tuple[int, list[int], list[int], int]:
     """What a log allows on its consecutive pairs, against its scan poses: how many pairs the
     correlative search alone finds, and how many each matcher keeps when started at the truth itself
-    (its fixed point: no guess can do better). Returns (search hits, hits per matcher, pairs)."""
+    (its fixed point: no guess can do better). Of the pairs a matcher leaves, those where more object
+    points lie on the reference at its pose than at the stored one are counted as doubting the truth
+    (see ``truth_doubted``). Returns (search hits, hits per matcher, doubts per matcher, pairs)."""
     pairs = consecutive_pairs(log, limit)
     for i, j in pairs:
         if log.scans[i].pose is None or log.scans[j].pose is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", log.path, field="poses")
     rows = ordered_map(_ceiling_row, [(log.scans[i], log.scans[j], params) for i, j in pairs], workers, on_row)
-    return sum(r[0] for r in rows), [sum(r[1][k] for r in rows) for k in range(len(params))], len(rows)
+    per_matcher = [[r[1][k] for r in rows] for k in range(len(params))]
+    return (sum(r[0] for r in rows), [sum(ok for ok, _ in m) for m in per_matcher],
+            [sum(doubt for _, doubt in m) for m in per_matcher], len(rows))

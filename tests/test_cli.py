@@ -135,9 +135,11 @@ def test_ctrl_c_stops_a_parallel_run_and_keeps_its_rows(tmp_path):
 
 def test_eval_ceiling_separates_what_the_data_allows_from_the_matcher():
     out = ok("eval", "ceiling", INTEL, "--algos", "improved,psm")
-    hits = {name: int(n) for name, n in re.findall(r"(\w+) started at the scan poses: (\d+)/59", out)}
+    rows = re.findall(r"(\w+) started at the scan poses: (\d+)/59 .*; of the (\d+) it leaves, (\d+) lay more", out)
+    hits = {name: int(n) for name, n, _, _ in rows}
     search = int(re.search(r"correlative search alone: (\d+)/59", out).group(1))
     assert hits["improved"] == 59 and hits["psm"] < hits["improved"] and search >= 53  # PSM walks off some
+    assert all(int(left) == 59 - int(n) and int(doubted) <= int(left) for _, n, left, doubted in rows)
 
 
 def test_eval_ceiling_needs_scan_poses():
