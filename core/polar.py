@@ -346,7 +346,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
             lam = min(d_mean / max(theta_r, grid.step), params.lambda_max)
         inc = est @ before.inverse()
         if observer is not None:
-            circle = e[used, None] * np.column_stack((np.cos(phi), np.sin(phi))) if projected_circle else None
+            circle = rhs[:, None] * rows if projected_circle else None  # Diosi's rows are the rays u_i
             observer(IterationEvent(
                 it, before, est, before.apply(obj_pts), np.empty(0, np.int64),
                 polar_pairs(grid, R, proj, i, e, used, ref_point_of), params.max_error, error, inc,

@@ -379,6 +379,8 @@ def eval_ceiling(
     workers: WorkersOpt = None,
 ):
     """How well any guess could do on a log: each matcher started at the truth, and the search alone."""
+    from core.agreement import INLIER_RADIUS_M
+
     from .inputs import make_params
     from .readers import read_log
     from .sequence import ceiling
@@ -394,7 +396,8 @@ def eval_ceiling(
     typer.echo(f"correlative search alone: {found}/{n} within 0.1 m and 3 deg ({100 * found / n:.1f} %)")
     for name, k, d in zip(names, kept, doubted):
         typer.echo(f"{name} started at the scan poses: {k}/{n} stay within 0.1 m and 3 deg ({100 * k / n:.1f} %); "
-                   f"of the {n - k} it leaves, {d} lay more object points within 5 cm of the reference")
+                   f"of the {n - k} it leaves, {d} lay more object points within {100 * INLIER_RADIUS_M:.0f} cm of the "
+                   "reference")
 
 
 @eval_app.command("relations")

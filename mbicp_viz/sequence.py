@@ -30,6 +30,16 @@ def truth_doubted(row: dict) -> bool:
     return not row["success"] and row["inliers_match"] > row["inliers_truth"]
 
 
+def scored(ref: Scan, obj: Scan, pose: Pose2, truth: Pose2) -> dict:
+    """Error of ``pose`` against ``truth`` and, for a failure, what the points say of each (the
+    fields ``truth_doubted`` reads)."""
+    et, er = pose_error(pose, truth)
+    row = {"error_xy": et, "error_theta": er, "success": succeeded(et, er)}
+    if not row["success"]:  # is the matcher wrong, or the stored pose? Ask the points.
+        row |= {"inliers_match": inlier_fraction(ref, obj, pose), "inliers_truth": inlier_fraction(ref, obj, truth)}
+    return row
+
+
 def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
     """The stable JSON record of one match (``match --json``, ``eval sequence``): scripts rely on these keys."""
     return {"ref": ref, "obj": obj, "x": r.pose.x, "y": r.pose.y, "theta": r.pose.theta,
@@ -76,25 +86,16 @@ def _match_row(job) -> dict:
     if truth == "pose":
         if ref.pose is None or obj.pose is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
-        truth_pose = relative(ref.pose, obj.pose)
-        et, er = pose_error(r.pose, truth_pose)
-        row |= {"error_xy": et, "error_theta": er, "success": succeeded(et, er)}
-        if not row["success"]:  # is the matcher wrong, or the stored pose? Ask the points.
-            row |= {"inliers_match": inlier_fraction(ref, obj, r.pose),
-                    "inliers_truth": inlier_fraction(ref, obj, truth_pose)}
+        row |= scored(ref, obj, r.pose, relative(ref.pose, obj.pose))
     return row
 
 
 def _ceiling_row(job) -> tuple[bool, list[tuple[bool, bool]]]:
     ref, obj, params = job
     truth = relative(ref.pose, obj.pose)
-    ok = lambda pose: succeeded(*pose_error(pose, truth))  # noqa: E731
-    kept = []
-    for p in params:
-        pose = match(ref, obj, truth, p).pose
-        stays = ok(pose)
-        kept.append((stays, not stays and inlier_fraction(ref, obj, pose) > inlier_fraction(ref, obj, truth)))
-    return ok(correlative_search(ref, obj).pose), kept
+    rows = [scored(ref, obj, match(ref, obj, truth, p).pose, truth) for p in params]
+    found = succeeded(*pose_error(correlative_search(ref, obj).pose, truth))
+    return found, [(r["success"], truth_doubted(r)) for r in rows]
 
 
 def ceiling(log: ScanLog, params: list[Params], limit: int | None = None, workers: int | None = None,
