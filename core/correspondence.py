@@ -14,7 +14,6 @@ import numpy as np
 from .events import PairKind
 from .metric import euclidean_project_on_segment, metric_distance_sq, metric_project_on_segment
 from .scan import Scan
-from .uncertainty import surface_tangents
 
 
 @dataclass(frozen=True, eq=False)
@@ -35,7 +34,6 @@ class ReferenceIndex:
     max_factor: float  # sqrt(max|q|^2 + L^2) / L: the Euclidean radius per unit of metric distance
     max_step: float  # the widest bearing gap between consecutive reference points [rad]
     full_circle: bool
-    tangents: np.ndarray  # (N, 2) unit surface tangent (central differences), for degeneracy
     neighbours: np.ndarray  # (N, 2) scan-order previous and next point, -1 past the ends of a partial scan
 
     @staticmethod
@@ -46,13 +44,12 @@ class ReferenceIndex:
         ext_b = np.concatenate((b - 2 * np.pi, b, b + 2 * np.pi))
         ext_map = np.tile(np.arange(n), 3)
         full = scan.is_full_circle()
-        t = surface_tangents(pts, full)
         sq = np.einsum("ij,ij->i", pts, pts)
         k = sq + L * L
         nb = np.arange(n)[:, None] + np.array([-1, 1])
         nb = nb % n if full else np.where((nb >= 0) & (nb < n), nb, -1)
         return ReferenceIndex(pts, b, ext_b, ext_map, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
-                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, t, nb)
+                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, nb)
 
 
 # Candidates tried first around each point's bearing: the K reference beams on either side.
@@ -103,7 +100,12 @@ def _best_in(ref: ReferenceIndex, p: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     return ext[r, k], np.where(hi > lo, d2[r, k], np.inf)
 
 
-def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float):
+def polar(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bearing [rad] and range [m] of each point (computed once per iteration, used twice)."""
+    return np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1])
+
+
+def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float, moved_polar=None):
     """Metric-nearest reference point of each moved point within MbICP's angular window +/-Bw.
 
     Exact for every pair whose metric distance is at most Br. First the 2K beams around the
@@ -114,11 +116,10 @@ def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: flo
     always <= d0 sqrt(max|q|^2 + L^2) / L): within the smaller radius rho of the two, so within
     asin(rho / |p|) of p's bearing. Points whose bounded window reaches beyond the 2K beams are
     searched again over the whole bounded window. A point with no candidate gets index -1 and
-    distance inf. Returns (index, squared metric distance).
+    distance inf. ``moved_polar``: ``polar(moved)`` when the caller has it. Returns (index, squared
+    metric distance).
     """
-    x, y = moved[:, 0], moved[:, 1]
-    alpha = np.arctan2(y, x)
-    rng = np.hypot(x, y)
+    alpha, rng = moved_polar if moved_polar is not None else polar(moved)
     eb = ref.ext_bearings
     pos = np.searchsorted(eb, alpha)
     lo, hi = pos - _NEAR_K, pos + _NEAR_K
@@ -156,10 +157,10 @@ class Pairs:
     dist: np.ndarray  # (K,) metric distance [m]
 
 
-def _nearest_found(ref, moved, rows, Bw, Br, L):
+def _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L):
     """Rows of ``moved`` that found a metric-nearest point, their points, the point, and d^2."""
     p = moved[rows]
-    best, d2 = nearest(ref, p, Bw, Br, L)
+    best, d2 = nearest(ref, p, Bw, Br, L, (moved_polar[0][rows], moved_polar[1][rows]))
     found = best >= 0
     return rows[found], p[found], best[found], d2[found]
 
@@ -183,7 +184,8 @@ def _segment_candidate(ref, p, j, other, L, max_len):
     return c, d2, t
 
 
-def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, Bw: float, Br: float, L: float,
+def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float, Br: float,
+                 L: float,
                 max_dist_inter: float) -> Pairs:
     """MbICP correspondences: metric-nearest reference point, or a point interpolated on a segment.
 
@@ -191,7 +193,7 @@ def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, Bw: fl
     metric-nearest point are tried, which is where the nearest segment lies except at folds.
     Segments longer than MaxDistInter bridge a gap between surfaces and are not interpolated.
     """
-    rows, p, best, d2 = _nearest_found(ref, moved, rows, Bw, Br, L)
+    rows, p, best, d2 = _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L)
     target = ref.points[best].copy()
     kind = np.full(len(rows), PairKind.POINT, dtype=np.int8)
     ref_index = np.column_stack((best, np.full(len(best), -1)))
@@ -205,7 +207,8 @@ def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, Bw: fl
     return Pairs(rows, target, kind, ref_index, np.sqrt(d2))
 
 
-def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, Bw: float, Br: float, L: float,
+def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float,
+                     Br: float, L: float,
                      max_dist_inter: float) -> Pairs:
     """Paper 000 §2.4.1: point-to-point pairs, point-to-line for object points sharing a target.
 
@@ -216,7 +219,7 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, B
     it lies but at occlusion edges. Segments longer than MaxDistInter would bridge two surfaces:
     such a point keeps m_j.
     """
-    rows, p, best, d2 = _nearest_found(ref, moved, rows, Bw, Br, L)
+    rows, p, best, d2 = _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L)
     target = ref.points[best]
     kind = np.zeros(len(rows), dtype=np.int8)  # PairKind.POINT
     ref_index = np.full((len(best), 2), -1)
@@ -238,15 +241,15 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, rows: np.ndarray, B
     return Pairs(rows, target, kind, ref_index, np.sqrt(d2))
 
 
-def visible_from_reference(moved: np.ndarray, bin_start: float, bin_width: float, margin: float) -> np.ndarray:
+def visible_from_reference(moved_polar, bin_start: float, bin_width: float, margin: float) -> np.ndarray:
     """Projection filter (Lu & Milios 1997, used by MbICP): which moved points the reference sees.
 
     A z-buffer over bearing bins of the reference viewpoint: in each bin only points within
     ``margin`` of the nearest one are visible; points behind a closer surface are hidden. Bins
     start at the reference scan's first bearing so that turning the scanner turns the bins.
+    ``moved_polar``: ``polar`` of the moved points.
     """
-    alpha = np.arctan2(moved[:, 1], moved[:, 0])
-    r = np.hypot(moved[:, 0], moved[:, 1])
+    alpha, r = moved_polar
     bins = ((alpha - bin_start) % (2 * np.pi) / bin_width).astype(np.int64)  # non-negative: truncation floors
     zbuf = np.full(int(2 * np.pi / bin_width) + 2, np.inf)
     np.minimum.at(zbuf, bins, r)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .correspondence import ReferenceIndex
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, StartEvent
 from .metric import linearised_jacobians, mean_sq_residual, svd_fit
 from .params import IcpParams
@@ -25,14 +24,14 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParam
           observer: Observer | None = None) -> MatchResult:
     """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
     params = params if params is not None else IcpParams()
-    R = ReferenceIndex.build(ref, DEGENERACY_LENGTH_M)
-    tree = cKDTree(R.points)
+    ref_pts = ref.points()
+    tree = cKDTree(ref_pts)
     P = obj.points()
     used = np.arange(len(P))
     min_pairs = max(3, int(np.ceil(params.AsocError * len(P))))
     no_hidden = np.empty(0, dtype=np.int64)
     if observer is not None:
-        observer(StartEvent("icp", params, R.points, P, used, initial_guess, None))
+        observer(StartEvent("icp", params, ref_pts, P, used, initial_guess, None))
 
     est = initial_guess
     reason = Termination.MAX_ITERATIONS
@@ -44,14 +43,14 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParam
         status, thr = reject(dist, params.max_correspondence_dist, params.filter)
         kept = status == PairStatus.KEPT
         n_kept = int(np.count_nonzero(kept))
-        step = svd_fit(moved[kept], R.points[j[kept]]) if n_kept >= min_pairs else None
+        step = svd_fit(moved[kept], ref_pts[j[kept]]) if n_kept >= min_pairs else None
         inc = Pose2(*step) if step is not None else Pose2()
         error = float("nan")
         if step is not None:
-            error = mean_sq_residual(inc.apply(moved[kept]), R.points[j[kept]])
+            error = mean_sq_residual(inc.apply(moved[kept]), ref_pts[j[kept]])
         new_est = inc @ est
         if observer is not None:
-            pairs = Correspondences(used, R.points[j], np.full(len(j), PairKind.POINT, dtype=np.int8),
+            pairs = Correspondences(used, ref_pts[j], np.full(len(j), PairKind.POINT, dtype=np.int8),
                                     np.column_stack((j, np.full(len(j), -1))), dist, status, moved)
             observer(IterationEvent(it, est, new_est, moved, no_hidden, pairs, thr, error, inc))
         if step is None:
@@ -59,13 +58,13 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParam
             break
         est = new_est
         J = linearised_jacobians(moved[kept])
-        last = FinalSystem(np.einsum("nij,nik->jk", J, J), error, R.points[j[kept]], j[kept], n_kept,
+        last = FinalSystem(np.einsum("nij,nik->jk", J, J), error, ref_pts[j[kept]], j[kept], n_kept,
                            len(status) - n_kept)
         if abs(inc.x) < params.errx_out and abs(inc.y) < params.erry_out and abs(inc.theta) < params.errt_out:
             reason = Termination.CONVERGED
             break
 
-    result = build_result("icp", est, reason, it, last, R.tangents, DEGENERACY_LENGTH_M)
+    result = build_result("icp", est, reason, it, last, ref_pts, ref.is_full_circle(), DEGENERACY_LENGTH_M)
     if observer is not None:
         observer(FinishEvent(result))
     return result

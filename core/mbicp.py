@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .correspondence import ReferenceIndex, mbicp_pairs, point_line_pairs, visible_from_reference
+from .correspondence import ReferenceIndex, mbicp_pairs, point_line_pairs, polar, visible_from_reference
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairStatus, StartEvent
 from .rejection import reject
 from .metric import mean_sq_residual, metric_normal_equations, solve3
@@ -66,12 +66,13 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     last = None
     for it in range(1, params.MaxIter + 1):
         moved = est.apply(P)
+        moved_polar = polar(moved)
         if params.ProjectionFilter:
-            vis = visible_from_reference(moved, R.bearings[0], bin_width, PROJECTION_MARGIN_M)
+            vis = visible_from_reference(moved_polar, R.bearings[0], bin_width, PROJECTION_MARGIN_M)
             rows = all_rows[vis]
         else:
             rows = all_rows
-        pairs = pair_fn(R, moved, rows, params.Bw, params.Br, params.L, params.MaxDistInter)
+        pairs = pair_fn(R, moved, moved_polar, rows, params.Bw, params.Br, params.L, params.MaxDistInter)
         status, thr = reject(pairs.dist, params.Br, params.filter,
                              params.mad_k if improved and params.mad_rejection else None,
                              rejection_floor(params, it) if improved else 0.0)
@@ -111,7 +112,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
             reason = Termination.CYCLE
             break
 
-    result = build_result(name, est, reason, it, last, R.tangents, params.L)
+    result = build_result(name, est, reason, it, last, R.points, R.full_circle, params.L)
     if observer is not None:
         observer(FinishEvent(result))
     return result

@@ -364,7 +364,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
     deg = None
     if last is not None:
         j = ref_point_of[last[1]]
-        deg = degeneracy(ref_pts[j], surface_tangents(ref_pts, grid.full)[j], DEGENERACY_LENGTH_M)
+        deg = degeneracy(ref_pts[j], surface_tangents(ref_pts, grid.full, j), DEGENERACY_LENGTH_M)
     result = MatchResult(strategy.name, est, reason.converged, reason, it,
                          last[0] if last else float("nan"), last[2] if last else 0, last[3] if last else 0, None, deg)
     if observer is not None:

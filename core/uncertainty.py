@@ -30,13 +30,19 @@ def covariance(A: np.ndarray, error: float, n_pairs: int) -> np.ndarray | None:
     return sigma2 * inv
 
 
-def surface_tangents(points: np.ndarray, full_circle: bool) -> np.ndarray:
-    """Unit surface direction at each point of a scan (central differences in scan order; one-sided
-    at the ends of a partial scan); (1, 0) where neighbours coincide."""
+def surface_tangents(points: np.ndarray, full_circle: bool, at: np.ndarray) -> np.ndarray:
+    """Unit surface direction at the scan points ``at`` (central differences in scan order; one-sided
+    at the ends of a partial scan); (1, 0) where neighbours coincide. Only where asked: the final
+    pairs' targets are a fraction of the scan."""
+    n = len(points)
+    after, before = at + 1, at - 1
     if full_circle:
-        t = np.roll(points, -1, axis=0) - np.roll(points, 1, axis=0)
+        after %= n
+        before %= n
     else:
-        t = np.vstack((points[1:], points[-1:])) - np.vstack((points[:1], points[:-1]))
+        np.minimum(after, n - 1, out=after)
+        np.maximum(before, 0, out=before)
+    t = points[after] - points[before]
     norm = np.hypot(t[:, 0], t[:, 1])
     return np.where(norm[:, None] > 0, t / np.where(norm > 0, norm, 1.0)[:, None], np.array([1.0, 0.0]))
 
@@ -74,10 +80,10 @@ class FinalSystem:
 
 
 def build_result(name: str, est: Pose2, reason: Termination, iterations: int, last: FinalSystem | None,
-                 tangents: np.ndarray, L: float) -> MatchResult:
-    """The MatchResult of a finished loop (``tangents``: the reference surface directions)."""
+                 ref_points: np.ndarray, full_circle: bool, L: float) -> MatchResult:
+    """The MatchResult of a finished loop (``ref_points``: the reference scan's points in scan order)."""
     if last is None:
         return MatchResult(name, est, False, reason, iterations, float("nan"), 0, 0, None, None)
     return MatchResult(
         name, est, reason.converged, reason, iterations, last.error, last.n_kept, last.n_rejected,
-        covariance(last.A, last.error, last.n_kept), degeneracy(last.targets, tangents[last.ref_index], L))
+        covariance(last.A, last.error, last.n_kept), degeneracy(last.targets, surface_tangents(ref_points, full_circle, last.ref_index), L))
