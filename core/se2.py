@@ -67,12 +67,8 @@ class Pose2:
 
 
 def relative(a: Pose2, b: Pose2) -> Pose2:
-    """``a^-1 @ b``: pose of frame ``b`` seen from frame ``a`` when both are given in a common frame.
-
-    Written out (one pose built, not two): the stopping tests call it every iteration."""
-    c, s = math.cos(a.theta), math.sin(a.theta)
-    dx, dy = b.x - a.x, b.y - a.y
-    return Pose2(c * dx + s * dy, c * dy - s * dx, wrap_angle(b.theta - a.theta))
+    """``a^-1 @ b``: pose of frame ``b`` seen from frame ``a`` when both are given in a common frame."""
+    return a.inverse() @ b
 
 
 def pose_error(estimate: Pose2, truth: Pose2) -> tuple[float, float]:
