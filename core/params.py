@@ -177,6 +177,12 @@ class PolarParams(Params):
         help="translation step with the reference surface normals instead of Diosi's range change u.dt "
              "(not published; holds corridors, see core/polar.py translation_system)")
     stop_after: int = param(3, unit="count", lo=1, hi=100, help="stop after this many small corrections in a row")
+    relaxed_cut: bool = param(False, unit="bool",
+        help="keep at least min_pairs residuals in the translation step, raising max_error when fewer lie "
+             "within it (not published; see core/polar.py translation_residuals)")
+    truncated_orientation: bool = param(False, unit="bool",
+        help="orientation cost with each |range difference| capped at max_error, as the translation step "
+             "caps its residuals (not published; see core/polar.py shift_costs)")
 
 
 @dataclass(frozen=True)

@@ -144,17 +144,25 @@ def project(grid: Grid, cur: PolarScan, pose: Pose2, pad: int = 0) -> np.ndarray
     return np.concatenate((out[grid.n - pad:], out, out[:pad])) if grid.full and pad else out
 
 
-def shift_costs(ref_r: np.ndarray, proj_ext: np.ndarray, K: int, min_pairs: int):
+def shift_costs(ref_r: np.ndarray, proj_ext: np.ndarray, K: int, min_pairs: int, cap: float | None = None):
     """Mean |r_ref(i) - r_proj(i + k)| and the pair count for every shift k in -K..K (PSM §3 step 4).
 
     ``proj_ext`` holds the projection on bins -K .. n + K - 1; NaN marks missing ranges. A window
-    sliding over it gives every shift without copying.
+    sliding over it gives every shift without copying. ``cap`` (not published) limits each
+    difference: after a long move most bearings compare different surfaces, and their metres of
+    difference, not the few bearings that agree, decide Diosi's mean (a nearly flat curve whose
+    minimum wanders); capped, a bearing that compares different surfaces costs the same at every
+    shift and the agreeing ones decide.
     """
     win = np.lib.stride_tricks.as_strided(proj_ext, (len(ref_r), 2 * K + 1), proj_ext.strides * 2, writeable=False)
-    diff = np.abs(win - ref_r[:, None])  # diff[i, K + k] = |r_ref(i) - r_proj(i + k)|
-    ok = diff == diff  # not NaN
-    count = ok.sum(axis=0)
-    cost = np.where(ok, diff, 0.0).sum(axis=0) / np.maximum(count, 1)
+    diff = win - ref_r[:, None]  # diff[i, K + k] = r_proj(i + k) - r_ref(i)
+    np.abs(diff, out=diff)
+    if cap is not None:
+        np.minimum(diff, cap, out=diff)  # NaN stays NaN
+    # The pairs per shift are a correlation of the two validity masks (one pass over n + 2K, not
+    # over the n x (2K + 1) window); the missing differences then add nothing to the sums.
+    count = np.correlate((proj_ext == proj_ext).astype(float), (ref_r == ref_r).astype(float), "valid").astype(np.int64)
+    cost = np.fmax(diff, 0.0, out=diff).sum(axis=0) / np.maximum(count, 1)  # fmax(NaN, 0) = 0
     return np.where(count >= min_pairs, cost, np.nan), count
 
 
@@ -198,12 +206,21 @@ def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarra
     return float(shifts[j]), None
 
 
-def translation_residuals(grid: Grid, ref: PolarScan, proj_r: np.ndarray, max_error: float, C: float):
-    """Residuals e_i = r_ref - r_proj at shared bearings, PSM weights w = C / (C + e^2), and which are used."""
+def translation_residuals(grid: Grid, ref: PolarScan, proj_r: np.ndarray, max_error: float, C: float,
+                          min_pairs: int | None = None):
+    """Residuals e_i = r_ref - r_proj at shared bearings, PSM weights w = C / (C + e^2), and which are used.
+
+    With ``min_pairs`` (not published) the cut never keeps fewer than that many residuals: when
+    fewer lie within ``max_error`` it rises to the min_pairs-th smallest |e|, so that a long move
+    is still corrected (the weights keep the far ones weak) instead of ending with too few pairs.
+    """
     both = ref.valid & np.isfinite(proj_r)
     i = np.flatnonzero(both)
     e = ref.ranges[i] - proj_r[i]
-    used = np.abs(e) <= max_error
+    a = np.abs(e)
+    if min_pairs is not None and min_pairs <= len(a):
+        max_error = max(max_error, float(np.partition(a, min_pairs - 1)[min_pairs - 1]))
+    used = a <= max_error
     return i, e, C / (C + e * e), used
 
 
@@ -299,7 +316,8 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
         cost, k_best, abc = np.full(len(shifts), np.nan), None, None
         range_cost = cost
         if strategy.orientation_due(it) and K > 0:
-            range_cost, _ = shift_costs(ref_r, proj_ext, K, params.min_pairs)
+            range_cost, _ = shift_costs(ref_r, proj_ext, K, params.min_pairs,
+                                         params.max_error if params.truncated_orientation else None)
             cost = range_cost + lam * np.abs(shifts) * grid.step if strategy.metric else range_cost
             k_best, abc = best_shift(shifts, cost, strategy.refine, range_cost)
         proj = proj0
@@ -316,7 +334,8 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                 k_turn = gain * k_best
             est = Pose2(0.0, 0.0, -k_turn * grid.step) @ est
             proj = project(grid, O, est)
-        i, e, w, used = translation_residuals(grid, R, proj, params.max_error, strategy.weight_C(it))
+        i, e, w, used = translation_residuals(grid, R, proj, params.max_error, strategy.weight_C(it),
+                                              params.min_pairs if params.relaxed_cut else None)
         if np.count_nonzero(used) < params.min_pairs:
             reason = Termination.TOO_FEW_PAIRS
             est = before

@@ -192,17 +192,72 @@ def test_projection_compares_only_surfaces_facing_the_reference():
     assert not np.isfinite(behind).any()
 
 
+def _held_from_the_truth(params) -> int:
+    """How many of the Intel excerpt's consecutive pairs, started at their corrected poses, stay there."""
+    ss = scans("intel")
+    truths = [relative(a.pose, b.pose) for a, b in zip(ss, ss[1:])]
+    return sum(succeeded(*pose_error(match(a, b, t, params).pose, t)) for a, b, t in zip(ss, ss[1:], truths))
+
+
 @pytest.mark.parametrize("params", [PsmParams, PmwnParams])
 def test_surface_jacobian_holds_intel_corridors_where_diosis_model_drifts(params):
     """Started at the corrected poses of Intel's consecutive pairs (the fixed point any guess can
     hope for), Diosi's translation model (range change u.dt) walks off along the corridors; the
     surface-aware step keeps the truth."""
-    ss = scans("intel")
-
-    def held(p):
-        truths = [relative(a.pose, b.pose) for a, b in zip(ss, ss[1:])]
-        return sum(succeeded(*pose_error(match(a, b, t, p).pose, t)) for a, b, t in zip(ss, ss[1:], truths))
-
-    diosi, surface = held(params()), held(params(surface_jacobian=True))
-    assert surface >= 0.93 * (len(ss) - 1)
+    diosi, surface = _held_from_the_truth(params()), _held_from_the_truth(params(surface_jacobian=True))
+    assert surface >= 0.93 * (len(scans("intel")) - 1)
     assert surface > diosi
+
+
+@given(st.lists(st.floats(0.2, 8.0), min_size=30, max_size=30), st.lists(st.floats(0.2, 8.0), min_size=34, max_size=34),
+       st.floats(0.05, 3.0))
+def test_capped_shift_cost_limits_every_difference_and_is_diosis_when_the_cap_is_loose(ref, proj, cap):
+    from core.polar import shift_costs
+
+    ref_r, proj_ext = np.array(ref), np.array(proj)
+    proj_ext[[3, 17]] = np.nan  # missing ranges are skipped either way
+    plain, n = shift_costs(ref_r, proj_ext, 2, 3)
+    capped, n_capped = shift_costs(ref_r, proj_ext, 2, 3, cap)
+    assert np.array_equal(n, n_capped)
+    assert (capped <= np.minimum(plain, cap) + 1e-12).all()
+    np.testing.assert_allclose(shift_costs(ref_r, proj_ext, 2, 3, 10.0)[0], plain, rtol=1e-12)
+
+
+@pytest.mark.parametrize("params", [PsmParams, PmwnParams])
+def test_truncated_orientation_cost_keeps_intel_pairs_that_diosis_mean_turns_away(params):
+    """After a long corridor move most bearings compare different surfaces: their metres decide
+    Diosi's mean and the turn runs away from the truth; capped at max_error, the bearings that
+    agree decide (pairs 365 and 884 of the full log turn by 40 and 74 deg without the cap)."""
+    for base in ({}, {"surface_jacobian": True}):
+        assert _held_from_the_truth(params(truncated_orientation=True, **base)) > _held_from_the_truth(params(**base))
+
+
+@given(st.lists(st.floats(-5.0, 5.0), min_size=50, max_size=120), st.integers(3, 40), st.floats(0.05, 2.0))
+def test_relaxed_cut_keeps_at_least_min_pairs_and_changes_nothing_when_enough_are_inside(e, min_pairs, max_error):
+    from core.polar import Grid, preprocess, translation_residuals
+
+    e = np.array(e)
+    b = np.linspace(-1.0, 1.0, len(e))
+    ref = preprocess(make_scan(np.full(len(e), 6.0), b), 1, 0.0, 30.0, 0.2)
+    grid = Grid.of(make_scan(np.full(len(e), 6.0), b), "psm")
+    proj = 6.0 - e
+    _, e0, _, used0 = translation_residuals(grid, ref, proj, max_error, 0.49)
+    _, e1, _, used1 = translation_residuals(grid, ref, proj, max_error, 0.49, min_pairs)
+    np.testing.assert_allclose(e0, e1)
+    assert np.count_nonzero(used1) >= min_pairs
+    assert used0[used1].sum() == used0.sum()  # every residual inside max_error stays
+    if np.count_nonzero(used0) >= min_pairs:
+        assert np.array_equal(used0, used1)
+    else:  # the cut rose to the min_pairs-th smallest |e|: the used are the smallest
+        assert np.abs(e1[used1]).max() <= np.abs(e1[~used1]).min(initial=np.inf)
+
+
+@pytest.mark.parametrize("params", [PsmParams, PmwnParams])
+def test_relaxed_cut_corrects_a_long_intel_move_that_ends_with_too_few_pairs(params):
+    """Scans 21 -> 22 of the Intel excerpt from the identity: fewer than min_pairs ranges lie within
+    max_error, and the published matchers stop there; with the relaxed cut they reach the truth."""
+    a, b = scans("intel")[21:23]
+    truth = relative(a.pose, b.pose)
+    plain, relaxed = match(a, b, Pose2(), params()), match(a, b, Pose2(), params(relaxed_cut=True))
+    assert plain.reason.value == "too_few_pairs" and not succeeded(*pose_error(plain.pose, truth))
+    assert relaxed.converged and succeeded(*pose_error(relaxed.pose, truth))
