@@ -185,8 +185,7 @@ def _segment_candidate(ref, p, j, other, L, max_len):
 
 
 def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float, Br: float,
-                 L: float,
-                max_dist_inter: float) -> Pairs:
+                L: float, max_dist_inter: float) -> Pairs:
     """MbICP correspondences: metric-nearest reference point, or a point interpolated on a segment.
 
     The original searches every segment in the window; here the two segments adjacent to the
@@ -208,8 +207,7 @@ def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.nd
 
 
 def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float,
-                     Br: float, L: float,
-                     max_dist_inter: float) -> Pairs:
+                     Br: float, L: float, max_dist_inter: float) -> Pairs:
     """Paper 000 §2.4.1: point-to-point pairs, point-to-line for object points sharing a target.
 
     Every object point takes its metric-nearest reference point m_j. Among the points sharing one
