@@ -206,7 +206,7 @@ def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarra
     return float(shifts[j]), None
 
 
-def translation_residuals(grid: Grid, ref: PolarScan, proj_r: np.ndarray, max_error: float, C: float,
+def translation_residuals(ref: PolarScan, proj_r: np.ndarray, max_error: float, C: float,
                           min_pairs: int | None = None):
     """Residuals e_i = r_ref - r_proj at shared bearings, PSM weights w = C / (C + e^2), and which are used.
 
@@ -334,7 +334,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                 k_turn = gain * k_best
             est = Pose2(0.0, 0.0, -k_turn * grid.step) @ est
             proj = project(grid, O, est)
-        i, e, w, used = translation_residuals(grid, R, proj, params.max_error, strategy.weight_C(it),
+        i, e, w, used = translation_residuals(R, proj, params.max_error, strategy.weight_C(it),
                                               params.min_pairs if params.relaxed_cut else None)
         if np.count_nonzero(used) < params.min_pairs:
             reason = Termination.TOO_FEW_PAIRS

@@ -86,4 +86,5 @@ def build_result(name: str, est: Pose2, reason: Termination, iterations: int, la
         return MatchResult(name, est, False, reason, iterations, float("nan"), 0, 0, None, None)
     return MatchResult(
         name, est, reason.converged, reason, iterations, last.error, last.n_kept, last.n_rejected,
-        covariance(last.A, last.error, last.n_kept), degeneracy(last.targets, surface_tangents(ref_points, full_circle, last.ref_index), L))
+        covariance(last.A, last.error, last.n_kept),
+        degeneracy(last.targets, surface_tangents(ref_points, full_circle, last.ref_index), L))

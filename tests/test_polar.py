@@ -234,15 +234,14 @@ def test_truncated_orientation_cost_keeps_intel_pairs_that_diosis_mean_turns_awa
 
 @given(st.lists(st.floats(-5.0, 5.0), min_size=50, max_size=120), st.integers(3, 40), st.floats(0.05, 2.0))
 def test_relaxed_cut_keeps_at_least_min_pairs_and_changes_nothing_when_enough_are_inside(e, min_pairs, max_error):
-    from core.polar import Grid, preprocess, translation_residuals
+    from core.polar import preprocess, translation_residuals
 
     e = np.array(e)
     b = np.linspace(-1.0, 1.0, len(e))
     ref = preprocess(make_scan(np.full(len(e), 6.0), b), 1, 0.0, 30.0, 0.2)
-    grid = Grid.of(make_scan(np.full(len(e), 6.0), b), "psm")
     proj = 6.0 - e
-    _, e0, _, used0 = translation_residuals(grid, ref, proj, max_error, 0.49)
-    _, e1, _, used1 = translation_residuals(grid, ref, proj, max_error, 0.49, min_pairs)
+    _, e0, _, used0 = translation_residuals(ref, proj, max_error, 0.49)
+    _, e1, _, used1 = translation_residuals(ref, proj, max_error, 0.49, min_pairs)
     np.testing.assert_allclose(e0, e1)
     assert np.count_nonzero(used1) >= min_pairs
     assert used0[used1].sum() == used0.sum()  # every residual inside max_error stays
