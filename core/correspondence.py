@@ -10,9 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .events import PairKind
-from .metric import euclidean_project_on_segment, metric_distance_sq, metric_project_on_segment
+from .metric import metric_distance_sq, metric_project_on_segment, metric_sq
 from .scan import Scan
 
 
@@ -54,55 +55,54 @@ class ReferenceIndex:
 
 # Candidates tried first around each point's bearing: the K reference beams on either side.
 _NEAR_K = 3
-# Windows are searched in one pass padded to the widest while that pads to at most this many
-# candidates (a numpy call costs about as much as a few thousand); otherwise (a large Br, a poor
-# guess) rows are grouped by width so that a few wide windows do not pad every row.
-_ONE_PASS_CANDIDATES = 4096
-_WIDTH_BUCKETS = np.array([64, 512])
-
-
-def _width_groups(width: np.ndarray):
-    """Row groups of similar window width (one group, no sorting, in the common case)."""
-    if width.max(initial=0) * len(width) <= _ONE_PASS_CANDIDATES:
-        yield slice(None)  # empty windows too: _best_in gives them inf
-        return
-    by_width = np.argsort(width, kind="stable")
-    cuts = np.searchsorted(width[by_width], _WIDTH_BUCKETS, side="right")
-    for a, b in zip((np.searchsorted(width[by_width], 1), *cuts), (*cuts, len(width))):
-        if b > a:
-            yield by_width[a:b]
-
-
-def _best_in(ref: ReferenceIndex, p: np.ndarray, lo: np.ndarray, hi: np.ndarray, w: int):
-    """Metric-nearest of the reference points ext[lo, hi) for each row of ``p`` (w >= hi - lo).
-
-    Returns (ext index, squared metric distance), inf where the slice is empty.
-    """
-    ext = lo[:, None] + np.arange(w)
-    # past the end of its slice a row repeats the slice's last point, which leaves its minimum as it is
-    np.minimum(ext, np.minimum(hi, len(ref.ext_map))[:, None] - 1, out=ext)
-    px, py = p[:, :1], p[:, 1:]
-    qx, qy = ref.ext_x[ext], ref.ext_y[ext]
-    # d^2 = |p - q|^2 - (p x q)^2 / (|q|^2 + L^2) (see metric_distance_sq), in place: the hot loop
-    cross = px * qy
-    cross -= py * qx
-    cross *= cross
-    cross /= ref.ext_sq_norm_L2[ext]
-    qx -= px
-    qy -= py
-    qx *= qx
-    qy *= qy
-    d2 = qx
-    d2 += qy
-    d2 -= cross
-    k = np.argmin(d2, axis=1)
-    r = np.arange(len(p))
-    return ext[r, k], np.where(hi > lo, d2[r, k], np.inf)
 
 
 def polar(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bearing [rad] and range [m] of each point (computed once per iteration, used twice)."""
     return np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1])
+
+
+@njit(cache=True, inline="always")
+def _window_min(px: float, py: float, ex, ey, ek, lo: int, hi: int):
+    """Metric-nearest of the reference points ext[lo, hi) to (px, py): (ext index, d^2); (-1, inf) if
+    empty; the first of equal minima. ``ek`` holds the metric's denominators |q|^2 + L^2."""
+    best, d_best = -1, np.inf
+    for j in range(lo, hi):
+        d = metric_sq(px, py, ex[j], ey[j], ek[j])
+        if d < d_best:
+            best, d_best = j, d
+    return best, d_best
+
+
+@njit(cache=True)
+def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, ext_map, n_ref: int, Bw: float, Br: float, L: float,
+                    max_factor: float, max_step: float):
+    """The loop of ``nearest`` over the moved points (compiled: a handful of candidates per point,
+    where numpy paid a call per step for all points at once)."""
+    idx = np.full(len(alpha), -1)
+    out = np.full(len(alpha), np.inf)
+    clip_to_bw = Bw < _NEAR_K * max_step  # the 2K beams may reach beyond +/-Bw: clip them
+    for i in range(len(alpha)):
+        a, r, px, py = alpha[i], rng[i], p[i, 0], p[i, 1]
+        pos = np.searchsorted(eb, a)
+        lo, hi = pos - _NEAR_K, pos + _NEAR_K
+        if clip_to_bw:
+            lo = max(lo, np.searchsorted(eb, a - Bw))
+            hi = max(min(hi, np.searchsorted(eb, a + Bw, "right")), lo)
+        best, d2 = _window_min(px, py, ex, ey, ek, lo, min(hi, len(eb)))
+        # the window that can hold anything closer (see ``nearest``), never wider than +/-Bw
+        d0 = np.sqrt(min(max(d2, 0.0), Br * Br))
+        rho = d0 * min((r + L) / max(L - d0, 1e-12), max_factor)
+        half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw) + 1e-12
+        wlo = np.searchsorted(eb, a - half)
+        whi = min(np.searchsorted(eb, a + half, "right"), wlo + n_ref)  # a point once
+        if wlo < lo or whi > hi:
+            b, d = _window_min(px, py, ex, ey, ek, wlo, min(whi, len(eb)))
+            if d < d2:
+                best, d2 = b, d
+        if d2 < np.inf:
+            idx[i], out[i] = ext_map[best], max(d2, 0.0)
+    return idx, out
 
 
 def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float, moved_polar=None):
@@ -120,30 +120,9 @@ def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: flo
     metric distance).
     """
     alpha, rng = moved_polar if moved_polar is not None else polar(moved)
-    eb = ref.ext_bearings
-    pos = np.searchsorted(eb, alpha)
-    lo, hi = pos - _NEAR_K, pos + _NEAR_K
-    if Bw < _NEAR_K * ref.max_step:  # the 2K beams may reach beyond +/-Bw: clip them
-        lo = np.maximum(lo, np.searchsorted(eb, alpha - Bw, side="left"))
-        hi = np.maximum(np.minimum(hi, np.searchsorted(eb, alpha + Bw, side="right")), lo)
-    best, d2 = _best_in(ref, moved, lo, hi, 2 * _NEAR_K)
-    # the window that can hold anything closer (see above), never wider than +/-Bw
-    d0 = np.sqrt(np.clip(d2, 0.0, Br * Br))
-    rho = d0 * np.minimum((rng + L) / np.maximum(L - d0, 1e-12), ref.max_factor)
-    # no np.errstate here: it costs more than the arithmetic in this hot loop
-    half = np.minimum(np.where(rho < rng, np.arcsin(np.minimum(rho / rng, 1.0)), np.pi), Bw) + 1e-12
-    wlo = np.searchsorted(eb, alpha - half, side="left")
-    whi = np.minimum(np.searchsorted(eb, alpha + half, side="right"), wlo + len(ref.points))  # a point once
-    again = np.flatnonzero((wlo < lo) | (whi > hi))
-    if len(again):
-        width = whi[again] - wlo[again]
-        for g in _width_groups(width):
-            rows = again[g]
-            b, d = _best_in(ref, moved[rows], wlo[rows], whi[rows], int(width[g].max()))
-            better = d < d2[rows]
-            best[rows[better]], d2[rows[better]] = b[better], d[better]
-    found = d2 < np.inf
-    return np.where(found, ref.ext_map[best], -1), np.where(found, np.maximum(d2, 0.0), np.inf)
+    return _nearest_kernel(moved, alpha, rng, ref.ext_bearings, ref.ext_x, ref.ext_y, ref.ext_sq_norm_L2,
+                           ref.ext_map, len(ref.points), float(Bw), float(Br), float(L), ref.max_factor,
+                           ref.max_step)
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,13 +142,6 @@ def _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L):
     best, d2 = nearest(ref, p, Bw, Br, L, (moved_polar[0][rows], moved_polar[1][rows]))
     found = best >= 0
     return rows[found], p[found], best[found], d2[found]
-
-
-def _closer_neighbour(ref, p, j, L):
-    """The scan neighbour (j - 1 or j + 1) of each j metrically closer to p, or -1 if none."""
-    both = ref.neighbours[j]  # (K, 2): previous, next
-    d = np.where(both >= 0, metric_distance_sq(p[:, None, :], ref.points[both], L), np.inf)
-    return np.where(d[:, 0] <= d[:, 1], both[:, 0], both[:, 1])
 
 
 def _segment_candidate(ref, p, j, other, L, max_len):
@@ -218,25 +190,53 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: 
     such a point keeps m_j.
     """
     rows, p, best, d2 = _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L)
-    target = ref.points[best]
-    kind = np.zeros(len(rows), dtype=np.int8)  # PairKind.POINT
-    ref_index = np.full((len(best), 2), -1)
-    ref_index[:, 0] = best
-    order = np.lexsort((d2, best))  # by target, then distance: the first of each run keeps m_j
-    losers = order[1:][best[order[1:]] == best[order[:-1]]]
-    if len(losers):
-        pl, a = p[losers], target[losers]
-        second = _closer_neighbour(ref, pl, best[losers], L)
-        b = ref.points[second]
-        e = b - a
-        ok = (second >= 0) & (e[:, 0] ** 2 + e[:, 1] ** 2 <= max_dist_inter * max_dist_inter)
-        inter, pl, a, b = losers[ok], pl[ok], a[ok], b[ok]
-        c = a + euclidean_project_on_segment(pl, a, b)[:, None] * (b - a)
-        target[inter] = c
-        kind[inter] = PairKind.INTERPOLATED
-        ref_index[inter, 1] = second[ok]
-        d2[inter] = np.maximum(metric_distance_sq(pl, c, L), 0.0)
-    return Pairs(rows, target, kind, ref_index, np.sqrt(d2))
+    target, kind, second, d2 = _share_targets(p, best, d2, ref.points, ref.ext_sq_norm_L2, ref.neighbours,
+                                              float(L), float(max_dist_inter))
+    return Pairs(rows, target, kind, np.column_stack((best, second)), np.sqrt(d2))
+
+
+@njit(cache=True)
+def _share_targets(p, best, d2, points, sq_norm_L2, neighbours, L: float, max_len: float):
+    """The loop of ``point_line_pairs``: target, kind, second reference point (-1: none) and d^2 per pair.
+
+    ``sq_norm_L2[j]`` = |q_j|^2 + L^2 for reference point j (ReferenceIndex.ext_sq_norm_L2).
+    """
+    n = len(best)
+    winner = np.full(len(points), -1)  # per reference point: the closest object point, first of ties
+    for i in range(n):
+        w = winner[best[i]]
+        if w < 0 or d2[i] < d2[w]:
+            winner[best[i]] = i
+    target = points[best]
+    kind = np.full(n, PairKind.POINT, dtype=np.int8)
+    second = np.full(n, -1)
+    d2 = d2.copy()
+    for i in range(n):
+        j = best[i]
+        if winner[j] == i:
+            continue
+        px, py = p[i, 0], p[i, 1]
+        # m'_j: the scan neighbour of m_j metrically closer to p (the previous one on a tie)
+        s, d_s = -1, np.inf
+        for nb in neighbours[j]:
+            if nb >= 0:
+                d = metric_sq(px, py, points[nb, 0], points[nb, 1], sq_norm_L2[nb])
+                if s < 0 or d < d_s:
+                    s, d_s = nb, d
+        if s < 0:
+            continue
+        ax, ay = points[j, 0], points[j, 1]
+        ex, ey = points[s, 0] - ax, points[s, 1] - ay
+        ee = ex * ex + ey * ey
+        if ee > max_len * max_len:
+            continue
+        t = min(max(((px - ax) * ex + (py - ay) * ey) / ee, 0.0), 1.0) if ee > 1e-18 else 0.0
+        cx, cy = ax + t * ex, ay + t * ey
+        target[i, 0], target[i, 1] = cx, cy
+        kind[i] = PairKind.INTERPOLATED
+        second[i] = s
+        d2[i] = max(metric_sq(px, py, cx, cy, cx * cx + cy * cy + L * L), 0.0)
+    return target, kind, second, d2
 
 
 def visible_from_reference(moved_polar, bin_start: float, bin_width: float, margin: float) -> np.ndarray:

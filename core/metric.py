@@ -8,6 +8,7 @@ other (paper 000 eq. 3); linearising the rotation gives the closed form used her
 from __future__ import annotations
 
 import numpy as np
+from numba import vectorize
 from scipy.linalg.lapack import dgesv
 
 
@@ -19,9 +20,16 @@ def metric_distance_sq(p: np.ndarray, q: np.ndarray, L: float) -> np.ndarray:
     in the denominator. Broadcasts over leading axes; written out by component (hot loop).
     """
     px, py, qx, qy = p[..., 0], p[..., 1], q[..., 0], q[..., 1]
+    return metric_sq(px, py, qx, qy, qx * qx + qy * qy + L * L)
+
+
+@vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
+def metric_sq(px, py, qx, qy, k):
+    """``metric_distance_sq`` by component, k = |q|^2 + L^2: a ufunc (it broadcasts) that the
+    compiled correspondence search calls too, so both round alike."""
     dx, dy = px - qx, py - qy
     c = px * qy - py * qx
-    return dx * dx + dy * dy - c * c / (qx * qx + qy * qy + L * L)
+    return dx * dx + dy * dy - c * c / k
 
 
 def metric_exact_sq(p1: np.ndarray, p2: np.ndarray, L: float, max_theta: float = np.pi) -> float:
@@ -59,14 +67,6 @@ def metric_project_on_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray, L: fl
     eMe = np.einsum("ij,ij->i", e, e) - er * er / k
     uMe = np.einsum("ij,ij->i", u, e) - ur * er / k
     t = np.where(eMe > 1e-18, -uMe / np.maximum(eMe, 1e-18), 0.0)
-    return np.clip(t, 0.0, 1.0)
-
-
-def euclidean_project_on_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Parameter t in [0, 1] of the orthogonal projection of p onto segment a->b (paper 000 §2.4.1)."""
-    e = b - a
-    ee = np.einsum("ij,ij->i", e, e)
-    t = np.where(ee > 1e-18, np.einsum("ij,ij->i", p - a, e) / np.maximum(ee, 1e-18), 0.0)
     return np.clip(t, 0.0, 1.0)
 
 
