@@ -67,11 +67,9 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     for it in range(1, params.MaxIter + 1):
         moved = est.apply(P)
         moved_polar = polar(moved)
-        if params.ProjectionFilter:
-            vis = visible_from_reference(moved_polar, R.bearings[0], bin_width, PROJECTION_MARGIN_M)
-            rows = all_rows[vis]
-        else:
-            rows = all_rows
+        vis = (visible_from_reference(moved_polar, R.bearings[0], bin_width, PROJECTION_MARGIN_M)
+               if params.ProjectionFilter else np.ones(len(P), dtype=bool))
+        rows = all_rows[vis]
         pairs = pair_fn(R, moved, moved_polar, rows, params.Bw, params.Br, params.L, params.MaxDistInter)
         status, thr = reject(pairs.dist, params.Br, params.filter,
                              params.mad_k if improved and params.mad_rejection else None,
@@ -92,7 +90,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
         new_est = inc @ est
         if observer is not None:
             observer(IterationEvent(
-                it, est, new_est, moved, used[np.setdiff1d(all_rows, rows, assume_unique=True)],
+                it, est, new_est, moved, used[~vis],
                 Correspondences(used[pairs.obj], pairs.target, pairs.kind, pairs.ref_index, pairs.dist, status,
                                 moved[pairs.obj]),
                 thr, error, inc))

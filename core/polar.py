@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from numba import njit
 from scipy.ndimage import median_filter
 
 from .events import (Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, PolarStep,
@@ -110,60 +111,70 @@ def project(grid: Grid, cur: PolarScan, pose: Pose2, pad: int = 0) -> np.ndarray
     reference viewpoint: it still hides what lies behind it, but a bearing whose closest surface is
     such a back face is not compared (NaN), as is a bearing where nothing projects.
     """
-    size = grid.n + 2 * pad
     pts = pose.apply(cur.xy)
-    a = grid.b0 + np.mod(np.arctan2(pts[:, 1], pts[:, 0]) - grid.b0, 2 * np.pi)  # in [b0, b0 + 2pi)
-    r = np.hypot(pts[:, 0], pts[:, 1])
-    k = cur.edges
-    a1, a2, r1, r2 = a[k], a[k + 1], r[k], r[k + 1]
-    ok = np.abs(a2 - a1) < np.pi / 2  # an edge across the seam of the angle range is not a surface
-    a1, a2, r1, r2 = a1[ok], a2[ok], r1[ok], r2[ok]
-    lo, hi = np.minimum(a1, a2), np.maximum(a1, a2)
-    i0 = np.ceil((lo - grid.b0) / grid.step - 1e-9).astype(np.int64)
-    i1 = np.floor((hi - grid.b0) / grid.step + 1e-9).astype(np.int64)
-    count = np.maximum(i1 - i0 + 1, 0)
-    total = int(count.sum())
-    if total == 0:
-        return np.full(size, np.nan)
-    edge = np.repeat(np.arange(len(i0)), count)
-    i = np.arange(total) + np.repeat(i0 - (np.cumsum(count) - count), count)
-    span = a2 - a1
-    slope = (r2 - r1) / np.where(np.abs(span) > 1e-12, span, np.inf)  # range per radian along the edge
-    rr = r1[edge] + (grid.b0 + i * grid.step - a1[edge]) * slope[edge]
-    if grid.full:  # bins wrap: fill the base circle, then extend it by the wrap
-        i %= grid.n
-    else:
-        i += pad
-    inside = (i >= 0) & (i < (grid.n if grid.full else size))
-    i, rr, front = i[inside], rr[inside], (span > 0)[edge[inside]]
-    out = np.full(grid.n if grid.full else size, np.inf)
-    np.minimum.at(out, i, rr)
-    seen = np.full(len(out), np.inf)
-    np.minimum.at(seen, i[front], rr[front])
-    out = np.where((seen == out) & (out < np.inf), out, np.nan)
+    # numpy's arctan2 and the C library's differ in the last bit: the bearings come from numpy
+    out = _project_kernel(pts, np.arctan2(pts[:, 1], pts[:, 0]), cur.edges, grid.b0, grid.step, grid.n, grid.full, pad)
     return np.concatenate((out[grid.n - pad:], out, out[:pad])) if grid.full and pad else out
+
+
+@njit(cache=True)
+def _project_kernel(pts, bearing, edges, b0: float, step: float, n: int, full: bool, pad: int):
+    """The loop of ``project`` over the edges of the moved scan (bins of a full grid not yet extended)."""
+    size = n if full else n + 2 * pad
+    a = np.empty(len(pts))
+    r = np.empty(len(pts))
+    for k in range(len(pts)):
+        a[k] = b0 + np.mod(bearing[k] - b0, 2 * np.pi)  # in [b0, b0 + 2pi)
+        r[k] = np.hypot(pts[k, 0], pts[k, 1])
+    out = np.full(size, np.inf)  # closest surface per bin
+    front = np.full(size, np.inf)  # closest surface facing the reference viewpoint
+    for k in edges:
+        a1, a2, r1, r2 = a[k], a[k + 1], r[k], r[k + 1]
+        span = a2 - a1
+        if not abs(span) < np.pi / 2:  # an edge across the seam of the angle range is not a surface
+            continue
+        lo, hi = min(a1, a2), max(a1, a2)
+        slope = (r2 - r1) / (span if abs(span) > 1e-12 else np.inf)  # range per radian along the edge
+        for i in range(int(np.ceil((lo - b0) / step - 1e-9)), int(np.floor((hi - b0) / step + 1e-9)) + 1):
+            rr = r1 + (b0 + i * step - a1) * slope
+            j = i % n if full else i + pad
+            if 0 <= j < size:
+                out[j] = min(out[j], rr)
+                if span > 0:
+                    front[j] = min(front[j], rr)
+    for j in range(size):
+        if not (front[j] == out[j] and out[j] < np.inf):
+            out[j] = np.nan
+    return out
 
 
 def shift_costs(ref_r: np.ndarray, proj_ext: np.ndarray, K: int, min_pairs: int, cap: float | None = None):
     """Mean |r_ref(i) - r_proj(i + k)| and the pair count for every shift k in -K..K (PSM §3 step 4).
 
-    ``proj_ext`` holds the projection on bins -K .. n + K - 1; NaN marks missing ranges. A window
-    sliding over it gives every shift without copying. ``cap`` (not published) limits each
-    difference: after a long move most bearings compare different surfaces, and their metres of
-    difference, not the few bearings that agree, decide Diosi's mean (a nearly flat curve whose
-    minimum wanders); capped, a bearing that compares different surfaces costs the same at every
-    shift and the agreeing ones decide.
+    ``proj_ext`` holds the projection on bins -K .. n + K - 1; NaN marks missing ranges. ``cap``
+    (not published) limits each difference: after a long move most bearings compare different
+    surfaces, and their metres of difference, not the few bearings that agree, decide Diosi's
+    mean (a nearly flat curve whose minimum wanders); capped, a bearing that compares different
+    surfaces costs the same at every shift and the agreeing ones decide.
     """
-    win = np.lib.stride_tricks.as_strided(proj_ext, (len(ref_r), 2 * K + 1), proj_ext.strides * 2, writeable=False)
-    diff = win - ref_r[:, None]  # diff[i, K + k] = r_proj(i + k) - r_ref(i)
-    np.abs(diff, out=diff)
-    if cap is not None:
-        np.minimum(diff, cap, out=diff)  # NaN stays NaN
-    # The pairs per shift are a correlation of the two validity masks (one pass over n + 2K, not
-    # over the n x (2K + 1) window); the missing differences then add nothing to the sums.
-    count = np.correlate((proj_ext == proj_ext).astype(float), (ref_r == ref_r).astype(float), "valid").astype(np.int64)
-    cost = np.fmax(diff, 0.0, out=diff).sum(axis=0) / np.maximum(count, 1)  # fmax(NaN, 0) = 0
+    cost, count = _shift_costs_kernel(ref_r, proj_ext, K, np.inf if cap is None else float(cap))
     return np.where(count >= min_pairs, cost, np.nan), count
+
+
+@njit(cache=True)
+def _shift_costs_kernel(ref_r, proj_ext, K: int, cap: float):
+    """Sum over the bearings with both ranges of min(|difference|, cap) / their count, per shift."""
+    cost = np.zeros(2 * K + 1)
+    count = np.zeros(2 * K + 1, dtype=np.int64)
+    for s in range(2 * K + 1):  # shift k = s - K: r_proj(i + k) is proj_ext[i + s]
+        total, m = 0.0, 0
+        for i in range(len(ref_r)):
+            d = abs(proj_ext[i + s] - ref_r[i])
+            if d == d:  # both ranges present
+                total += min(d, cap)
+                m += 1
+        cost[s], count[s] = total / max(m, 1), m
+    return cost, count
 
 
 def refine_parabola(a: float, b: float, c: float) -> float:
