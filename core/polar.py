@@ -180,7 +180,7 @@ def _shift_costs_kernel(ref_r, proj_ext, K: int, cap: float):
 def refine_parabola(a: float, b: float, c: float) -> float:
     """Offset of the vertex of the parabola through (-1, a), (0, b), (1, c) (PSM's refinement)."""
     den = a - 2.0 * b + c
-    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den > 0 else 0.0
+    return min(max(0.5 * (a - c) / den, -0.5), 0.5) if den > 0 else 0.0
 
 
 def refine_v(a: float, b: float, c: float) -> float:
@@ -190,7 +190,7 @@ def refine_v(a: float, b: float, c: float) -> float:
     steeper side setting the slope m = max(a, c) - b, x0 = (a - c) / (2 m).
     """
     m = max(a, c) - b
-    return float(np.clip((a - c) / (2.0 * m), -0.5, 0.5)) if m > 0 else 0.0
+    return min(max((a - c) / (2.0 * m), -0.5), 0.5) if m > 0 else 0.0
 
 
 def least(cost: np.ndarray) -> int | None:
@@ -253,11 +253,17 @@ def beam_normals(scan: PolarScan) -> np.ndarray:
 def weighted_translation(rows: np.ndarray, e: np.ndarray, w: np.ndarray) -> np.ndarray | None:
     """Weighted least squares of e_i ~ rows_i . dt (PSM §3 step 3; PMWN's circle); None when singular."""
     c, s = rows[:, 0], rows[:, 1]
-    a, b, d = (w * c * c).sum(), (w * c * s).sum(), (w * s * s).sum()
+    wc, ws = w * c, w * s
+    X = np.empty((5, len(e)))  # the five per-residual terms, summed by one reduction
+    np.multiply(wc, c, out=X[0])
+    np.multiply(wc, s, out=X[1])
+    np.multiply(ws, s, out=X[2])
+    np.multiply(wc, e, out=X[3])
+    np.multiply(ws, e, out=X[4])
+    a, b, d, rx, ry = X.sum(axis=1)
     det = a * d - b * b
     if det <= 1e-9 * (a + d) ** 2:  # all rows alike: translation across them is unobservable
         return None
-    rx, ry = (w * c * e).sum(), (w * s * e).sum()
     return np.array([(d * rx - b * ry) / det, (a * ry - b * rx) / det])
 
 
@@ -355,14 +361,14 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                                         polar_pairs(grid, R, proj, i, e, used, ref_point_of), None, float("nan"),
                                         Pose2(), None))
             break
-        phi = R.bearings[i[used]]
-        rows, rhs = translation_system(phi, e[used], normals[i[used]] if normals is not None else None)
+        iu, eu = i[used], e[used]
+        rows, rhs = translation_system(R.bearings[iu], eu, normals[iu] if normals is not None else None)
         dt = weighted_translation(rows, rhs, w[used])
         if dt is None:
             reason, est = Termination.SINGULAR, before
             break
         est = Pose2(float(dt[0]), float(dt[1]), 0.0) @ est
-        error = float(np.mean(e[used] ** 2))
+        error = float(np.mean(eu ** 2))
         lam_used = lam
         if strategy.metric:
             # Paper 003 eq. 17 (lost): the weight that balances the two terms of the norm at the
@@ -370,7 +376,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
             # difference| of this iteration, theta_r the shift where the range cost alone is least.
             # (Balancing at the step actually taken would lock: a small step raises lambda, which
             # keeps the next step small.)
-            d_mean = float(np.mean(np.abs(e[used])))
+            d_mean = float(np.mean(np.abs(eu)))
             j = least(range_cost)
             theta_r = abs(float(shifts[j])) * grid.step if j is not None else 0.0
             lam = min(d_mean / max(theta_r, grid.step), params.lambda_max)
@@ -383,7 +389,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                 PolarStep(grid.bearings, ref_r, proj0, shifts, cost, k_best,
                           strategy.fit if k_best is not None else None, abc, lam_used,
                           e, w, circle, 0.5 * dt if projected_circle else None)))
-        last = (error, i[used], int(np.count_nonzero(used)), int(np.count_nonzero(~used)))
+        last = (error, iu, len(iu), len(used) - len(iu))
         n_small = n_small + 1 if params.small(inc) else 0
         if n_small >= params.stop_after:
             reason = Termination.CONVERGED
