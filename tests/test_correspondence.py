@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from core import ImprovedParams, Pose2, match, pose_error
-from core.correspondence import ReferenceIndex, nearest
+from core.correspondence import ReferenceIndex, nearest, point_line_pairs, polar
+from core.events import PairKind
 from core.mbicp import rejection_floor
 from core.metric import metric_distance_sq
 from mbicp_viz.overlap import make_cases
@@ -55,6 +56,44 @@ def test_nearest_equals_the_brute_force_window_search(scans, which, k, x, y, t, 
     np.testing.assert_allclose(got, d2[within], rtol=1e-9, atol=1e-12)
     # beyond Br a point may report a candidate (rejected later), never a closer one than exists
     assert np.all(d2[~within] >= outer[~within] - tol[~within])
+
+
+@settings(max_examples=40, deadline=None)
+@given(which=st.sampled_from(["intel", "laserazos", "stallo2 (360 deg)"]), k=st.integers(0, 29),
+       x=st.floats(-0.3, 0.3), y=st.floats(-0.3, 0.3), t=st.floats(-0.3, 0.3), max_len=st.floats(0.05, 1.0))
+def test_point_line_pairs_follow_paper_000(scans, which, k, x, y, t, max_len):
+    """§2.4.1 pair by pair: of the points sharing a metric-nearest reference point m_j the closest
+    keeps it; each other one goes to the foot of its perpendicular on the segment from m_j to the
+    scan neighbour metrically closer to it (clamped), unless that segment is longer than max_len."""
+    ref_scan = scans[which][k % len(scans[which])]
+    ref = ReferenceIndex.build(ref_scan, 3.0)
+    moved = Pose2(x, y, t).apply(scans[which][(k + 1) % len(scans[which])].points())
+    rows = np.arange(len(moved))
+    pairs = point_line_pairs(ref, moved, polar(moved), rows, math.radians(45), 1.0, 3.0, max_len)
+    idx, d2 = nearest(ref, moved, math.radians(45), 1.0, 3.0)
+    np.testing.assert_array_equal(pairs.obj, rows[idx >= 0])
+    np.testing.assert_array_equal(pairs.ref_index[:, 0], idx[idx >= 0])
+    for j in np.unique(pairs.ref_index[:, 0]):
+        group = np.flatnonzero(pairs.ref_index[:, 0] == j)
+        keeper = group[np.argmin(d2[pairs.obj[group]])]
+        a = ref.points[j]
+        for g in group:
+            p = moved[pairs.obj[g]]
+            if g == keeper:
+                assert pairs.kind[g] == PairKind.POINT and np.array_equal(pairs.target[g], a)
+                continue
+            nbs = [n for n in ref.neighbours[j] if n >= 0]
+            d_nb = [metric_distance_sq(p, ref.points[n], 3.0) for n in nbs]
+            second = nbs[int(np.argmin(d_nb))] if nbs else -1
+            if second < 0 or np.linalg.norm(ref.points[second] - a) > max_len:
+                assert pairs.kind[g] == PairKind.POINT and np.array_equal(pairs.target[g], a)
+                assert pairs.dist[g] == pytest.approx(math.sqrt(d2[pairs.obj[g]]))
+                continue
+            e = ref.points[second] - a
+            foot = a + np.clip(np.dot(p - a, e) / np.dot(e, e), 0.0, 1.0) * e
+            assert pairs.kind[g] == PairKind.INTERPOLATED and pairs.ref_index[g, 1] == second
+            np.testing.assert_allclose(pairs.target[g], foot, atol=1e-12)
+            assert pairs.dist[g] == pytest.approx(math.sqrt(max(metric_distance_sq(p, foot, 3.0), 0.0)), abs=1e-12)
 
 
 def test_rejection_floor_shrinks_from_br_to_the_floor():

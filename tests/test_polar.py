@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
@@ -190,6 +190,39 @@ def test_projection_compares_only_surfaces_facing_the_reference():
     # the same wall after a half turn about (2, 0): it lies where it was, but its back faces us
     behind = project(grid, cur, Pose2(4.0, 0.0, math.pi))
     assert not np.isfinite(behind).any()
+
+
+def test_projection_at_the_identity_returns_the_scan_itself(intel):
+    """A scan projected onto its own bearings gives back its ranges wherever a surface facing the
+    sensor passes (the interior of each segment)."""
+    from core.polar import Grid, preprocess, project
+
+    for scan in intel.scans[:10]:
+        cur = preprocess(scan, 5, 0.1, 30.0, 0.2)
+        proj = project(Grid.of(scan, "psm"), cur, Pose2())
+        seen = np.isfinite(proj)
+        assert np.count_nonzero(seen) > 0.5 * np.count_nonzero(cur.valid)
+        assert np.all(cur.valid[seen])
+        np.testing.assert_allclose(proj[seen], cur.ranges[seen], rtol=1e-9)
+
+
+@settings(max_examples=30, deadline=None)
+@given(k=st.integers(0, 9), m=st.integers(-10, 10), x=st.floats(-0.3, 0.3), y=st.floats(-0.3, 0.3))
+def test_projection_turns_with_the_scan(intel, k, m, x, y):
+    """Turning the moved scan by m bearing steps about the reference sensor shifts its projection by
+    m bins (the orientation step of PSM §3 step 4 rests on this)."""
+    from core.polar import Grid, preprocess, project
+
+    grid = Grid.of(intel.scans[k], "psm")
+    cur = preprocess(intel.scans[k + 1], 5, 0.1, 30.0, 0.2)
+    K = 12
+    base = project(grid, cur, Pose2(x, y, 0.0), K)
+    turned = project(grid, cur, Pose2(0.0, 0.0, m * grid.step) @ Pose2(x, y, 0.0), K)
+    inner = slice(K + abs(m), K + grid.n - abs(m))  # bins whose shifted source lies inside the padding
+    shifted = base[inner.start - m: inner.stop - m]
+    both = np.isfinite(turned[inner]) & np.isfinite(shifted)
+    assert np.count_nonzero(both) >= 0.95 * np.count_nonzero(np.isfinite(shifted))
+    np.testing.assert_allclose(turned[inner][both], shifted[both], rtol=1e-6, atol=1e-9)
 
 
 def _held_from_the_truth(params) -> int:
