@@ -1,4 +1,4 @@
-"""Correspondence search of the MbICP family, vectorised over object points.
+"""Correspondence search of the MbICP family: compiled (numba) loops over the object points.
 
 For each object point (already moved into the reference frame) the candidates are the
 reference points whose bearing lies within the angular window +/-Bw of the point's bearing

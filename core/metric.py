@@ -17,7 +17,7 @@ def metric_distance_sq(p: np.ndarray, q: np.ndarray, L: float) -> np.ndarray:
 
     d^2 = |p - q|^2 - (p x q)^2 / (|q|^2 + L^2)   (MbICP eq. 12 with delta = p - q; note that
     delta x q = p x q). The original C code scores candidates this way, with the reference point
-    in the denominator. Broadcasts over leading axes; written out by component (hot loop).
+    in the denominator. Broadcasts over leading axes.
     """
     px, py, qx, qy = p[..., 0], p[..., 1], q[..., 0], q[..., 1]
     return metric_sq(px, py, qx, qy, qx * qx + qy * qy + L * L)
