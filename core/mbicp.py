@@ -52,7 +52,6 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     P = obj_pts[used]
     pair_fn = point_line_pairs if improved and params.point_line else mbicp_pairs
     bin_width = 2.0 * float(np.median(np.diff(R.bearings))) if len(R.bearings) > 1 else 0.01
-    all_rows = np.arange(len(P))
     min_pairs = max(3, int(np.ceil(params.AsocError * len(P))))
     if observer is not None:
         observer(StartEvent(name, params, R.points, obj_pts, used, initial_guess, resampling))
@@ -69,7 +68,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
         moved_polar = polar(moved)
         vis = (visible_from_reference(moved_polar, R.bearings[0], bin_width, PROJECTION_MARGIN_M)
                if params.ProjectionFilter else np.ones(len(P), dtype=bool))
-        rows = all_rows[vis]
+        rows = np.flatnonzero(vis)
         pairs = pair_fn(R, moved, moved_polar, rows, params.Bw, params.Br, params.L, params.MaxDistInter)
         status, thr = reject(pairs.dist, params.Br, params.filter,
                              params.mad_k if improved and params.mad_rejection else None,
