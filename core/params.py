@@ -175,7 +175,7 @@ class PolarParams(Params):
     errt_out: float = param(5e-4, unit="rad", lo=0.0, hi=1.0, help="... and |dtheta| below this")
     surface_jacobian: bool = param(False, unit="bool",
         help="translation step with the reference surface normals instead of Diosi's range change u.dt "
-             "(not published; holds corridors, see core/polar.py translation_system)")
+             "(not published; holds corridors, see core/polar.py translation_step)")
     stop_after: int = param(3, unit="count", lo=1, hi=100, help="stop after this many small corrections in a row")
     relaxed_cut: bool = param(False, unit="bool",
         help="keep at least min_pairs residuals in the translation step, raising max_error when fewer lie "

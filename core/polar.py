@@ -8,6 +8,7 @@ a 360-degree reference wraps around.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -32,6 +33,7 @@ class PolarScan:
     bearings: np.ndarray
     valid: np.ndarray
     segment: np.ndarray
+    rays: np.ndarray  # (N, 2) unit vector (cos, sin) of every bearing
     xy: np.ndarray  # (N, 2) every beam as a point (invalid ones too; ``valid`` says which count)
     edges: np.ndarray  # beams k such that k and k + 1 bound a surface of one segment
 
@@ -69,8 +71,8 @@ def preprocess(scan: Scan, median_window: int, min_range: float, max_range: floa
     if len(idx) and median_window > 1:
         r[idx] = median_filter(scan.ranges[idx], size=median_window, mode="nearest")
     seg = segment(r, valid, max_jump)
-    return PolarScan(r, scan.bearings, seg >= 0, seg,
-                     np.column_stack((r * np.cos(scan.bearings), r * np.sin(scan.bearings))),
+    rays = np.column_stack((np.cos(scan.bearings), np.sin(scan.bearings)))
+    return PolarScan(r, scan.bearings, seg >= 0, seg, rays, r[:, None] * rays,
                      np.flatnonzero((seg[:-1] >= 0) & (seg[:-1] == seg[1:])))
 
 
@@ -195,9 +197,18 @@ def refine_v(a: float, b: float, c: float) -> float:
 
 def least(cost: np.ndarray) -> int | None:
     """Index of the smallest cost, NaN meaning "too few pairs at that shift"; None if all are NaN."""
-    finite = np.where(cost == cost, cost, np.inf)
-    j = int(np.argmin(finite))
-    return j if finite[j] < np.inf else None
+    j = _least_kernel(cost)
+    return j if j >= 0 else None
+
+
+@njit(cache=True)
+def _least_kernel(cost) -> int:
+    """First index of the smallest finite cost (NaN and inf skipped); -1 if there is none."""
+    j, best = -1, np.inf
+    for k in range(len(cost)):
+        if cost[k] < best:
+            j, best = k, cost[k]
+    return j
 
 
 def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarray | None = None):
@@ -211,9 +222,10 @@ def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarra
     if j is None:
         return None, None
     f = cost if fit_cost is None else fit_cost
-    if 0 < j < len(f) - 1 and np.isfinite(f[j - 1]) and np.isfinite(f[j]) and np.isfinite(f[j + 1]):
+    if 0 < j < len(f) - 1:
         abc = (float(f[j - 1]), float(f[j]), float(f[j + 1]))
-        return float(shifts[j]) + refine(*abc), abc
+        if all(map(math.isfinite, abc)):
+            return float(shifts[j]) + refine(*abc), abc
     return float(shifts[j]), None
 
 
@@ -225,14 +237,24 @@ def translation_residuals(ref: PolarScan, proj_r: np.ndarray, max_error: float, 
     fewer lie within ``max_error`` it rises to the min_pairs-th smallest |e|, so that a long move
     is still corrected (the weights keep the far ones weak) instead of ending with too few pairs.
     """
-    both = ref.valid & np.isfinite(proj_r)
-    i = np.flatnonzero(both)
-    e = ref.ranges[i] - proj_r[i]
+    return _residuals_kernel(ref.ranges, ref.valid, proj_r, max_error, C, 0 if min_pairs is None else min_pairs)
+
+
+@njit(cache=True)
+def _residuals_kernel(ref_r, valid, proj_r, max_error: float, C: float, min_pairs: int):
+    """``translation_residuals`` as one loop (min_pairs 0: no relaxed cut)."""
+    i = np.empty(len(ref_r), dtype=np.int64)
+    m = 0
+    for k in range(len(ref_r)):
+        if valid[k] and np.isfinite(proj_r[k]):
+            i[m] = k
+            m += 1
+    i = i[:m]
+    e = ref_r[i] - proj_r[i]
     a = np.abs(e)
-    if min_pairs is not None and min_pairs <= len(a):
-        max_error = max(max_error, float(np.partition(a, min_pairs - 1)[min_pairs - 1]))
-    used = a <= max_error
-    return i, e, C / (C + e * e), used
+    if 0 < min_pairs <= m:
+        max_error = max(max_error, np.sort(a)[min_pairs - 1])
+    return i, e, C / (C + e * e), a <= max_error
 
 
 def beam_normals(scan: PolarScan) -> np.ndarray:
@@ -245,30 +267,25 @@ def beam_normals(scan: PolarScan) -> np.ndarray:
     hi = np.where(joined, k + 1, k)
     t = scan.xy[hi] - scan.xy[lo]
     norm = np.hypot(t[:, 0], t[:, 1])
-    ray = np.column_stack((np.cos(scan.bearings), np.sin(scan.bearings)))
     normal = np.column_stack((-t[:, 1], t[:, 0])) / np.where(norm > 0, norm, 1.0)[:, None]
-    return np.where((norm > 0)[:, None], normal, ray)
+    return np.where((norm > 0)[:, None], normal, scan.rays)
 
 
-def weighted_translation(rows: np.ndarray, e: np.ndarray, w: np.ndarray) -> np.ndarray | None:
-    """Weighted least squares of e_i ~ rows_i . dt (PSM §3 step 3; PMWN's circle); None when singular."""
-    c, s = rows[:, 0], rows[:, 1]
-    wc, ws = w * c, w * s
-    X = np.empty((5, len(e)))  # the five per-residual terms, summed by one reduction
-    np.multiply(wc, c, out=X[0])
-    np.multiply(wc, s, out=X[1])
-    np.multiply(ws, s, out=X[2])
-    np.multiply(wc, e, out=X[3])
-    np.multiply(ws, e, out=X[4])
-    a, b, d, rx, ry = X.sum(axis=1)
-    det = a * d - b * b
-    if det <= 1e-9 * (a + d) ** 2:  # all rows alike: translation across them is unobservable
-        return None
-    return np.array([(d * rx - b * ry) / det, (a * ry - b * rx) / det])
+@dataclass(frozen=True, eq=False)
+class TranslationStep:
+    """One translation step: its system rows_i . dt = rhs_i (weights w_i) and what it found."""
+
+    rows: np.ndarray  # (m, 2) per used residual: the ray u_i (Diosi) or the surface normal n_i
+    rhs: np.ndarray  # (m,)
+    dt: np.ndarray | None  # the weighted least-squares translation [m]; None when singular
+    error: float  # mean e^2 of the used residuals [m^2]
+    mean_abs: float  # mean |e| of the used residuals [m]
 
 
-def translation_system(phi: np.ndarray, e: np.ndarray, normals: np.ndarray | None):
-    """Rows and right-hand side of the translation step for range residuals e at bearings phi.
+def translation_step(ref: PolarScan, iu: np.ndarray, eu: np.ndarray, wu: np.ndarray,
+                     normals: np.ndarray | None) -> TranslationStep:
+    """Weighted least squares of rhs_i ~ rows_i . dt (PSM §3 step 3; PMWN's circle) over the used residuals
+    (bearing indices iu, residuals eu, weights wu).
 
     Diosi's model (``normals`` None): moving the scan by dt changes the range along ray u by
     u . dt — exact for a surface facing the sensor, wrong for a wall seen at a grazing angle, whose
@@ -278,17 +295,42 @@ def translation_system(phi: np.ndarray, e: np.ndarray, normals: np.ndarray | Non
     corridors, where Diosi's under-estimates the range change of the walls, over-corrects and
     drifts (his code's own limitation note; `eval ceiling` measures it).
     """
-    u = np.column_stack((np.cos(phi), np.sin(phi)))
-    if normals is None:
-        return u, e
-    return normals, e * np.einsum("ij,ij->i", normals, u)
+    rows, rhs, X = _translation_kernel(iu, eu, wu, ref.rays, ref.rays if normals is None else normals,
+                                       normals is not None)
+    a, b, d, rx, ry, e2, e1 = X.sum(axis=1)  # the seven sums in one reduction
+    det = a * d - b * b
+    m = len(eu)
+    # all rows alike: translation across them is unobservable
+    dt = None if det <= 1e-9 * (a + d) ** 2 else np.array([(d * rx - b * ry) / det, (a * ry - b * rx) / det])
+    return TranslationStep(rows, rhs, dt, float(e2 / m), float(e1 / m))
+
+
+@njit(cache=True)
+def _translation_kernel(iu, eu, wu, rays, normals, surface: bool):
+    """Rows, right-hand sides and the per-residual terms of the normal equations (see ``translation_step``)."""
+    m = len(eu)
+    rows = np.empty((m, 2))
+    rhs = np.empty(m)
+    X = np.empty((7, m))
+    for t in range(m):
+        k = iu[t]
+        if surface:
+            rows[t, 0], rows[t, 1] = normals[k, 0], normals[k, 1]
+            rhs[t] = eu[t] * (normals[k, 0] * rays[k, 0] + normals[k, 1] * rays[k, 1])
+        else:
+            rows[t, 0], rows[t, 1] = rays[k, 0], rays[k, 1]
+            rhs[t] = eu[t]
+        wc, ws = wu[t] * rows[t, 0], wu[t] * rows[t, 1]
+        X[0, t], X[1, t], X[2, t] = wc * rows[t, 0], wc * rows[t, 1], ws * rows[t, 1]
+        X[3, t], X[4, t] = wc * rhs[t], ws * rhs[t]
+        X[5, t], X[6, t] = eu[t] * eu[t], abs(eu[t])
+    return rows, rhs, X
 
 
 def polar_pairs(grid: Grid, ref: PolarScan, proj_r: np.ndarray, i: np.ndarray, e: np.ndarray,
                 used: np.ndarray, ref_point_of: np.ndarray) -> Correspondences:
     """The range comparisons as point pairs: projected surface point -> reference point, one bearing each."""
-    phi = ref.bearings[i]
-    u = np.column_stack((np.cos(phi), np.sin(phi)))
+    u = ref.rays[i]
     src = proj_r[i, None] * u
     tgt = ref.ranges[i, None] * u
     status = np.where(used, PairStatus.KEPT, PairStatus.OUTSIDE_BR).astype(np.int8)
@@ -362,13 +404,12 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                                         Pose2(), None))
             break
         iu, eu = i[used], e[used]
-        rows, rhs = translation_system(R.bearings[iu], eu, normals[iu] if normals is not None else None)
-        dt = weighted_translation(rows, rhs, w[used])
+        step = translation_step(R, iu, eu, w[used], normals)
+        dt, error = step.dt, step.error
         if dt is None:
             reason, est = Termination.SINGULAR, before
             break
         est = Pose2(float(dt[0]), float(dt[1]), 0.0) @ est
-        error = float(np.mean(eu ** 2))
         lam_used = lam
         if strategy.metric:
             # Paper 003 eq. 17 (lost): the weight that balances the two terms of the norm at the
@@ -376,13 +417,12 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
             # difference| of this iteration, theta_r the shift where the range cost alone is least.
             # (Balancing at the step actually taken would lock: a small step raises lambda, which
             # keeps the next step small.)
-            d_mean = float(np.mean(np.abs(eu)))
             j = least(range_cost)
             theta_r = abs(float(shifts[j])) * grid.step if j is not None else 0.0
-            lam = min(d_mean / max(theta_r, grid.step), params.lambda_max)
+            lam = min(step.mean_abs / max(theta_r, grid.step), params.lambda_max)
         inc = est @ before.inverse()
         if observer is not None:
-            circle = rhs[:, None] * rows if projected_circle else None  # Diosi's rows are the rays u_i
+            circle = step.rhs[:, None] * step.rows if projected_circle else None  # Diosi's rows are the rays u_i
             observer(IterationEvent(
                 it, before, est, before.apply(obj_pts), np.empty(0, np.int64),
                 polar_pairs(grid, R, proj, i, e, used, ref_point_of), params.max_error, error, inc,

@@ -71,6 +71,11 @@ def relative(a: Pose2, b: Pose2) -> Pose2:
     return a.inverse() @ b
 
 
+def relative_theta(a: Pose2, b: Pose2) -> float:
+    """``relative(a, b).theta`` with the same arithmetic, without building the poses (hot loops)."""
+    return wrap_angle(wrap_angle(-a.theta) + b.theta)
+
+
 def pose_error(estimate: Pose2, truth: Pose2) -> tuple[float, float]:
     """Translation error [m] and absolute rotation error [rad] of ``estimate`` against ``truth``."""
     d = relative(truth, estimate)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections import deque
 
 from .params import Params
-from .se2 import Pose2, relative
+from .se2 import Pose2, relative, relative_theta
 
 # Cycles of the estimate up to this period (in iterations) are recognised.
 CYCLE_PERIOD_MAX = 4
@@ -30,7 +30,9 @@ class CycleWatch:
 
     def step(self, before: Pose2, after: Pose2) -> int:
         """Record one iteration's move from ``before`` to ``after``; the current count."""
-        returned = any(self.params.small(relative(e, after)) for e in self.recent)
+        p = self.params
+        # the rotation first (the same number relative() gives): most estimates fail there already
+        returned = any(abs(relative_theta(e, after)) < p.errt_out and p.small(relative(e, after)) for e in self.recent)
         self.recent.appendleft(before)
         self.count = self.count + 1 if returned else 0
         return self.count
