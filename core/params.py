@@ -183,16 +183,23 @@ class PolarParams(Params):
     truncated_orientation: bool = param(False, unit="bool",
         help="orientation cost with each |range difference| capped at max_error, as the translation step "
              "caps its residuals (not published; see core/polar.py shift_costs)")
+    # The translation weights w = C / (C + e^2) of Diosi's code (after Dudek 2000), which paper 003
+    # §4.2 takes over for its projected circle (its ref. [22]), with the code's schedule: C is
+    # lowered after 10 iterations so that only the closest residuals steer the end of the match.
+    C: float = param(0.49, unit="m^2", lo=1e-6, hi=100.0,
+        help="weight constant w = C / (C + e^2) of the translation step (Diosi: 70 cm squared)")
+    C_late: float = param(0.01, unit="m^2", lo=1e-6, hi=100.0, help="weight constant after C_switch iterations")
+    C_switch: int = param(10, unit="count", lo=0, hi=10000, help="iteration from which C_late is used")
+
+    def weight_constant(self, iteration: int) -> float:
+        """C of the translation weights at an iteration (counted from 1)."""
+        return self.C if iteration <= self.C_switch else self.C_late
 
 
 @dataclass(frozen=True)
 class PsmParams(PolarParams):
     """Polar Scan Matching (Diosi & Kleeman, IJRR 2007)."""
 
-    C: float = param(0.49, unit="m^2", lo=1e-6, hi=100.0,
-        help="weight constant w = C / (C + e^2) of the translation step (Diosi: 70 cm squared)")
-    C_late: float = param(0.01, unit="m^2", lo=1e-6, hi=100.0, help="weight constant after C_switch iterations")
-    C_switch: int = param(10, unit="count", lo=0, hi=10000, help="iteration from which C_late is used")
     orientation_every: int = param(1, unit="count", lo=1, hi=100,
         help="run the orientation step on every n-th iteration; each iteration has a translation step "
              "(Diosi's code alternates one orientation and one translation pass: 1)")
@@ -202,7 +209,6 @@ class PsmParams(PolarParams):
 class PmwnParams(PolarParams):
     """Polar Metric-Weighted Norm (Huo et al. 2016, paper 003); equations reconstructed, see core/pmwn.py."""
 
-    C: float = param(0.49, unit="m^2", lo=1e-6, hi=100.0, help="weight constant of the projected-circle fit")
     lambda0: float = param(0.0, unit="m/rad", lo=0.0, hi=1000.0,
         help="metric weight of the first iteration (0: the first rotation is free)")
     lambda_max: float = param(0.5, unit="m/rad", lo=0.0, hi=1e6,

@@ -18,8 +18,9 @@ The paper's equations were lost in our copy; what its prose fixes is implemented
 - Translation (§3.3, §4.2): under a pure translation T the range change along a ray u_i is
   dr_i ~ u_i . T, so the points dr_i u_i lie on the "projected circle" through the origin with
   centre T/2 (Thales). Its centre comes from the weighted least squares u_i . T = dr_i
-  (w_i = C / (C + dr_i^2)), which a 180-270 degree field of view does not bias as the mean of the
-  points would. Events carry the circle points and the fitted centre.
+  (w_i = C / (C + dr_i^2), the weight of the paper's ref. [22] — PSM's, with its schedule: C drops
+  from ``C`` to ``C_late`` after ``C_switch`` iterations), which a 180-270 degree field of view does
+  not bias as the mean of the points would. Events carry the circle points and the fitted centre.
 - Stops after ``stop_after`` small corrections in a row, or at MaxIter (paper 003 Table 1).
 """
 
@@ -37,6 +38,5 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: PmwnPara
           observer: Observer | None = None) -> MatchResult:
     """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
     p = params if params is not None else PmwnParams()
-    strategy = Strategy("pmwn", orientation_due=lambda it: True, refine=refine_v, fit="V",
-                        weight_C=lambda it: p.C, metric=True)
+    strategy = Strategy("pmwn", orientation_due=lambda it: True, refine=refine_v, fit="V", metric=True)
     return run_polar(strategy, ref, obj, initial_guess, p, observer)

@@ -346,7 +346,6 @@ class Strategy:
     orientation_due: Callable[[int], bool]  # iteration -> run the orientation step?
     refine: Callable[[float, float, float], float]  # three costs -> fractional offset of the minimum
     fit: str  # "parabola" | "V"
-    weight_C: Callable[[int], float]  # iteration -> C of the translation weights
     metric: bool  # PMWN: add lambda * |shift angle| to the cost and adapt lambda
 
 
@@ -393,7 +392,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                 k_turn = gain * k_best
             est = Pose2(0.0, 0.0, -k_turn * grid.step) @ est
             proj = project(grid, O, est)
-        i, e, w, used = translation_residuals(R, proj, params.max_error, strategy.weight_C(it),
+        i, e, w, used = translation_residuals(R, proj, params.max_error, params.weight_constant(it),
                                               params.min_pairs if params.relaxed_cut else None)
         if np.count_nonzero(used) < params.min_pairs:
             reason = Termination.TOO_FEW_PAIRS

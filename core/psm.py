@@ -23,6 +23,5 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: PsmParam
     """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
     p = params if params is not None else PsmParams()
     strategy = Strategy("psm", orientation_due=lambda it: (it - 1) % p.orientation_every == 0,
-                        refine=refine_parabola, fit="parabola",
-                        weight_C=lambda it: p.C if it <= p.C_switch else p.C_late, metric=False)
+                        refine=refine_parabola, fit="parabola", metric=False)
     return run_polar(strategy, ref, obj, initial_guess, p, observer)

@@ -134,6 +134,20 @@ def test_psm_turns_with_the_parabola_on_every_iteration_as_diosi_alternates():
     assert fits[2][0] == "parabola" and fits[2][1] is None  # the option still skips
 
 
+
+@pytest.mark.parametrize("params", [PsmParams(C_switch=3), PmwnParams(C_switch=3)], ids=["psm", "pmwn"])
+def test_translation_weights_follow_diosis_schedule(params):
+    """w = C / (C + e^2) with C until C_switch, C_late after: PSM's schedule, which PMWN takes over
+    with the weight (paper 003 §4.2, its ref. [22])."""
+    ref = scans("intel")[20]
+    rec = Recorder()
+    match(ref, seen_from(ref, Pose2(0.08, -0.05, math.radians(6.0))), Pose2(), params, rec)
+    assert len(rec.iterations) > params.C_switch + 1
+    for event in rec.iterations:
+        C = params.C if event.iteration <= params.C_switch else params.C_late
+        e = event.polar.residuals
+        np.testing.assert_allclose(event.polar.weights, C / (C + e * e), rtol=1e-12)
+
 @pytest.mark.parametrize("algo", ["psm", "pmwn"])
 def test_algo_choice_reaches_eval_sequence_and_bench(tmp_path, algo):
     r = CliRunner()
