@@ -307,3 +307,35 @@ def test_relaxed_cut_corrects_a_long_intel_move_that_ends_with_too_few_pairs(par
     plain, relaxed = match(a, b, Pose2(), params()), match(a, b, Pose2(), params(relaxed_cut=True))
     assert plain.reason.value == "too_few_pairs" and not succeeded(*pose_error(plain.pose, truth))
     assert relaxed.converged and succeeded(*pose_error(relaxed.pose, truth))
+
+
+@settings(max_examples=60)
+@given(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.lists(st.floats(0.05, 1.0), min_size=60, max_size=60),
+       st.booleans())
+def test_translation_step_solves_exact_residuals(tx, ty, weights, surface):
+    """Residuals made by a translation T under the step's own model (e_i = u_i . T, or with the surface
+    normals n_i: e_i (n_i . u_i) = n_i . T) give back T exactly, whatever the weights."""
+    from core.polar import preprocess, translation_step
+
+    b = np.linspace(-1.5, 1.5, 60)
+    ref = preprocess(make_scan(3.0 + np.sin(3 * b), b), 1, 0.0, 30.0, 10.0)
+    T = np.array([tx, ty])
+    i = np.arange(60)
+    if surface:
+        normals = np.column_stack((np.cos(2 * b + 0.3), np.sin(2 * b + 0.3)))  # n . u = cos(b + 0.3) > 0
+        e = normals @ T / np.einsum("ij,ij->i", normals, ref.rays)
+    else:
+        normals, e = None, ref.rays @ T
+    step = translation_step(ref, i, e, np.array(weights), normals)
+    np.testing.assert_allclose(step.dt, T, atol=1e-9)
+    assert step.error == pytest.approx(np.mean(e ** 2)) and step.mean_abs == pytest.approx(np.mean(np.abs(e)))
+
+
+@given(st.lists(st.one_of(st.floats(0.0, 5.0), st.just(float("nan")), st.just(float("inf"))), min_size=1, max_size=40))
+def test_least_is_the_first_smallest_finite_cost(cost):
+    from core.polar import least
+
+    c = np.array(cost)
+    finite = np.isfinite(c)
+    expected = int(np.flatnonzero(finite & (c == c[finite].min()))[0]) if finite.any() else None
+    assert least(c) == expected
