@@ -113,21 +113,23 @@ def project(grid: Grid, cur: PolarScan, pose: Pose2, pad: int = 0) -> np.ndarray
     reference viewpoint: it still hides what lies behind it, but a bearing whose closest surface is
     such a back face is not compared (NaN), as is a bearing where nothing projects.
     """
-    pts = pose.apply(cur.xy)
-    # numpy's arctan2 and the C library's differ in the last bit: the bearings come from numpy
-    out = _project_kernel(pts, np.arctan2(pts[:, 1], pts[:, 0]), cur.edges, grid.b0, grid.step, grid.n, grid.full, pad)
+    out = _project_kernel(cur.xy, cur.edges, pose.x, pose.y, math.cos(pose.theta), math.sin(pose.theta),
+                          grid.b0, grid.step, grid.n, grid.full, pad)
     return np.concatenate((out[grid.n - pad:], out, out[:pad])) if grid.full and pad else out
 
 
 @njit(cache=True)
-def _project_kernel(pts, bearing, edges, b0: float, step: float, n: int, full: bool, pad: int):
-    """The loop of ``project`` over the edges of the moved scan (bins of a full grid not yet extended)."""
+def _project_kernel(xy, edges, tx: float, ty: float, c: float, s: float, b0: float, step: float, n: int,
+                    full: bool, pad: int):
+    """The loop of ``project``: move the scan by (tx, ty, angle with cosine c and sine s), then walk
+    its edges (bins of a full grid not yet extended)."""
     size = n if full else n + 2 * pad
-    a = np.empty(len(pts))
-    r = np.empty(len(pts))
-    for k in range(len(pts)):
-        a[k] = b0 + np.mod(bearing[k] - b0, 2 * np.pi)  # in [b0, b0 + 2pi)
-        r[k] = np.hypot(pts[k, 0], pts[k, 1])
+    a = np.empty(len(xy))
+    r = np.empty(len(xy))
+    for k in range(len(xy)):
+        x, y = c * xy[k, 0] - s * xy[k, 1] + tx, s * xy[k, 0] + c * xy[k, 1] + ty
+        a[k] = b0 + np.mod(np.arctan2(y, x) - b0, 2 * np.pi)  # in [b0, b0 + 2pi)
+        r[k] = np.hypot(x, y)
     out = np.full(size, np.inf)  # closest surface per bin
     front = np.full(size, np.inf)  # closest surface facing the reference viewpoint
     for k in edges:
@@ -277,7 +279,7 @@ class TranslationStep:
 
     rows: np.ndarray  # (m, 2) per used residual: the ray u_i (Diosi) or the surface normal n_i
     rhs: np.ndarray  # (m,)
-    dt: np.ndarray | None  # the weighted least-squares translation [m]; None when singular
+    dt: tuple[float, float] | None  # the weighted least-squares translation [m]; None when singular
     error: float  # mean e^2 of the used residuals [m^2]
     mean_abs: float  # mean |e| of the used residuals [m]
 
@@ -295,23 +297,24 @@ def translation_step(ref: PolarScan, iu: np.ndarray, eu: np.ndarray, wu: np.ndar
     corridors, where Diosi's under-estimates the range change of the walls, over-corrects and
     drifts (his code's own limitation note; `eval ceiling` measures it).
     """
-    rows, rhs, X = _translation_kernel(iu, eu, wu, ref.rays, ref.rays if normals is None else normals,
-                                       normals is not None)
-    a, b, d, rx, ry, e2, e1 = X.sum(axis=1)  # the seven sums in one reduction
+    rows, rhs, sums = _translation_kernel(iu, eu, wu, ref.rays, ref.rays if normals is None else normals,
+                                          normals is not None)
+    a, b, d, rx, ry, e2, e1 = sums
     det = a * d - b * b
     m = len(eu)
     # all rows alike: translation across them is unobservable
-    dt = None if det <= 1e-9 * (a + d) ** 2 else np.array([(d * rx - b * ry) / det, (a * ry - b * rx) / det])
+    dt = None if det <= 1e-9 * (a + d) ** 2 else ((d * rx - b * ry) / det, (a * ry - b * rx) / det)
     return TranslationStep(rows, rhs, dt, float(e2 / m), float(e1 / m))
 
 
 @njit(cache=True)
 def _translation_kernel(iu, eu, wu, rays, normals, surface: bool):
-    """Rows, right-hand sides and the per-residual terms of the normal equations (see ``translation_step``)."""
+    """Rows, right-hand sides and the sums of the normal equations (see ``translation_step``):
+    sum w r0^2, w r0 r1, w r1^2, w r0 rhs, w r1 rhs, e^2, |e|."""
     m = len(eu)
     rows = np.empty((m, 2))
     rhs = np.empty(m)
-    X = np.empty((7, m))
+    sums = np.zeros(7)
     for t in range(m):
         k = iu[t]
         if surface:
@@ -321,10 +324,14 @@ def _translation_kernel(iu, eu, wu, rays, normals, surface: bool):
             rows[t, 0], rows[t, 1] = rays[k, 0], rays[k, 1]
             rhs[t] = eu[t]
         wc, ws = wu[t] * rows[t, 0], wu[t] * rows[t, 1]
-        X[0, t], X[1, t], X[2, t] = wc * rows[t, 0], wc * rows[t, 1], ws * rows[t, 1]
-        X[3, t], X[4, t] = wc * rhs[t], ws * rhs[t]
-        X[5, t], X[6, t] = eu[t] * eu[t], abs(eu[t])
-    return rows, rhs, X
+        sums[0] += wc * rows[t, 0]
+        sums[1] += wc * rows[t, 1]
+        sums[2] += ws * rows[t, 1]
+        sums[3] += wc * rhs[t]
+        sums[4] += ws * rhs[t]
+        sums[5] += eu[t] * eu[t]
+        sums[6] += abs(eu[t])
+    return rows, rhs, sums
 
 
 def polar_pairs(grid: Grid, ref: PolarScan, proj_r: np.ndarray, i: np.ndarray, e: np.ndarray,
@@ -427,7 +434,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                 polar_pairs(grid, R, proj, i, e, used, ref_point_of), params.max_error, error, inc,
                 PolarStep(grid.bearings, ref_r, proj0, shifts, cost, k_best,
                           strategy.fit if k_best is not None else None, abc, lam_used,
-                          e, w, circle, 0.5 * dt if projected_circle else None)))
+                          e, w, circle, 0.5 * np.array(dt) if projected_circle else None)))
         last = (error, iu, len(iu), len(used) - len(iu))
         n_small = n_small + 1 if params.small(inc) else 0
         if n_small >= params.stop_after:
