@@ -339,3 +339,33 @@ def test_least_is_the_first_smallest_finite_cost(cost):
     finite = np.isfinite(c)
     expected = int(np.flatnonzero(finite & (c == c[finite].min()))[0]) if finite.any() else None
     assert least(c) == expected
+
+
+@given(st.lists(st.floats(0.0, 10.0), min_size=1, max_size=40), st.integers(1, 21))
+def test_median_filter_is_scipys_with_the_ends_repeated(x, window):
+    from scipy.ndimage import median_filter
+
+    from core.polar import median_nearest
+
+    x = np.array(x)
+    assert np.array_equal(median_nearest(x, window), median_filter(x, size=window, mode="nearest"))
+
+
+@given(st.lists(st.tuples(st.floats(0.1, 5.0), st.booleans()), min_size=1, max_size=60), st.floats(0.05, 1.0))
+def test_segments_are_the_runs_of_close_valid_readings(beams, max_jump):
+    """PSM §3 step 1: consecutive valid readings share a segment exactly when their ranges differ by
+    at most max_jump; a reading with no such neighbour is in none."""
+    from core.polar import segment
+
+    r = np.array([b[0] for b in beams])
+    valid = np.array([b[1] for b in beams])
+    seg = segment(r, valid, max_jump)
+    assert (seg[~valid] == -1).all()
+    k = np.flatnonzero(valid)
+    close = np.abs(np.diff(r[k])) <= max_jump  # between consecutive valid readings
+    for a, b, near in zip(k, k[1:], close):
+        assert (seg[a] == seg[b] and seg[a] >= 0) == bool(near)
+    alone = np.ones(len(k), dtype=bool)
+    alone[1:] &= ~close
+    alone[:-1] &= ~close
+    assert (seg[k[alone]] == -1).all()
