@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -198,13 +198,13 @@ def shift_costs(ref_r: np.ndarray, proj_ext: np.ndarray, K: int, min_pairs: int,
     mean (a nearly flat curve whose minimum wanders); capped, a bearing that compares different
     surfaces costs the same at every shift and the agreeing ones decide.
     """
-    cost, count = _shift_costs_kernel(ref_r, proj_ext, K, np.inf if cap is None else float(cap))
-    return np.where(count >= min_pairs, cost, np.nan), count
+    return _shift_costs_kernel(ref_r, proj_ext, K, min_pairs, np.inf if cap is None else float(cap))
 
 
 @njit(cache=True)
-def _shift_costs_kernel(ref_r, proj_ext, K: int, cap: float):
-    """Sum over the bearings with both ranges of min(|difference|, cap) / their count, per shift."""
+def _shift_costs_kernel(ref_r, proj_ext, K: int, min_pairs: int, cap: float):
+    """Sum over the bearings with both ranges of min(|difference|, cap) / their count, per shift
+    (NaN with fewer than min_pairs)."""
     cost = np.zeros(2 * K + 1)
     count = np.zeros(2 * K + 1, dtype=np.int64)
     for s in range(2 * K + 1):  # shift k = s - K: r_proj(i + k) is proj_ext[i + s]
@@ -214,7 +214,7 @@ def _shift_costs_kernel(ref_r, proj_ext, K: int, cap: float):
             if d == d:  # both ranges present
                 total += min(d, cap)
                 m += 1
-        cost[s], count[s] = total / max(m, 1), m
+        cost[s], count[s] = total / max(m, 1) if m >= min_pairs else np.nan, m
     return cost, count
 
 
@@ -268,15 +268,28 @@ def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarra
     return float(shifts[j]), None
 
 
+class Residuals(NamedTuple):
+    """The range residuals of one translation step: all at shared bearings, and the used ones."""
+
+    i: np.ndarray  # bearing indices where both scans have a range
+    e: np.ndarray  # r_ref - r_proj there [m]
+    w: np.ndarray  # PSM weights C / (C + e^2)
+    used: np.ndarray  # |e| within the cut
+    iu: np.ndarray  # i[used]
+    eu: np.ndarray  # e[used]
+    wu: np.ndarray  # w[used]
+
+
 def translation_residuals(ref: PolarScan, proj_r: np.ndarray, max_error: float, C: float,
-                          min_pairs: int | None = None):
+                          min_pairs: int | None = None) -> Residuals:
     """Residuals e_i = r_ref - r_proj at shared bearings, PSM weights w = C / (C + e^2), and which are used.
 
     With ``min_pairs`` (not published) the cut never keeps fewer than that many residuals: when
     fewer lie within ``max_error`` it rises to the min_pairs-th smallest |e|, so that a long move
     is still corrected (the weights keep the far ones weak) instead of ending with too few pairs.
     """
-    return _residuals_kernel(ref.ranges, ref.valid, proj_r, max_error, C, 0 if min_pairs is None else min_pairs)
+    relaxed = 0 if min_pairs is None else min_pairs
+    return Residuals(*_residuals_kernel(ref.ranges, ref.valid, proj_r, max_error, C, relaxed))
 
 
 @njit(cache=True)
@@ -293,7 +306,9 @@ def _residuals_kernel(ref_r, valid, proj_r, max_error: float, C: float, min_pair
     a = np.abs(e)
     if 0 < min_pairs <= m:
         max_error = max(max_error, np.sort(a)[min_pairs - 1])
-    return i, e, C / (C + e * e), a <= max_error
+    w = C / (C + e * e)
+    used = a <= max_error
+    return i, e, w, used, i[used], e[used], w[used]
 
 
 def beam_normals(scan: PolarScan) -> np.ndarray:
@@ -404,6 +419,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
     ref_r = np.where(R.valid, R.ranges, np.nan)
     K = int(round(params.search_window / grid.step))
     shifts = np.arange(-K, K + 1)
+    no_cost = np.full(len(shifts), np.nan)  # the cost curve of an iteration without orientation step
     if observer is not None:
         observer(StartEvent(strategy.name, params, ref_pts, obj_pts, np.arange(len(obj_pts)), guess, None))
     est, lam = guess, params.lambda0 if strategy.metric else None
@@ -415,7 +431,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
         before = est
         proj_ext = project(grid, O, est, K)
         proj0 = proj_ext[K: K + grid.n]
-        cost, k_best, abc = np.full(len(shifts), np.nan), None, None
+        cost, k_best, abc = no_cost, None, None
         range_cost = cost
         if strategy.orientation_due(it) and K > 0:
             range_cost, _ = shift_costs(ref_r, proj_ext, K, params.min_pairs,
@@ -436,18 +452,17 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                 k_turn = gain * k_best
             est = Pose2(0.0, 0.0, -k_turn * grid.step) @ est
             proj = project(grid, O, est)
-        i, e, w, used = translation_residuals(R, proj, params.max_error, params.weight_constant(it),
+        res = translation_residuals(R, proj, params.max_error, params.weight_constant(it),
                                               params.min_pairs if params.relaxed_cut else None)
-        if np.count_nonzero(used) < params.min_pairs:
+        if len(res.iu) < params.min_pairs:
             reason = Termination.TOO_FEW_PAIRS
             est = before
             if observer is not None:
                 observer(IterationEvent(it, before, before, before.apply(obj_pts), np.empty(0, np.int64),
-                                        polar_pairs(grid, R, proj, i, e, used, ref_point_of), None, float("nan"),
-                                        Pose2(), None))
+                                        polar_pairs(grid, R, proj, res.i, res.e, res.used, ref_point_of), None,
+                                        float("nan"), Pose2(), None))
             break
-        iu, eu = i[used], e[used]
-        step = translation_step(R, iu, eu, w[used], normals)
+        step = translation_step(R, res.iu, res.eu, res.wu, normals)
         dt, error = step.dt, step.error
         if dt is None:
             reason, est = Termination.SINGULAR, before
@@ -468,11 +483,11 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
             circle = step.rhs[:, None] * step.rows if projected_circle else None  # Diosi's rows are the rays u_i
             observer(IterationEvent(
                 it, before, est, before.apply(obj_pts), np.empty(0, np.int64),
-                polar_pairs(grid, R, proj, i, e, used, ref_point_of), params.max_error, error, inc,
+                polar_pairs(grid, R, proj, res.i, res.e, res.used, ref_point_of), params.max_error, error, inc,
                 PolarStep(grid.bearings, ref_r, proj0, shifts, cost, k_best,
                           strategy.fit if k_best is not None else None, abc, lam_used,
-                          e, w, circle, 0.5 * np.array(dt) if projected_circle else None)))
-        last = (error, iu, len(iu), len(used) - len(iu))
+                          res.e, res.w, circle, 0.5 * np.array(dt) if projected_circle else None)))
+        last = (error, res.iu, len(res.iu), len(res.i) - len(res.iu))
         n_small = n_small + 1 if params.small(inc) else 0
         if n_small >= params.stop_after:
             reason = Termination.CONVERGED

@@ -287,8 +287,10 @@ def test_relaxed_cut_keeps_at_least_min_pairs_and_changes_nothing_when_enough_ar
     b = np.linspace(-1.0, 1.0, len(e))
     ref = preprocess(make_scan(np.full(len(e), 6.0), b), 1, 0.0, 30.0, 0.2)
     proj = 6.0 - e
-    _, e0, _, used0 = translation_residuals(ref, proj, max_error, 0.49)
-    _, e1, _, used1 = translation_residuals(ref, proj, max_error, 0.49, min_pairs)
+    plain = translation_residuals(ref, proj, max_error, 0.49)
+    relaxed = translation_residuals(ref, proj, max_error, 0.49, min_pairs)
+    (e0, used0), (e1, used1) = (plain.e, plain.used), (relaxed.e, relaxed.used)
+    assert np.array_equal(relaxed.eu, e1[used1]) and np.array_equal(relaxed.iu, relaxed.i[used1])
     np.testing.assert_allclose(e0, e1)
     assert np.count_nonzero(used1) >= min_pairs
     assert used0[used1].sum() == used0.sum()  # every residual inside max_error stays
