@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -134,7 +135,7 @@ class Grid:
                             f"{np.degrees(d.min()):.4f} to {np.degrees(d.max()):.4f} deg); use icp, mbicp or improved")
         return Grid(float(b[0]), step, len(b), scan.is_full_circle())
 
-    @property
+    @cached_property
     def bearings(self) -> np.ndarray:
         return self.b0 + self.step * np.arange(self.n)
 
@@ -392,7 +393,8 @@ def polar_pairs(grid: Grid, ref: PolarScan, proj_r: np.ndarray, i: np.ndarray, e
     u = ref.rays[i]
     src = proj_r[i, None] * u
     tgt = ref.ranges[i, None] * u
-    status = np.where(used, PairStatus.KEPT, PairStatus.OUTSIDE_BR).astype(np.int8)
+    status = np.full(len(i), PairStatus.OUTSIDE_BR, dtype=np.int8)
+    status[used] = PairStatus.KEPT
     return Correspondences(np.full(len(i), -1), tgt, np.full(len(i), PairKind.POINT, dtype=np.int8),
                            np.column_stack((ref_point_of[i], np.full(len(i), -1))), np.abs(e), status, src)
 
