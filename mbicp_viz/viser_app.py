@@ -516,9 +516,18 @@ class Session:
         while not self.closed.is_set():
             if self.playing and self.runs:
                 with self.lock:
+                    if self.closed.is_set():  # closed while this frame waited for the lock
+                        break
                     n = self.max_iteration()
                     self.h_iter.value = 0 if self.iteration >= n else self.iteration + 1
             time.sleep(1.0 / max(self.fps, 0.5))
+
+    def close(self) -> None:
+        """Stop the player; returns once a frame it was drawing has been sent (nothing is queued
+        for a client that has gone, or on a stopped server)."""
+        self.closed.set()
+        with self.lock:
+            pass
 
     # ---- export -----------------------------------------------------------------------------
     def export_rrd(self) -> bytes:
@@ -563,7 +572,7 @@ class App:
         with self._lock:
             s = self.sessions.pop(client.client_id, None)
         if s is not None:
-            s.closed.set()
+            s.close()
 
     @property
     def port(self) -> int:
@@ -571,7 +580,7 @@ class App:
 
     def stop(self) -> None:
         for s in list(self.sessions.values()):
-            s.closed.set()
+            s.close()
         self.server.stop()
 
 

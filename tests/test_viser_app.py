@@ -27,7 +27,9 @@ def server():
 
 @pytest.fixture
 def session(server):
-    return Session(server, Source("hokuyo pair", read_log(PAIR), guess=Pose2()))
+    s = Session(server, Source("hokuyo pair", read_log(PAIR), guess=Pose2()))
+    yield s
+    s.close()
 
 
 def test_opens_on_the_final_iteration_with_a_result(session):
@@ -69,6 +71,11 @@ def test_previous_next_and_play(session):
     time.sleep(0.5)
     session.playing = False
     assert session.iteration != 2  # the player advanced
+    session.playing = True
+    session.close()  # stops the player even while playing
+    at = session.iteration
+    time.sleep(0.2)
+    assert session.iteration == at
 
 
 def test_pairs_by_kind_match_the_events(session):
