@@ -270,7 +270,8 @@ def best_shift(shifts: np.ndarray, cost: np.ndarray, refine, fit_cost: np.ndarra
 
 
 class Residuals(NamedTuple):
-    """The range residuals of one translation step: all at shared bearings, and the used ones."""
+    """The range residuals of one translation step: all at shared bearings, and the used ones (the
+    kernel returns both, so the loop does not index the arrays again each iteration)."""
 
     i: np.ndarray  # bearing indices where both scans have a range
     e: np.ndarray  # r_ref - r_proj there [m]
@@ -455,7 +456,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
             est = Pose2(0.0, 0.0, -k_turn * grid.step) @ est
             proj = project(grid, O, est)
         res = translation_residuals(R, proj, params.max_error, params.weight_constant(it),
-                                              params.min_pairs if params.relaxed_cut else None)
+                                    params.min_pairs if params.relaxed_cut else None)
         if len(res.iu) < params.min_pairs:
             reason = Termination.TOO_FEW_PAIRS
             est = before
