@@ -17,7 +17,10 @@ class ParamError(ValueError):
 
     def __init__(self, name: str, message: str):
         super().__init__(f"parameter {name!r}: {message}")
-        self.name = name
+        self.name, self.message = name, message
+
+    def __reduce__(self):  # worker processes send errors back pickled; keep the arguments
+        return type(self), (self.name, self.message)
 
 
 def param(default, *, unit: str, lo: float | None = None, hi: float | None = None, help: str):

@@ -20,6 +20,9 @@ class ScanError(ValueError):
         super().__init__(f"{source}: {reason}")
         self.source, self.reason = source, reason
 
+    def __reduce__(self):  # worker processes send errors back pickled; keep the arguments
+        return type(self), (self.source, self.reason)
+
 
 @dataclass(frozen=True)
 class ScanSource:

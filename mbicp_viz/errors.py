@@ -11,3 +11,6 @@ class InputError(Exception):
         where = ":".join(str(p) for p in (path, line) if p is not None)
         text = f"{field}: {message}" if field else message
         super().__init__(f"{where}: {text}" if where else text)
+
+    def __reduce__(self):  # worker processes send errors back pickled; keep the arguments
+        return type(self), (self.message, self.path, self.line, self.field)

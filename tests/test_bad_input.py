@@ -2,6 +2,7 @@
 
 import gzip
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -165,3 +166,22 @@ def test_fuzz_check_accepts_a_valid_line(tmp_path):
     # the fuzz oracle is not vacuous: a valid line reads as a scan
     p = write(tmp_path, "ok.log", FLASER_OK + "\n")
     assert len(read_log(p)) == 1 and math.isclose(read_log(p).scans[0].ranges[0], 1.0)
+
+
+def _refuse(scan: Scan) -> None:
+    raise ScanError(scan.source, "refused in a worker")
+
+
+def test_errors_raised_in_worker_processes_arrive_whole():
+    """Evaluations run in a process pool, which sends exceptions back pickled: each error type
+    must rebuild with its fields, else the user gets BrokenProcessPool instead of the message."""
+    from core import ParamError
+    from mbicp_viz.pool import ordered_map
+
+    for e in (ScanError(read_log(INTEL).scans[0].source, "why"), ParamError("Br", "must be > 0"),
+              InputError("bad value", "a.log", 3, "ranges")):
+        back = pickle.loads(pickle.dumps(e))
+        assert type(back) is type(e) and str(back) == str(e) and vars(back) == vars(e)
+    scans = read_log(INTEL).scans[:4]
+    with pytest.raises(ScanError, match="scan 0.*refused in a worker"):
+        ordered_map(_refuse, scans, workers=2)
