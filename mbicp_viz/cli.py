@@ -312,6 +312,8 @@ def eval_overlap(
     ratios: Annotated[str, typer.Option("--ratios", help="kept fractions in %")] = "100,90,80,70,60",
     runs: Annotated[int, typer.Option("--runs", min=1, help="random displacements per scene and ratio")] = 10,
     removal: Annotated[str, typer.Option("--removal", help="block (occlusion-like) or random")] = "block",
+    thin: Annotated[str, typer.Option("--thin", help="the copy that loses the points: reference (its object "
+                                      "points then lack counterparts) or object")] = "reference",
     algos: Annotated[str, typer.Option("--algos", help="comma-separated matchers")] = ",".join(MATCHERS),
     params: ParamsOpt = None,
     seed: Annotated[int, typer.Option("--seed", help="random seed")] = 0,
@@ -331,6 +333,8 @@ def eval_overlap(
 
     if removal not in ("block", "random"):
         raise InputError("choose block or random", field="--removal")
+    if thin not in ("reference", "object"):
+        raise InputError("choose reference or object", field="--thin")
     try:
         etas = [float(v) / 100.0 for v in ratios.split(",")]
     except ValueError:
@@ -346,7 +350,7 @@ def eval_overlap(
         else:
             idx = [int(round(k)) for k in np.linspace(0, len(lg.scans) - 1, scenes_per_log + 2)[1:-1]]
         scenes += [lg.scan(i) for i in idx]
-    cases = make_cases(scenes, etas, runs, removal, seed, max_xy, math.radians(max_theta_deg))
+    cases = make_cases(scenes, etas, runs, removal, seed, max_xy, math.radians(max_theta_deg), thin)
     total = len(cases)
     t0 = time.perf_counter()
     with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:
@@ -362,7 +366,7 @@ def eval_overlap(
     tab = tables(rows)
     typer.echo(markdown(tab))
     typer.echo(f"{len(rows)} matches ({len(rows) // max(len(ps), 1)}/{total} cases) in {took:.1f} s; "
-               f"{len(scenes)} scenes, removal {removal}, seed {seed}", err=True)
+               f"{len(scenes)} scenes, removal {removal} from the {thin}, seed {seed}", err=True)
     if csv:
         csv.write_text(csv_text(rows))
     if png:

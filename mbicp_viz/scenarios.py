@@ -79,6 +79,16 @@ def seen_from(scan: Scan, T: Pose2, keep: np.ndarray | None = None) -> Scan:
                      source=ScanSource(f"{scan.source.path} (displaced)", scan.source.index))
 
 
+def thinned(scan: Scan, keep: np.ndarray) -> Scan:
+    """``scan`` with the valid readings where ``keep`` is False marked invalid.
+
+    The beams stay (uniform bearings, as PSM's reference needs); ``keep`` runs over the valid readings.
+    """
+    valid = scan.valid.copy()
+    valid[scan.valid_indices()[~keep]] = False
+    return make_scan(scan.ranges, scan.bearings, valid=valid, source=scan.source)
+
+
 def block_mask(n: int, a: float, b: float) -> np.ndarray:
     keep = np.ones(n, dtype=bool)
     keep[int(round(a * n)):int(round(b * n))] = False

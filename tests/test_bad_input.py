@@ -88,6 +88,11 @@ def test_unknown_algorithm():
     assert_clean_error(*run("match", INTEL, "--algo", "sift"), "--algo", "unknown algorithm")
 
 
+def test_overlap_protocol_choices():
+    assert_clean_error(*run("eval", "overlap", INTEL, "--thin", "both"), "--thin", "reference or object")
+    assert_clean_error(*run("eval", "overlap", INTEL, "--removal", "holes"), "--removal", "block or random")
+
+
 def test_csm_json_errors(tmp_path):
     p = write(tmp_path, "s.jsonl", '{"nrays": 3, "theta": [0, 1], "readings": [1, 2, 3]}\n')
     assert_clean_error(*run("match", p, p), "s.jsonl:1", "theta")

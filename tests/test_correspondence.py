@@ -12,9 +12,8 @@ from core.correspondence import ReferenceIndex, nearest, point_line_pairs, polar
 from core.events import PairKind
 from core.mbicp import rejection_floor
 from core.metric import metric_distance_sq
-from mbicp_viz.overlap import make_cases
+from mbicp_viz.overlap import case_pair, make_cases
 from mbicp_viz.readers import read_log
-from mbicp_viz.scenarios import seen_from
 
 from .conftest import DATA
 
@@ -111,7 +110,7 @@ def test_annealed_rejection_widens_the_basin(intel):
         for i in (10, 30):
             scan = intel.scan(i)
             for c in make_cases([scan], [1.0, 0.8, 0.6], 6, "random", 1, 0.5, math.radians(15)):
-                r = match(scan, seen_from(scan, c.truth, c.keep), Pose2(), params)
+                r = match(*case_pair(scan, c), Pose2(), params)
                 et, er = pose_error(r.pose, c.truth)
                 ok += et <= 0.1 and er <= math.radians(3.14)
         return ok / 36
