@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -43,12 +44,37 @@ EXAMPLES = Path(__file__).parent / "examples"
 DEMO_PAIR = EXAMPLES / "hokuyo-125-130.npz"
 
 
+# Options that name a file a command writes, by the same names in every command.
+OUTPUT_FILES = ("rrd", "out", "png", "tum", "tum_ref", "csv")
+
+
+def check_outputs(options: dict) -> None:
+    """Refuse an output file whose folder is missing or read-only before any work is done (a run
+    must not end in an error after its work); make ``--out-dir`` when missing."""
+    for name in OUTPUT_FILES:
+        path, field = options.get(name), "--" + name.replace("_", "-")
+        if not isinstance(path, Path):  # unset, or a flag (bench --rrd)
+            continue
+        if path.is_dir():
+            raise InputError(f"{path} is a folder; give a file name", field=field)
+        if not path.parent.is_dir():
+            raise InputError(f"folder {path.parent} does not exist", field=field)
+        if not os.access(path.parent, os.W_OK):
+            raise InputError(f"folder {path.parent} is not writable", field=field)
+    if isinstance(options.get("out_dir"), Path):
+        try:
+            options["out_dir"].mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise InputError(f"cannot make folder {options['out_dir']}: {e.strerror}", field="--out-dir") from None
+
+
 def user_errors(fn):
     """Bad input ends in one readable line on stderr and exit code 2, never a traceback."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
+            check_outputs(kwargs)
             return fn(*args, **kwargs)
         except (InputError, ScanError, ParamError) as e:
             typer.echo(f"mbicp-viz: error: {e}", err=True)
@@ -517,7 +543,8 @@ def bench_cmd(
 @user_errors
 def record_cmd(
     names: Annotated[Optional[list[str]], typer.Argument(help="scenario names (default: all)")] = None,
-    out_dir: Annotated[Optional[Path], typer.Option("--out-dir", help="write the .rrd files here")] = None,
+    out_dir: Annotated[Optional[Path], typer.Option("--out-dir",
+                                                    help="write the .rrd files here (made if missing)")] = None,
 ):
     """Regenerate the curated recordings (recordings/*.rrd) from recordings/scenarios/*.toml."""
     from .recordings import record_all
@@ -564,7 +591,7 @@ def compare_cmd(
 @app.command("bench-gui")
 @user_errors
 def bench_gui_cmd(
-    scans: Annotated[Path, typer.Argument(help="scan file")] = Path(__file__).parent / "examples" / "hokuyo-125-130.npz",
+    scans: Annotated[Path, typer.Argument(help="scan file")] = DEMO_PAIR,
     pair: PairOpt = None,
 ):
     """Latency of the debugger: iteration step -> redraw, parameter change -> re-match -> redraw."""

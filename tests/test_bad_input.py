@@ -93,6 +93,35 @@ def test_overlap_protocol_choices():
     assert_clean_error(*run("eval", "overlap", INTEL, "--removal", "holes"), "--removal", "block or random")
 
 
+@pytest.mark.parametrize("args", [
+    ("match", INTEL, "--pair", 0, 1, "--rrd"),
+    ("compare", INTEL, "--pair", 0, 1, "--rrd"),
+    ("eval", "overlap", INTEL, "--csv"),
+    ("eval", "overlap", INTEL, "--png"),
+    ("eval", "sequence", INTEL, "--tum"),
+    ("eval", "basin", INTEL, "--pair", 0, 1, "--png"),
+    ("params", "--out"),
+])
+def test_an_unwritable_output_is_refused_before_the_work(tmp_path, args):
+    """A missing folder or a folder given as the file: a clean error up front, not a traceback
+    after the whole run."""
+    missing = tmp_path / "no-such-folder" / "out.x"
+    extra = ("--out", tmp_path / "rows.json") if args[:2] == ("eval", "sequence") else ()
+    assert_clean_error(*run(*args, missing, *extra), args[-1], "does not exist")
+    assert_clean_error(*run(*args, tmp_path, *extra), args[-1], "is a folder")
+    assert not (tmp_path / "rows.json").exists()
+
+
+def test_record_makes_its_output_folder(tmp_path):
+    out = tmp_path / "a" / "b"
+    code, text = run("record", "large-rotation", "--out-dir", out)
+    assert code == 0, text
+    assert (out / "large-rotation.rrd").stat().st_size > 0
+    (tmp_path / "file").write_text("")
+    assert_clean_error(*run("record", "large-rotation", "--out-dir", tmp_path / "file" / "x"), "--out-dir",
+                       "cannot make folder")
+
+
 def test_csm_json_errors(tmp_path):
     p = write(tmp_path, "s.jsonl", '{"nrays": 3, "theta": [0, 1], "readings": [1, 2, 3]}\n')
     assert_clean_error(*run("match", p, p), "s.jsonl:1", "theta")
