@@ -26,7 +26,7 @@ import numpy as np
 from core import Params, Pose2, Scan, match, pose_error
 
 from .pool import ordered_map
-from .scenarios import block_mask, seen_from, thinned
+from .scenarios import block_mask, displaced_pair
 
 FAIL_M, FAIL_RAD = 0.1, math.radians(3.14)  # paper 000 §3.1
 CLASSES = ("TP", "FP", "TN", "FN")
@@ -84,9 +84,7 @@ def classify(converged: bool, correct: bool) -> str:
 
 def case_pair(scan: Scan, case: OverlapCase) -> tuple[Scan, Scan]:
     """(reference, object) of a case; the object is seen from the displacement ``case.truth``."""
-    if case.thinned == "reference":
-        return thinned(scan, case.keep), seen_from(scan, case.truth)
-    return scan, seen_from(scan, case.truth, case.keep)
+    return displaced_pair(scan, case.truth, case.keep, case.thinned)
 
 
 def run_case(args) -> list[OverlapRow]:

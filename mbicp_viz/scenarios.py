@@ -11,8 +11,10 @@ Fields (units at the edges: degrees named ``_deg``):
 - ``pair = [I, J]``: reference and object scan indices in the input.
 - ``displacement_deg = [x, y, theta_deg]`` (optional, needs I == J): the object is the reference
   scan seen from a sensor at this pose, which is then the known answer.
-- ``remove_block = [a, b]`` (optional): remove the object's valid beams between fractions a and b
-  of the scan (an occlusion-like block, paper 000 §3.1).
+- ``remove_block = [a, b]`` (optional): remove the valid beams between fractions a and b of the
+  scan (an occlusion-like block, paper 000 §3.1) from the copy ``thin`` names: ``"reference"``
+  (the default; the object's points there then have no counterpart, as the paper's trashcan
+  experiment, §3.1 Figs. 11-12) or ``"object"``.
 - ``guess_deg = [x, y, theta_deg]`` or ``guess = "log"`` (the poses/odometry the input stores).
 - ``algorithms = [...]`` and ``[params.NAME]`` tables in the ``--params`` file format.
 - ``teaching = true``: add the teaching layers.
@@ -89,6 +91,14 @@ def thinned(scan: Scan, keep: np.ndarray) -> Scan:
     return make_scan(scan.ranges, scan.bearings, valid=valid, source=scan.source)
 
 
+def displaced_pair(scan: Scan, truth: Pose2, keep: np.ndarray | None, thin: str) -> tuple[Scan, Scan]:
+    """(reference, object) from one scan: the object is the scan seen from ``truth``; ``keep``
+    (over the valid readings) thins the reference or the object, as ``thin`` says."""
+    if keep is None or thin == "object":
+        return scan, seen_from(scan, truth, keep)
+    return thinned(scan, keep), seen_from(scan, truth)
+
+
 def block_mask(n: int, a: float, b: float) -> np.ndarray:
     keep = np.ones(n, dtype=bool)
     keep[int(round(a * n)):int(round(b * n))] = False
@@ -111,7 +121,10 @@ def load_scenario(path: Path) -> Scenario:
             raise InputError("a displacement needs the same scan twice: pair = [I, I]", str(path), field="pair")
         truth = _pose_deg(spec["displacement_deg"], str(path), "displacement_deg")
         keep = block_mask(ref.n_valid, *spec["remove_block"]) if "remove_block" in spec else None
-        obj = seen_from(ref, truth, keep)
+        thin = spec.get("thin", "reference")
+        if thin not in ("reference", "object"):
+            raise InputError("choose reference or object", str(path), field="thin")
+        ref, obj = displaced_pair(ref, truth, keep, thin)
     else:
         obj = log.scan(j)
         if ref.pose is not None and obj.pose is not None:
