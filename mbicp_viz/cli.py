@@ -353,7 +353,7 @@ def eval_overlap(
     """Paper 000's partial-overlap protocol (§3.1): Tables 1-3 for each matcher, as Markdown."""
     import math
 
-    from .inputs import make_params
+    from .inputs import number_list, params_for
     from .overlap import csv_text, make_cases, markdown, plot_png, run_overlap, tables
     from .readers import read_log
 
@@ -361,18 +361,14 @@ def eval_overlap(
         raise InputError("choose block or random", field="--removal")
     if thin not in ("reference", "object"):
         raise InputError("choose reference or object", field="--thin")
-    try:
-        etas = [float(v) / 100.0 for v in ratios.split(",")]
-    except ValueError:
-        raise InputError(f"expected numbers like 100,90,80, got {ratios!r}", field="--ratios") from None
+    etas = [v / 100.0 for v in number_list(ratios, "--ratios", "100,90,80")]
     if not all(0.0 < e <= 1.0 for e in etas):
         raise InputError("each ratio must lie in (0, 100]", field="--ratios")
-    names = [a.strip() for a in algos.split(",") if a.strip()]
-    ps = {a: make_params(a, str(params) if params else None) for a in names}
+    ps = params_for(algos, str(params) if params else None)
     scenes = []
     for lg in (read_log(p) for p in logs):
         if scans:
-            idx = [int(v) for v in scans.split(",")]
+            idx = number_list(scans, "--scans", "3,10,25", int)
         else:
             idx = [int(round(k)) for k in np.linspace(0, len(lg.scans) - 1, scenes_per_log + 2)[1:-1]]
         scenes += [lg.scan(i) for i in idx]
@@ -411,12 +407,12 @@ def eval_ceiling(
     """How well any guess could do on a log: each matcher started at the truth, and the search alone."""
     from core.agreement import INLIER_RADIUS_M
 
-    from .inputs import make_params
+    from .inputs import params_for
     from .readers import read_log
     from .sequence import ceiling
 
-    names = [a.strip() for a in algos.split(",") if a.strip()]
-    ps = [make_params(a, params) for a in names]
+    by_name = params_for(algos, params)
+    names, ps = list(by_name), list(by_name.values())
     lg = read_log(log)
     total = min(limit or len(lg.scans) - 1, len(lg.scans) - 1)
     with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:
@@ -479,14 +475,10 @@ def eval_basin(
     import math
 
     from .basin import basin, plot_png, record_rrd, summary
-    from .inputs import guess_from_deg, load_pair, make_params
+    from .inputs import guess_from_deg, load_pair, number_list, params_for
 
-    try:
-        thetas = [math.radians(float(v)) for v in thetas_deg.split(",")]
-    except ValueError:
-        raise InputError(f"expected numbers like -15,0,15, got {thetas_deg!r}", field="--thetas-deg") from None
-    names = [a.strip() for a in algos.split(",") if a.strip()]
-    ps = {a: make_params(a, str(params) if params else None) for a in names}
+    thetas = [math.radians(v) for v in number_list(thetas_deg, "--thetas-deg", "-15,0,15")]
+    ps = params_for(algos, str(params) if params else None)
     sp = load_pair(first, second, pair)
     answer = guess_from_deg(truth)
     if answer is None and sp.ref.pose is not None and sp.obj.pose is not None:
@@ -574,11 +566,10 @@ def compare_cmd(
 ):
     """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
     from .compare import compare_table
-    from .inputs import guess_from_deg, load_pair, make_params, stored_guess
+    from .inputs import guess_from_deg, load_pair, params_for, stored_guess
     from .rrd import Run
 
-    names = [a.strip() for a in algos.split(",") if a.strip()]
-    ps = {a: make_params(a, str(params) if params else None) for a in names}
+    ps = params_for(algos, str(params) if params else None)
     sp = load_pair(first, second, pair)
     guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
     known = guess_from_deg(truth)

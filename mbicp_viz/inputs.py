@@ -61,6 +61,22 @@ def make_params(algorithm: str, params_file: str | None) -> Params:
     return load_params(params_file, algorithm) if params_file else MATCHERS[algorithm].params_type()
 
 
+def params_for(algos: str, params_file: str | None) -> dict[str, Params]:
+    """``--algos a,b,c`` with their parameters (defaults, or the file's table for each)."""
+    names = [a.strip() for a in algos.split(",") if a.strip()]
+    if not names:
+        raise InputError(f"name at least one matcher: {', '.join(MATCHERS)}", field="--algos")
+    return {a: make_params(a, params_file) for a in names}
+
+
+def number_list(text: str, field: str, example: str, kind=float) -> list:
+    """``--field 1,2,3`` as numbers of ``kind``; one clear error for anything else."""
+    try:
+        return [kind(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"expected numbers like {example}, got {text!r}", field=field) from None
+
+
 def consecutive_pairs(log: ScanLog, limit: int | None = None):
     n = len(log.scans) - 1 if limit is None else min(limit, len(log.scans) - 1)
     if n < 1:

@@ -88,6 +88,18 @@ def test_unknown_algorithm():
     assert_clean_error(*run("match", INTEL, "--algo", "sift"), "--algo", "unknown algorithm")
 
 
+@pytest.mark.parametrize("args, field, needle", [
+    (("eval", "overlap", INTEL, "--scans", "1,x"), "--scans", "expected numbers"),
+    (("eval", "overlap", INTEL, "--ratios", "100,sixty"), "--ratios", "expected numbers"),
+    (("eval", "basin", INTEL, "--pair", 0, 1, "--thetas-deg=a"), "--thetas-deg", "expected numbers"),
+    (("compare", INTEL, "--pair", 0, 1, "--algos", ","), "--algos", "at least one matcher"),
+    (("eval", "ceiling", INTEL, "--algos", " "), "--algos", "at least one matcher"),
+    (("eval", "overlap", INTEL, "--algos", ",,"), "--algos", "at least one matcher"),
+])
+def test_lists_of_numbers_and_matchers(args, field, needle):
+    assert_clean_error(*run(*args), field, needle)
+
+
 def test_overlap_protocol_choices():
     assert_clean_error(*run("eval", "overlap", INTEL, "--thin", "both"), "--thin", "reference or object")
     assert_clean_error(*run("eval", "overlap", INTEL, "--removal", "holes"), "--removal", "block or random")
