@@ -44,6 +44,13 @@ EXAMPLES = Path(__file__).parent / "examples"
 DEMO_PAIR = EXAMPLES / "hokuyo-125-130.npz"
 
 
+def finite(value: float) -> float:
+    """Typer callback: bounds checks let inf (and NaN, with no lower bound) through."""
+    if not math.isfinite(value):
+        raise typer.BadParameter(f"must be a finite number, got {value}")
+    return value
+
+
 # Options that name a file a command writes, by the same names in every command.
 OUTPUT_FILES = ("rrd", "out", "png", "tum", "tum_ref", "csv")
 
@@ -308,8 +315,9 @@ def eval_protocol(
     algo: AlgoOpt = "improved",
     params: ParamsOpt = None,
     cases: Annotated[int, typer.Option("--cases", min=1, help="number of random cases")] = 200,
-    seed: Annotated[int, typer.Option("--seed", help="random seed")] = 24,
-    max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, help="largest |x|, |y| of the guess [m]")] = 0.2,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="random seed")] = 24,
+    max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, callback=finite,
+                                          help="largest |x|, |y| of the guess [m]")] = 0.2,
     max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
                                                  help="largest |theta| of the guess [deg]")] = 45.0,
 ):
@@ -342,8 +350,9 @@ def eval_overlap(
                                       "points then lack counterparts) or object")] = "reference",
     algos: Annotated[str, typer.Option("--algos", help="comma-separated matchers")] = ",".join(MATCHERS),
     params: ParamsOpt = None,
-    seed: Annotated[int, typer.Option("--seed", help="random seed")] = 0,
-    max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, help="largest |x|, |y| of a displacement [m]")] = 0.5,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="random seed")] = 0,
+    max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, callback=finite,
+                                          help="largest |x|, |y| of a displacement [m]")] = 0.5,
     max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
                                                  help="largest |theta| of a displacement [deg]")] = 15.0,
     csv: Annotated[Optional[Path], typer.Option("--csv", help="write every run as CSV")] = None,
@@ -433,9 +442,11 @@ def eval_relations(
     relations: Annotated[str, typer.Argument(help="relations file (t1 t2 x y z roll pitch yaw)")],
     algo: AlgoOpt = "improved",
     params: ParamsOpt = None,
-    offset: Annotated[float, typer.Option("--offset", help="seconds added to the log's stamps (Intel corrected: "
+    offset: Annotated[float, typer.Option("--offset", callback=finite,
+                                          help="seconds added to the log's stamps (Intel corrected: "
                                           "976052857.337)")] = 0.0,
-    tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, help="largest stamp mismatch [s]")] = 0.025,
+    tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
+                                             help="largest stamp mismatch [s]")] = 0.025,
     guess: Annotated[str, typer.Option("--guess", help="identity, pose, odometry or search (a correlative search "
                                        f"within {SEARCH} of the identity)")] = "identity",
     out: Annotated[Optional[Path], typer.Option("--out", help="JSON file: one object per matched relation")] = None,
@@ -464,7 +475,8 @@ def eval_basin(
         "--truth", help="the answer X Y THETA_DEG (default: the stored poses, else each matcher's own)")] = None,
     algos: Annotated[str, typer.Option("--algos", help="comma-separated matchers")] = ",".join(MATCHERS),
     params: ParamsOpt = None,
-    range_xy: Annotated[float, typer.Option("--range-xy", min=0.0, help="largest |dx|, |dy| offset [m]")] = 1.0,
+    range_xy: Annotated[float, typer.Option("--range-xy", min=0.0, callback=finite,
+                                            help="largest |dx|, |dy| offset [m]")] = 1.0,
     steps: Annotated[int, typer.Option("--steps", min=2, max=201, help="grid points per axis")] = 11,
     thetas_deg: Annotated[str, typer.Option("--thetas-deg", help="theta offsets [deg]")] = "-30,-15,0,15,30",
     png: Annotated[Optional[Path], typer.Option("--png", help="write the atlas as a PNG")] = None,
@@ -480,7 +492,7 @@ def eval_basin(
     thetas = [math.radians(v) for v in number_list(thetas_deg, "--thetas-deg", "-15,0,15")]
     ps = params_for(algos, str(params) if params else None)
     sp = load_pair(first, second, pair)
-    answer = guess_from_deg(truth)
+    answer = guess_from_deg(truth, "--truth")
     if answer is None and sp.ref.pose is not None and sp.obj.pose is not None:
         from core import relative
 
@@ -572,7 +584,7 @@ def compare_cmd(
     ps = params_for(algos, str(params) if params else None)
     sp = load_pair(first, second, pair)
     guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
-    known = guess_from_deg(truth)
+    known = guess_from_deg(truth, "--truth")
     typer.echo(f"{sp.label}\ninitial guess {guess}\n")
     typer.echo(compare_table(sp.ref, sp.obj, guess, ps, known))
     if rrd or connect or serve:

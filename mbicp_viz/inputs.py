@@ -40,13 +40,14 @@ def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:
     return Pose2(), "identity"
 
 
-def guess_from_deg(init: tuple[float, float, float] | None) -> Pose2 | None:
+def guess_from_deg(init: tuple[float, float, float] | None, option: str = "--init") -> Pose2 | None:
+    """A pose given as X Y THETA_DEG on the command line (``option`` names it in errors)."""
     if init is None:
         return None
     x, y, th = init
     for name, v in (("X", x), ("Y", y), ("THETA_DEG", th)):
         if not math.isfinite(v):
-            raise InputError(f"must be finite, got {v}", field=f"--init {name}")
+            raise InputError(f"must be finite, got {v}", field=f"{option} {name}")
     return Pose2(x, y, math.radians(th))
 
 
@@ -72,9 +73,12 @@ def params_for(algos: str, params_file: str | None) -> dict[str, Params]:
 def number_list(text: str, field: str, example: str, kind=float) -> list:
     """``--field 1,2,3`` as numbers of ``kind``; one clear error for anything else."""
     try:
-        return [kind(v) for v in text.split(",")]
+        values = [kind(v) for v in text.split(",")]
     except ValueError:
         raise InputError(f"expected numbers like {example}, got {text!r}", field=field) from None
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(f"expected finite numbers, got {text!r}", field=field)
+    return values
 
 
 def consecutive_pairs(log: ScanLog, limit: int | None = None):

@@ -92,12 +92,29 @@ def test_unknown_algorithm():
     (("eval", "overlap", INTEL, "--scans", "1,x"), "--scans", "expected numbers"),
     (("eval", "overlap", INTEL, "--ratios", "100,sixty"), "--ratios", "expected numbers"),
     (("eval", "basin", INTEL, "--pair", 0, 1, "--thetas-deg=a"), "--thetas-deg", "expected numbers"),
+    (("eval", "basin", INTEL, "--pair", 0, 1, "--thetas-deg=0,inf"), "--thetas-deg", "finite"),
+    (("compare", INTEL, "--pair", 0, 1, "--truth", "nan", 0, 0), "--truth X", "finite"),
     (("compare", INTEL, "--pair", 0, 1, "--algos", ","), "--algos", "at least one matcher"),
     (("eval", "ceiling", INTEL, "--algos", " "), "--algos", "at least one matcher"),
     (("eval", "overlap", INTEL, "--algos", ",,"), "--algos", "at least one matcher"),
 ])
 def test_lists_of_numbers_and_matchers(args, field, needle):
     assert_clean_error(*run(*args), field, needle)
+
+
+@pytest.mark.parametrize("args, option", [
+    (("eval", "overlap", INTEL, "--max-xy", "inf"), "--max-xy"),
+    (("eval", "protocol", INTEL, "--max-xy", "nan"), "--max-xy"),
+    (("eval", "basin", INTEL, "--pair", 0, 1, "--range-xy", "inf"), "--range-xy"),
+    (("eval", "relations", INTEL, INTEL, "--offset", "nan"), "--offset"),
+    (("eval", "relations", INTEL, INTEL, "--tolerance", "inf"), "--tolerance"),
+    (("eval", "protocol", INTEL, "--seed", "-1"), "--seed"),
+])
+def test_numeric_options_out_of_their_domain(args, option):
+    """Checked by the command line parser (typer's own message, exit 2), before any work."""
+    code, out = run(*args)
+    assert code == 2 and "Traceback" not in out
+    assert f"Invalid value for '{option}'" in out, out
 
 
 def test_overlap_protocol_choices():
