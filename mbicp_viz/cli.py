@@ -30,7 +30,8 @@ FirstArg = Annotated[str, typer.Argument(help="reference scan file, or a log wit
 SecondArg = Annotated[Optional[str], typer.Argument(help="object scan file")]
 AlgoOpt = Annotated[str, typer.Option("--algo", help=f"matcher: {ALGOS}")]
 ParamsOpt = Annotated[Optional[Path], typer.Option("--params", help="TOML file of matcher parameters")]
-PairOpt = Annotated[Optional[tuple[int, int]], typer.Option("--pair", help="scan indices I J of one log (ref obj)")]
+PairOpt = Annotated[Optional[tuple[int, int]], typer.Option(
+    "--pair", help="scan indices I J of one log (ref obj; -1 is the last)")]
 InitOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
     "--init", help="initial guess X Y THETA_DEG: object frame in the reference frame (m, m, deg)")]
 RrdOpt = Annotated[Optional[Path], typer.Option("--rrd", help="write the run to this rerun .rrd file")]
