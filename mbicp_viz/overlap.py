@@ -38,7 +38,7 @@ class OverlapCase:
     ratio: float  # eta, the kept fraction
     run: int
     removal: str  # "block" | "random"
-    thinned: str  # "reference" | "object": the copy that loses the points
+    thin: str  # "reference" | "object": the copy that loses the points
     truth: Pose2
     keep: np.ndarray  # bool over the scene's valid points
 
@@ -50,7 +50,7 @@ class OverlapRow:
     ratio: float
     run: int
     removal: str
-    thinned: str
+    thin: str
     error_m: float
     error_deg: float
     converged: bool
@@ -84,7 +84,7 @@ def classify(converged: bool, correct: bool) -> str:
 
 def case_pair(scan: Scan, case: OverlapCase) -> tuple[Scan, Scan]:
     """(reference, object) of a case; the object is seen from the displacement ``case.truth``."""
-    return displaced_pair(scan, case.truth, case.keep, case.thinned)
+    return displaced_pair(scan, case.truth, case.keep, case.thin)
 
 
 def run_case(args) -> list[OverlapRow]:
@@ -94,7 +94,7 @@ def run_case(args) -> list[OverlapRow]:
     for name, p in params.items():
         r = match(ref, obj, Pose2(), p)
         et, er = pose_error(r.pose, case.truth)
-        rows.append(OverlapRow(name, case.scene, case.ratio, case.run, case.removal, case.thinned, et, math.degrees(er),
+        rows.append(OverlapRow(name, case.scene, case.ratio, case.run, case.removal, case.thin, et, math.degrees(er),
                                r.converged, r.iterations, classify(r.converged, et <= FAIL_M and er <= FAIL_RAD)))
     return rows
 
