@@ -138,7 +138,7 @@ def match_cmd(
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from .inputs import guess_from_deg, load_pair, make_params, stored_guess
 
-    p = make_params(algo, str(params) if params else None)
+    p = make_params(algo, params)
     sp = load_pair(first, second, pair)
     guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
     if search:
@@ -255,7 +255,7 @@ def eval_sequence(
         raise InputError(f"choose one of {', '.join(GUESSES)}", field="--guess")
     if truth not in (None, "pose"):
         raise InputError("the only truth a log carries is 'pose'", field="--truth")
-    p = make_params(algo, str(params) if params else None)
+    p = make_params(algo, params)
     lg = read_log(log)
     total = min(limit or len(lg.scans) - 1, len(lg.scans) - 1)
     with typer.progressbar(length=total, label="matching", file=sys.stderr) as bar:
@@ -329,7 +329,7 @@ def eval_protocol(
     from .protocols import displaced_self_matches
     from .readers import read_log
 
-    p = make_params(algo, str(params) if params else None)
+    p = make_params(algo, params)
     res = displaced_self_matches(read_log(log).scans, cases, p, seed, max_xy, math.radians(max_theta_deg))
     ok = sum(c.error_m < 0.01 and c.error_rad < math.radians(0.1) for c in res)
     gross = sum(c.error_m > 0.1 or c.error_rad > math.radians(3.0) for c in res)
@@ -365,16 +365,17 @@ def eval_overlap(
 
     from .inputs import number_list, params_for
     from .overlap import csv_text, make_cases, markdown, plot_png, run_overlap, tables
+    from .scenarios import THIN
     from .readers import read_log
 
     if removal not in ("block", "random"):
         raise InputError("choose block or random", field="--removal")
-    if thin not in ("reference", "object"):
-        raise InputError("choose reference or object", field="--thin")
+    if thin not in THIN:
+        raise InputError(f"choose {' or '.join(THIN)}", field="--thin")
     etas = [v / 100.0 for v in number_list(ratios, "--ratios", "100,90,80")]
     if not all(0.0 < e <= 1.0 for e in etas):
         raise InputError("each ratio must lie in (0, 100]", field="--ratios")
-    ps = params_for(algos, str(params) if params else None)
+    ps = params_for(algos, params)
     scenes = []
     for lg in (read_log(p) for p in logs):
         if scans:
@@ -459,8 +460,8 @@ def eval_relations(
 
     if guess not in ("identity", "pose", "odometry", "search"):
         raise InputError("choose identity, pose, odometry or search", field="--guess")
-    rows, missing = match_relations(read_log(log), read_relations(relations), make_params(algo, str(params) if params
-                                    else None), offset, tolerance, guess)
+    rows, missing = match_relations(read_log(log), read_relations(relations), make_params(algo, params), offset,
+                                    tolerance, guess)
     if out:
         out.write_text(json.dumps(rows, indent=1) + "\n")
     typer.echo(f"{algo}: {summary(rows)} ({missing} relations without a scan at both ends)")
@@ -491,7 +492,7 @@ def eval_basin(
     from .inputs import guess_from_deg, load_pair, number_list, params_for
 
     thetas = [math.radians(v) for v in number_list(thetas_deg, "--thetas-deg", "-15,0,15")]
-    ps = params_for(algos, str(params) if params else None)
+    ps = params_for(algos, params)
     sp = load_pair(first, second, pair)
     answer = guess_from_deg(truth, "--truth")
     if answer is None and sp.ref.pose is not None and sp.obj.pose is not None:
@@ -529,7 +530,7 @@ def bench_cmd(
     lg = read_log(log)
     typer.echo(f"{algo} on {log}: {len(lg.scans[0].ranges)} beams; {machine_line()}")
     before = speed_probe_us()
-    timings = bench(lg, make_params(algo, str(params) if params else None), limit, repeat)
+    timings = bench(lg, make_params(algo, params), limit, repeat)
     after = speed_probe_us()
     for t in timings:
         typer.echo(t.line())
@@ -539,7 +540,7 @@ def bench_cmd(
     if rrd:
         from .bench import time_recordings
 
-        t, sizes = time_recordings(lg, make_params(algo, str(params) if params else None), limit, 1, teach)
+        t, sizes = time_recordings(lg, make_params(algo, params), limit, 1, teach)
         typer.echo(t.line())
         typer.echo(f".rrd size              median {np.median(sizes) / 1e6:.2f} MB   max {sizes.max() / 1e6:.2f} MB")
 
@@ -582,7 +583,7 @@ def compare_cmd(
     from .inputs import guess_from_deg, load_pair, params_for, stored_guess
     from .rrd import Run
 
-    ps = params_for(algos, str(params) if params else None)
+    ps = params_for(algos, params)
     sp = load_pair(first, second, pair)
     guess = guess_from_deg(init) or stored_guess(sp.ref, sp.obj)[0]
     known = guess_from_deg(truth, "--truth")

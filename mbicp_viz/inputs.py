@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 from core import MATCHERS, Params, Pose2, Scan, relative
 from core.search import SearchParams
@@ -56,13 +57,14 @@ def search_window_text(params: SearchParams = SearchParams()) -> str:
     return f"+/-{params.window_xy:g} m, +/-{math.degrees(params.window_theta):g} deg"
 
 
-def make_params(algorithm: str, params_file: str | None) -> Params:
+def make_params(algorithm: str, params_file: str | Path | None) -> Params:
+    """Defaults of ``algorithm``, or its parameters from a ``--params`` TOML file."""
     if algorithm not in MATCHERS:
         raise InputError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(MATCHERS)}", field="--algo")
-    return load_params(params_file, algorithm) if params_file else MATCHERS[algorithm].params_type()
+    return load_params(str(params_file), algorithm) if params_file else MATCHERS[algorithm].params_type()
 
 
-def params_for(algos: str, params_file: str | None) -> dict[str, Params]:
+def params_for(algos: str, params_file: str | Path | None) -> dict[str, Params]:
     """``--algos a,b,c`` with their parameters (defaults, or the file's table for each)."""
     names = [a.strip() for a in algos.split(",") if a.strip()]
     if not names:

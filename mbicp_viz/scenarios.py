@@ -91,6 +91,9 @@ def thinned(scan: Scan, keep: np.ndarray) -> Scan:
     return make_scan(scan.ranges, scan.bearings, valid=valid, source=scan.source)
 
 
+THIN = ("reference", "object")  # the copy of a displaced scan that loses points (``thin``)
+
+
 def displaced_pair(scan: Scan, truth: Pose2, keep: np.ndarray | None, thin: str) -> tuple[Scan, Scan]:
     """(reference, object) from one scan: the object is the scan seen from ``truth``; ``keep``
     (over the valid readings) thins the reference or the object, as ``thin`` says."""
@@ -122,8 +125,8 @@ def load_scenario(path: Path) -> Scenario:
         truth = _pose_deg(spec["displacement_deg"], str(path), "displacement_deg")
         keep = block_mask(ref.n_valid, *spec["remove_block"]) if "remove_block" in spec else None
         thin = spec.get("thin", "reference")
-        if thin not in ("reference", "object"):
-            raise InputError("choose reference or object", str(path), field="thin")
+        if thin not in THIN:
+            raise InputError(f"choose {' or '.join(THIN)}", str(path), field="thin")
         ref, obj = displaced_pair(ref, truth, keep, thin)
     else:
         obj = log.scan(j)
