@@ -114,6 +114,8 @@ def test_eval_sequence_keeps_the_rows_when_interrupted(monkeypatch, tmp_path):
 def test_ctrl_c_stops_a_parallel_run_and_keeps_its_rows(tmp_path):
     """A real SIGINT to a real process running the pool: the parent keeps the finished rows and
     exits cleanly; the workers ignore the signal instead of each printing a traceback."""
+    import os
+    import select
     import signal
     import subprocess
     import sys
@@ -123,9 +125,16 @@ def test_ctrl_c_stops_a_parallel_run_and_keeps_its_rows(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess",
                              "search", "--out", str(out_file), "--workers", "2"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    time.sleep(6.0)  # imports, reading the bag, some of its 359 pairs
+    # the progress bar's label says the pool has started; a fixed delay from the start raced the
+    # run's own length, which varies with the machine's speed
+    seen, deadline = "", time.monotonic() + 60
+    while "matching" not in seen and time.monotonic() < deadline:
+        if select.select([proc.stderr], [], [], 1.0)[0]:
+            seen += os.read(proc.stderr.fileno(), 4096).decode()
+    time.sleep(1.5)  # some of its 359 pairs (about 8 s in all)
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=60)
+    stderr = seen + stderr
     assert proc.returncode == 0, stderr
     rows = json.loads(out_file.read_text())
     assert 0 < len(rows) < 359 and [r["ref"] for r in rows] == list(range(len(rows)))
