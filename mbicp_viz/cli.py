@@ -456,7 +456,7 @@ def eval_relations(
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""
     from .inputs import make_params
     from .readers import read_log
-    from .relations import match_relations, read_relations, summary
+    from .relations import match_relations, read_relations, stored_summary, summary
 
     if guess not in ("identity", "pose", "odometry", "search"):
         raise InputError("choose identity, pose, odometry or search", field="--guess")
@@ -465,6 +465,8 @@ def eval_relations(
     if out:
         out.write_text(json.dumps(rows, indent=1) + "\n")
     typer.echo(f"{algo}: {summary(rows)} ({missing} relations without a scan at both ends)")
+    if stored := stored_summary(rows):
+        typer.echo(stored)
 
 
 @eval_app.command("basin")

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core import Params, Pose2, match, pose_error
+from core import Params, Pose2, match, pose_error, relative
 
 from .errors import InputError
 from .readers import ScanLog
@@ -79,17 +79,33 @@ def match_relations(log: ScanLog, relations: list[Relation], params: Params, off
         t0 = time.perf_counter()
         r = match(log.scans[i], log.scans[j], g, params)
         et, er = pose_error(r.pose, rel.pose)
-        rows.append({"ref": i, "obj": j, "t1": rel.t1, "t2": rel.t2, "x": r.pose.x, "y": r.pose.y,
-                     "theta": r.pose.theta, "error_xy": et, "error_theta": er, "converged": r.converged,
-                     "iterations": r.iterations, "time_ms": 1000.0 * (time.perf_counter() - t0)})
+        row = {"ref": i, "obj": j, "t1": rel.t1, "t2": rel.t2, "x": r.pose.x, "y": r.pose.y,
+               "theta": r.pose.theta, "error_xy": et, "error_theta": er, "converged": r.converged,
+               "iterations": r.iterations, "time_ms": 1000.0 * (time.perf_counter() - t0)}
+        if log.scans[i].pose is not None and log.scans[j].pose is not None:
+            # the log's own poses judged by the same relation: how good a truth they are for --truth pose
+            st, sr = pose_error(relative(log.scans[i].pose, log.scans[j].pose), rel.pose)
+            row |= {"stored_error_xy": st, "stored_error_theta": sr}
+        rows.append(row)
     return rows, missing
 
 
 def summary(rows: list[dict]) -> str:
     if not rows:
         return "no relation had a scan at both ends: check --offset and --tolerance"
-    et = np.array([r["error_xy"] for r in rows])
-    er = np.degrees([r["error_theta"] for r in rows])
-    return (f"{len(rows)} relations matched; translation error mean {et.mean() * 1000:.1f} mm, median "
-            f"{np.median(et) * 1000:.1f} mm, max {et.max() * 1000:.1f} mm; rotation error mean {er.mean():.3f} deg, "
-            f"median {np.median(er):.3f} deg, max {er.max():.3f} deg")
+    return f"{len(rows)} relations matched; {error_summary(rows, 'error')}"
+
+
+def stored_summary(rows: list[dict]) -> str | None:
+    """The same errors for the poses stored in the log, when every matched relation has them."""
+    if not rows or not all("stored_error_xy" in r for r in rows):
+        return None
+    return f"the log's scan poses against the same relations: {error_summary(rows, 'stored_error')}"
+
+
+def error_summary(rows: list[dict], key: str) -> str:
+    et = np.array([r[f"{key}_xy"] for r in rows])
+    er = np.degrees([r[f"{key}_theta"] for r in rows])
+    return (f"translation error mean {et.mean() * 1000:.1f} mm, median {np.median(et) * 1000:.1f} mm, max "
+            f"{et.max() * 1000:.1f} mm; rotation error mean {er.mean():.3f} deg, median {np.median(er):.3f} deg, "
+            f"max {er.max():.3f} deg")

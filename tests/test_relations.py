@@ -25,6 +25,10 @@ def test_relations_are_matched_and_scored(tmp_path):
     assert len(rows) == 8 and all(r["ref"] != r["obj"] for r in rows)
     # these are mostly in-place turns: the matcher gets most of them within a few centimetres
     assert sorted(r["error_xy"] for r in rows)[4] < 0.05
+    # the log's corrected poses are judged by the same relations (a frame mix-up would put them
+    # tens of centimetres off): how good a truth `eval sequence --truth pose` scores against
+    assert "the log's scan poses against the same relations" in res.output
+    assert sorted(r["stored_error_xy"] for r in rows)[4] < 0.1
 
 
 def test_without_the_offset_nothing_matches():

@@ -23,13 +23,16 @@ def success(pose: Pose2, truth: Pose2) -> bool:
 @settings(max_examples=12, deadline=None)
 @given(x=st.floats(-1.2, 1.2), y=st.floats(-1.2, 1.2), theta_deg=st.floats(-35.0, 35.0), k=st.integers(0, 59))
 def test_search_finds_a_large_known_displacement(intel, x, y, theta_deg, k):
-    """A real scan seen from a pose up to 1.2 m and 35 deg away: the best candidate is within a grid
-    step of the truth (far outside any local matcher's basin)."""
+    """A real scan seen from a pose up to 1.2 m and 35 deg away (far outside any local matcher's
+    basin): the coarse pass lands within a grid step of the truth, the fine pass within a few of its
+    own (2 cm, 0.25 deg)."""
     scan = intel.scan(k)
     truth = Pose2(x, y, math.radians(theta_deg))
     found = correlative_search(scan, seen_from(scan, truth))
-    et, er = pose_error(found.pose, truth)
+    et, er = pose_error(found.coarse, truth)
     assert et <= 0.15 and er <= math.radians(1.5)
+    et, er = pose_error(found.pose, truth)
+    assert et <= 0.03 and er <= math.radians(0.3)
 
 
 def test_search_stays_inside_its_window(intel):
@@ -37,10 +40,24 @@ def test_search_stays_inside_its_window(intel):
     guess = Pose2(-0.5, 0.2, 0.1)
     p = SearchParams(window_xy=0.3, window_theta=math.radians(5.0))
     found = correlative_search(ref, obj, guess, p)
-    d = relative(guess, found.pose)
-    assert abs(found.pose.x - guess.x) <= 0.3 + 1e-9 and abs(found.pose.y - guess.y) <= 0.3 + 1e-9
+    d = relative(guess, found.coarse)
+    assert abs(found.coarse.x - guess.x) <= 0.3 + 1e-9 and abs(found.coarse.y - guess.y) <= 0.3 + 1e-9
     assert abs(d.theta) <= math.radians(5.0) + 1e-9
     assert len(found.angles) == 11 and found.score == found.best_per_angle.max()
+    # the fine pass looks within 1.5 coarse cells (in whole fine cells) and 2 coarse angle steps of
+    # the coarse best
+    d = relative(found.coarse, found.pose)
+    reach = round(1.5 * p.cell / p.fine_cell) * p.fine_cell + 1e-9
+    assert abs(found.pose.x - found.coarse.x) <= reach and abs(found.pose.y - found.coarse.y) <= reach
+    assert abs(d.theta) <= math.radians(2.0) + 1e-9
+
+
+def test_without_the_fine_pass_the_search_stops_at_the_coarse_grid(intel):
+    ref, obj = intel.scan(12), intel.scan(13)
+    coarse_only = correlative_search(ref, obj, params=SearchParams(refine=False))
+    both = correlative_search(ref, obj)
+    assert coarse_only.pose == coarse_only.coarse == both.coarse
+    assert both.pose != both.coarse
 
 
 def test_search_gives_improved_mbicp_the_basin_it_lacks(intel):
