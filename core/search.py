@@ -41,7 +41,7 @@ class SearchParams(Params):
     weight_cap: float = param(8.0, unit="m", lo=0.1, hi=1000.0,
                               help="a point weighs its range, up to this (the arc its beam covers)")
     # Measured on Intel's 909 consecutive pairs (docs/results.md): the search alone within 0.1 m and
-    # 3 deg 848 -> 888, improved MbICP refining it 885 -> 890.
+    # 3 deg 848 -> 887, improved MbICP refining it 885 -> 889.
     refine: bool = param(True, unit="bool", help="a second, finer pass around the best candidate of the first")
     fine_cell: float = param(0.02, unit="m", lo=0.01, hi=1.0, help="grid step of the second pass")
     fine_angle_step: float = param(math.radians(0.25), unit="rad", lo=math.radians(0.01), hi=math.radians(10.0),
@@ -75,7 +75,7 @@ def correlative_search(ref: Scan, obj: Scan, guess: Pose2 = Pose2(), params: Sea
                        ) -> SearchResult:
     """The pose in the window around ``guess`` whose object points best meet the reference scan.
 
-    Two passes, coarse to fine (Olson 2009 §IV searches at two resolutions as well): the coarse grid
+    Two passes, coarse to fine (Olson 2009 searches at two resolutions as well): the coarse grid
     over the whole window, then ``fine_cell`` / ``fine_angle_step`` within 1.5 coarse cells and 2
     coarse angle steps of its best candidate, on a sharper field (``fine_sigma``). The coarse
     optimum is only as good as its grid; the fine pass puts the guess within a few centimetres and
