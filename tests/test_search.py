@@ -3,12 +3,13 @@
 import json
 import math
 
+import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from core import ImprovedParams, Pose2, match, pose_error, relative
-from core.search import SearchParams, correlative_search
+from core.search import SearchParams, correlative_search, likelihood_field
 from mbicp_viz.cli import app
 from mbicp_viz.scenarios import seen_from
 from mbicp_viz.sequence import succeeded
@@ -80,3 +81,13 @@ def test_eval_sequence_with_a_searched_guess(tmp_path):
     rows = json.loads(out.read_text())
     assert len(rows) == 6 and all(r["guess"] == "search" and r["guess_ms"] > 0 for r in rows)
     assert sum(r["success"] for r in rows) >= 5
+
+
+def test_the_likelihood_field_peaks_at_the_points_and_ignores_those_outside():
+    """1 at a point's cell, exp(-(d / sigma)^2) beside it; a point outside the grid (the fine pass
+    crops it to where the object can land) adds nothing, and none inside leaves the field at 0."""
+    origin, cell, sigma = np.array([0.0, 0.0]), 0.1, 0.2
+    field = likelihood_field(np.array([[0.5, 0.5], [5.0, 5.0]]), origin, (11, 11), cell, sigma)
+    assert field[5, 5] == 1.0 and math.isclose(field[5, 7], math.exp(-((0.2 / sigma) ** 2)))
+    assert math.isclose(field[0, 10], math.exp(-((math.hypot(0.5, 0.5) / sigma) ** 2)))
+    assert not likelihood_field(np.array([[5.0, 5.0]]), origin, (11, 11), cell, sigma).any()
