@@ -1,16 +1,15 @@
-"""The matchers by name: one interface ``match(ref, obj, initial_guess, params, observer)``."""
+"""The matchers by name: one interface ``match(ref, obj, initial_guess, params, observer)``.
+
+A matcher's module (and its compiled kernels) is imported when it first runs, so that naming the
+matchers — command-line choices, the debugger's dropdown — costs nothing.
+"""
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
-from typing import Callable
 
-from . import icp, mbicp, pmwn, psm
-from .events import Observer
 from .params import IcpParams, ImprovedParams, MbicpParams, Params, PmwnParams, PsmParams
-from .result import MatchResult
-from .scan import Scan
-from .se2 import Pose2
 
 
 @dataclass(frozen=True)
@@ -18,17 +17,20 @@ class Matcher:
     name: str
     title: str
     params_type: type
-    run: Callable[..., MatchResult]
+    module: str  # the module of this package whose ``match`` runs it
+
+    def run(self, ref, obj, initial_guess, params, observer=None):
+        return importlib.import_module(f".{self.module}", __package__).match(ref, obj, initial_guess, params, observer)
 
 
 MATCHERS: dict[str, Matcher] = {
     m.name: m
     for m in (
-        Matcher("icp", "ICP (point-to-point, Euclidean)", IcpParams, icp.match),
-        Matcher("mbicp", "MbICP (Minguez et al. 2006)", MbicpParams, mbicp.match),
-        Matcher("improved", "Improved MbICP (Li et al. 2018)", ImprovedParams, mbicp.match),
-        Matcher("psm", "PSM (Diosi & Kleeman 2007)", PsmParams, psm.match),
-        Matcher("pmwn", "PMWN (Huo et al. 2016)", PmwnParams, pmwn.match),
+        Matcher("icp", "ICP (point-to-point, Euclidean)", IcpParams, "icp"),
+        Matcher("mbicp", "MbICP (Minguez et al. 2006)", MbicpParams, "mbicp"),
+        Matcher("improved", "Improved MbICP (Li et al. 2018)", ImprovedParams, "mbicp"),
+        Matcher("psm", "PSM (Diosi & Kleeman 2007)", PsmParams, "psm"),
+        Matcher("pmwn", "PMWN (Huo et al. 2016)", PmwnParams, "pmwn"),
     )
 }
 
@@ -38,8 +40,11 @@ def matcher_for(params: Params) -> Matcher:
     return next(m for m in MATCHERS.values() if type(params) is m.params_type)
 
 
-def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: Params | None = None,
-          observer: Observer | None = None, algorithm: str = "improved") -> MatchResult:
-    """Run the matcher that ``params`` belongs to (or ``algorithm``'s, with its defaults)."""
+def match(ref, obj, initial_guess=None, params: Params | None = None, observer=None, algorithm: str = "improved"):
+    """Run the matcher that ``params`` belongs to (or ``algorithm``'s, with its defaults): the
+    ``MatchResult`` whose pose maps object-frame points into the reference frame."""
+    from .se2 import Pose2
+
     m = matcher_for(params) if params is not None else MATCHERS[algorithm]
-    return m.run(ref, obj, initial_guess, params if params is not None else m.params_type(), observer)
+    return m.run(ref, obj, initial_guess if initial_guess is not None else Pose2(),
+                 params if params is not None else m.params_type(), observer)

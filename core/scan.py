@@ -10,31 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import ScanError, ScanSource, UnusableScan  # noqa: F401 - re-exported
 from .se2 import Pose2
-
-
-class ScanError(ValueError):
-    """A scan that cannot be matched (empty, all invalid, inconsistent arrays)."""
-
-    def __init__(self, source: "ScanSource", reason: str):
-        super().__init__(f"{source}: {reason}")
-        self.source, self.reason = source, reason
-
-    def __reduce__(self):  # worker processes send errors back pickled; keep the arguments
-        return type(self), (self.source, self.reason)
-
-
-@dataclass(frozen=True)
-class ScanSource:
-    """Where a scan came from, so every message can name it."""
-
-    path: str = "<memory>"
-    index: int = 0
-    line: int | None = None
-
-    def __str__(self) -> str:
-        where = f"{self.path}: scan {self.index}"
-        return f"{where} (line {self.line})" if self.line is not None else where
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,6 +54,11 @@ class Scan:
         return self.angular_span() + 1.5 * step >= 2.0 * np.pi
 
 
+# No 2-D laser scanner returns a reading beyond this; a larger number is a damaged value, masked
+# as an invalid reading like a no-return code (formats without a range_max get this one).
+ABSURD_RANGE_M = 1000.0
+
+
 def make_scan(
     ranges,
     bearings,
@@ -94,7 +76,9 @@ def make_scan(
 
     ``invalid_values`` lists closed intervals of no-return codes (e.g. SICK's 81.83-81.91 m).
     A reading is valid when it is finite, strictly above ``range_min`` (and 0), strictly below
-    ``range_max`` and outside every no-return interval. Raises ScanError when nothing is valid.
+    ``range_max`` and ``ABSURD_RANGE_M`` and outside every no-return interval. A 360-degree scan
+    whose last beams point where its first do (a span of 2 pi, up to one step more) loses those
+    closing beams. Raises ScanError for inconsistent arrays, UnusableScan when nothing is valid.
     """
     source = source or ScanSource()
     r = np.asarray(ranges, dtype=float).reshape(-1)
@@ -102,21 +86,32 @@ def make_scan(
     if r.shape != b.shape:
         raise ScanError(source, f"{len(r)} ranges but {len(b)} bearings")
     if len(r) == 0:
-        raise ScanError(source, "empty scan (no beams)")
+        raise UnusableScan(source, "empty scan (no beams)")
     if not np.all(np.isfinite(b)):
         raise ScanError(source, "bearings contain NaN or inf")
     if len(b) > 1 and not np.all(np.diff(b) > 0):
         raise ScanError(source, "bearings must be strictly increasing")
-    if b[-1] - b[0] > 2.0 * np.pi + 1e-9:
-        raise ScanError(source, "bearings span more than 360 degrees")
+    v = None if valid is None else np.asarray(valid, dtype=bool).reshape(-1)
+    if v is not None and v.shape != r.shape:
+        raise ScanError(source, f"{len(v)} validity flags for {len(r)} beams")
+    if len(b) > 2:
+        step = (b[-1] - b[0]) / (len(b) - 1)
+        if b[-1] - b[0] > 2.0 * np.pi + 1.5 * step:
+            raise ScanError(source, f"bearings span {np.degrees(b[-1] - b[0]):.4f} degrees: more than 360 degrees "
+                                    "and one step")
+        turn = b < b[0] + 2.0 * np.pi - 0.5 * step  # beams past it repeat the first directions: dropped
+        if not turn.all():
+            r, b, v = r[turn], b[turn], None if v is None else v[turn]
+    elif len(b) == 2 and b[1] - b[0] >= 2.0 * np.pi:
+        raise ScanError(source, "two beams a full turn apart")
     with np.errstate(invalid="ignore"):
-        ok = np.isfinite(r) & (r > max(range_min, 0.0)) & (r < range_max)
+        ok = np.isfinite(r) & (r > max(range_min, 0.0)) & (r < min(range_max, ABSURD_RANGE_M))
         for lo, hi in invalid_values:
             ok &= ~((r >= lo) & (r <= hi))
-    if valid is not None:
-        ok &= np.asarray(valid, dtype=bool).reshape(-1)
+    if v is not None:
+        ok &= v
     if not ok.any():
-        raise ScanError(source, f"no valid reading among {len(r)} beams")
+        raise UnusableScan(source, f"no valid reading among {len(r)} beams")
     return Scan(r, b, ok, pose, odometry, stamp, source)
 
 

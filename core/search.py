@@ -18,35 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from .params import Params, param
+from .params import SearchParams
 from .scan import Scan
 from .se2 import Pose2, wrap_angle
-
-
-@dataclass(frozen=True)
-class SearchParams(Params):
-    """The window and grid of the correlative search (around the given guess)."""
-
-    window_xy: float = param(1.5, unit="m", lo=0.0, hi=20.0, help="candidates within +/- this in x and in y")
-    window_theta: float = param(math.radians(40.0), unit="rad", lo=0.0, hi=math.pi,
-                                help="candidates within +/- this in rotation")
-    cell: float = param(0.1, unit="m", lo=0.01, hi=1.0, help="grid step in x and y (and of the likelihood field)")
-    angle_step: float = param(math.radians(1.0), unit="rad", lo=math.radians(0.05), hi=math.radians(10.0),
-                              help="grid step in rotation")
-    # 1.5 cells: at sigma = one cell the field is nearly binary at its own resolution and a point's
-    # score jumps as it crosses a cell. Measured on Intel's 909 consecutive pairs (docs/results.md):
-    # the search alone within 0.1 m and 3 deg 839 -> 848, improved MbICP refining it 879 -> 885.
-    sigma: float = param(0.15, unit="m", lo=0.005, hi=2.0,
-                         help="likelihood exp(-d^2 / sigma^2) of a point d metres from the reference scan")
-    weight_cap: float = param(8.0, unit="m", lo=0.1, hi=1000.0,
-                              help="a point weighs its range, up to this (the arc its beam covers)")
-    # Measured on Intel's 909 consecutive pairs (docs/results.md): the search alone within 0.1 m and
-    # 3 deg 848 -> 887, improved MbICP refining it 885 -> 889.
-    refine: bool = param(True, unit="bool", help="a second, finer pass around the best candidate of the first")
-    fine_cell: float = param(0.02, unit="m", lo=0.01, hi=1.0, help="grid step of the second pass")
-    fine_angle_step: float = param(math.radians(0.25), unit="rad", lo=math.radians(0.01), hi=math.radians(10.0),
-                                   help="rotation step of the second pass")
-    fine_sigma: float = param(0.05, unit="m", lo=0.005, hi=2.0, help="sigma of the second pass's likelihood field")
 
 
 @dataclass(frozen=True)

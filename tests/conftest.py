@@ -3,8 +3,14 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 from mbicp_viz.readers import read_log
+
+# No deadline: a test's first example may compile a matcher's kernels (numba), which takes
+# seconds on a cold cache; a deadline there measures the compiler, not the code.
+settings.register_profile("mbicp-viz", deadline=None)
+settings.load_profile("mbicp-viz")
 
 DATA = Path(__file__).parent / "data"
 EXAMPLES = Path(__file__).parent.parent / "mbicp_viz" / "examples"

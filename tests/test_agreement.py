@@ -7,12 +7,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from core import Pose2
-from core.agreement import inlier_fraction
+from mbicp_viz.core import Pose2
+from mbicp_viz.core.agreement import inlier_fraction
 from mbicp_viz.cli import app
 from mbicp_viz.readers import read_log
-from mbicp_viz.scenarios import seen_from
-from mbicp_viz.sequence import truth_doubted
+from mbicp_viz.evaluation.pairs import seen_from
+from mbicp_viz.evaluation.sequence import truth_doubted
 
 from .conftest import INTEL
 

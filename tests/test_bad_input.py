@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from core import Scan, ScanError, make_scan
+from mbicp_viz.core import Scan, ScanError, make_scan
 from mbicp_viz.cli import app
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import read_log
@@ -44,8 +44,8 @@ def write(tmp_path, name, text):
 @pytest.mark.parametrize("body, needles", [
     ("FLASER 3 1.0 x 1.2 0 0 0 0 0 0 1 h 1\n", ["bad.log:1", "range[1]", "'x'"]),  # malformed number
     ("# ok\n12.5 abc\n", ["bad.log:2", "message"]),  # not a message at all
-    ("FLASER 5 1.0 1.1 1.2\n", ["bad.log:1", "num_readings", "5 readings announced"]),  # wrong beam count
-    ("FLASER 3 0 nan inf 0 0 0 0 0 0 1 h 1\n", ["bad.log:1", "ranges", "no valid reading"]),  # all invalid
+    ("FLASER 5 1.0 1.1 1.2\n", ["bad.log:1", "num_readings", "5 ranges announced"]),  # wrong beam count
+    ("FLASER 3 0 nan inf 0 0 0 0 0 0 1 h 1\n", ["bad.log:1", "scan 0", "no valid reading"]),  # all invalid
     ("FLASER 3 1 1 1 nan 0 0 0 0 0 1 h 1\n", ["bad.log:1", "laser_pose_x"]),  # NaN pose
     ("ODOM 1 2\n", ["bad.log:1", "odom_theta"]),
     ("NEFF 15\n", ["bad.log", "no laser scans"]),  # only unknown (skipped) messages: empty log
@@ -85,7 +85,7 @@ def test_nan_initial_guess():
 
 
 def test_unknown_algorithm():
-    assert_clean_error(*run("match", INTEL, "--algo", "sift"), "--algo", "unknown algorithm")
+    assert_clean_error(*run("match", INTEL, "--algo", "sift"), "--algo", "'sift' is not one of 'icp'")
 
 
 @pytest.mark.parametrize("args, field, needle", [
@@ -118,8 +118,8 @@ def test_numeric_options_out_of_their_domain(args, option):
 
 
 def test_overlap_protocol_choices():
-    assert_clean_error(*run("eval", "overlap", INTEL, "--thin", "both"), "--thin", "reference or object")
-    assert_clean_error(*run("eval", "overlap", INTEL, "--removal", "holes"), "--removal", "block or random")
+    assert_clean_error(*run("eval", "overlap", INTEL, "--thin", "both"), "--thin", "'reference', 'object'")
+    assert_clean_error(*run("eval", "overlap", INTEL, "--removal", "holes"), "--removal", "'block', 'random'")
 
 
 @pytest.mark.parametrize("args", [
@@ -238,8 +238,8 @@ def _refuse(scan: Scan) -> None:
 def test_errors_raised_in_worker_processes_arrive_whole():
     """Evaluations run in a process pool, which sends exceptions back pickled: each error type
     must rebuild with its fields, else the user gets BrokenProcessPool instead of the message."""
-    from core import ParamError
-    from mbicp_viz.pool import ordered_map
+    from mbicp_viz.core import ParamError
+    from mbicp_viz.evaluation.pool import ordered_map
 
     for e in (ScanError(read_log(INTEL).scans[0].source, "why"), ParamError("Br", "must be > 0"),
               InputError("bad value", "a.log", 3, "ranges")):

@@ -4,8 +4,8 @@ import numpy as np
 from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
-from core import IcpParams, MbicpParams, Pose2
-from mbicp_viz.basin import CORRECT, basin
+from mbicp_viz.core import IcpParams, MbicpParams, Pose2
+from mbicp_viz.evaluation.basin import CORRECT, basin
 from mbicp_viz.cli import app
 from mbicp_viz.readers import read_log
 

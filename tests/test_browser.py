@@ -1,15 +1,18 @@
-"""The debugger in a real headless Chromium (Debian's, driven by Playwright)."""
+"""The debugger in a real headless Chromium (Debian's, driven by Playwright): what a person sees
+and what the boxes really send."""
 
+import math
 import time
 
 import numpy as np
 import pytest
 from playwright.sync_api import sync_playwright
 
-from core import Pose2
+from mbicp_viz.core import Pose2
 from mbicp_viz.readers import read_log
-from mbicp_viz.scene import OBJECT, REFERENCE
-from mbicp_viz.viser_app import App, Source
+from mbicp_viz.views.debugger.app import App
+from mbicp_viz.views.debugger.state import Source
+from mbicp_viz.views.scene import OBJECT, REFERENCE
 
 from .conftest import EXAMPLES
 
@@ -34,11 +37,11 @@ def browser():
 
 
 def wait_for(cond, timeout=30.0):
-    deadline = time.time() + timeout
-    while time.time() < deadline:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
         if cond():
             return True
-        time.sleep(0.1)
+        time.sleep(0.05)
     return False
 
 
@@ -49,30 +52,37 @@ def open_tab(browser, app):
     page.get_by_role("slider").first.wait_for(timeout=60000)
     assert wait_for(lambda: set(app.sessions) - before)
     session = app.sessions[(set(app.sessions) - before).pop()]
-    assert wait_for(lambda: bool(session.runs))
+    assert wait_for(lambda: bool(session.state.runs))
+    page.get_by_text("after ").first.wait_for(timeout=30000)  # the result is on the page
     return page, session
+
+
+def box(page, label):
+    """The input of the GUI row labelled ``label`` (viser's text boxes are not tied to their labels)."""
+    return page.locator(f"xpath=//label[normalize-space(.)='{label}']"
+                        "/ancestor::div[contains(@class, 'mantine-Flex-root')][1]//*[self::input or self::textarea]").first
+
+
+def type_into(page, label, text):
+    b = box(page, label)
+    b.fill(text)
+    b.press("Enter")
 
 
 def test_slider_parameter_export_and_colours(browser, app, tmp_path):
     page, session = open_tab(browser, app)
-    n = session.max_iteration()
-    assert n > 5
-    # move the iteration slider with the keyboard, as a user would
-    slider = page.get_by_role("slider").first
+    assert session.state.max_iteration() > 5
+    slider = page.get_by_role("slider").first  # the iteration slider, moved with the keyboard
     slider.focus()
     slider.press("Home")
-    assert wait_for(lambda: session.iteration == 0)
+    assert wait_for(lambda: session.state.iteration == 0)
     slider.press("ArrowRight")
     slider.press("ArrowRight")
-    assert wait_for(lambda: session.iteration == 2)
+    assert wait_for(lambda: session.state.iteration == 2)
     page.get_by_text("iteration 2:").first.wait_for(timeout=10000)
-    # change a parameter: the match re-runs and the result panel changes in the page
-    box = page.get_by_label("MaxIter")
-    box.fill("4")
-    box.press("Enter")
-    assert wait_for(lambda: session.max_iteration() == 4)
+    type_into(page, "MaxIter", "4")  # the match re-runs; the page shows the new result
+    assert wait_for(lambda: session.state.max_iteration() == 4)
     page.get_by_text("after 4 iterations").first.wait_for(timeout=10000)
-    # export: the browser downloads a real .rrd that reads back
     with page.expect_download(timeout=30000) as dl:
         page.get_by_role("button", name="export .rrd").click()
     path = tmp_path / "session.rrd"
@@ -81,15 +91,33 @@ def test_slider_parameter_export_and_colours(browser, app, tmp_path):
 
     entities = {c.entity_path for c in RrdReader(str(path)).stream().to_chunks()}
     assert "/improved/scene/reference" in entities and "/improved/scene/pairs/point" in entities
-    # the picture: reference red, object blue
     shot = tmp_path / "page.png"
-    time.sleep(1.0)
     page.screenshot(path=str(shot))
     from PIL import Image
 
     img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     near = lambda rgb: int(np.count_nonzero(np.abs(img - np.array(rgb)).max(axis=2) < 45))  # noqa: E731
-    assert near(REFERENCE) > 100 and near(OBJECT) > 100
+    assert near(REFERENCE.color) > 100 and near(OBJECT.color) > 100  # reference red, object blue
+    page.close()
+
+
+def test_number_boxes_send_exactly_what_was_typed(browser, app):
+    page, session = open_tab(browser, app)
+    type_into(page, "errx_out [m]", "1e-5")
+    assert wait_for(lambda: session.state.params["improved"].errx_out == 1e-5)
+    type_into(page, "MaxIter", "2.5")  # refused: a whole number is needed, nothing changes
+    page.get_by_text("expected a whole number").first.wait_for(timeout=10000)
+    assert session.state.params["improved"].MaxIter == 100
+    assert wait_for(lambda: box(page, "MaxIter").input_value() == "100")  # the box shows what the matcher uses
+    type_into(page, "Bw [deg]", "500")  # out of bounds: refused, not clamped
+    page.get_by_text("outside").first.wait_for(timeout=10000)
+    box(page, "L [m]").click()  # the box loses focus: still nothing applied
+    assert session.state.params["improved"].Bw == pytest.approx(math.radians(45.0))
+    box(page, "Br [m]").fill("0.75")  # typed without Enter: not applied ...
+    type_into(page, "MaxIter", "7")
+    assert wait_for(lambda: session.state.params["improved"].MaxIter == 7)
+    assert wait_for(lambda: box(page, "Br [m]").input_value() == "1.0")  # ... and the page says so
+    assert session.state.params["improved"].Br == 1.0
     page.close()
 
 
@@ -97,14 +125,12 @@ def test_two_tabs_keep_their_own_state(browser, app):
     p1, s1 = open_tab(browser, app)
     p2, s2 = open_tab(browser, app)
     assert s1 is not s2
-    box = p2.get_by_label("MaxIter")
-    box.fill("2")
-    box.press("Enter")
-    assert wait_for(lambda: s2.max_iteration() == 2)
-    assert s1.params["improved"].MaxIter == 100 and s1.max_iteration() > 2
+    type_into(p2, "MaxIter", "2")
+    assert wait_for(lambda: s2.state.max_iteration() == 2)
+    assert s1.state.params["improved"].MaxIter == 100 and s1.state.max_iteration() > 2
     p2.get_by_role("slider").first.focus()
     p2.get_by_role("slider").first.press("Home")
-    assert wait_for(lambda: s2.iteration == 0)
-    assert s1.iteration == s1.max_iteration()
+    assert wait_for(lambda: s2.state.iteration == 0)
+    assert s1.state.iteration == s1.state.max_iteration()
     p1.close()
     p2.close()

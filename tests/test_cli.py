@@ -7,9 +7,9 @@ import re
 import pytest
 from typer.testing import CliRunner
 
-from core import MATCHERS, field_specs
+from mbicp_viz.core import MATCHERS, field_specs
 from mbicp_viz.cli import app
-from mbicp_viz.params_io import load_params
+from mbicp_viz.readers.params_toml import load_params
 
 from .conftest import DATA, HOKUYO_BAG, INTEL, LASERAZOS
 
@@ -56,7 +56,7 @@ def test_eval_sequence_writes_one_row_per_pair(tmp_path):
 
 
 def test_bench_reports_median_p90_and_rate():
-    out = ok("bench", LASERAZOS, "--algo", "icp", "--limit", 3, "--repeat", 1)
+    out = ok("bench", "matches", LASERAZOS, "--algo", "icp", "--limit", 3, "--repeat", 1)
     assert "events off" in out and "recording observer" in out
     assert "median" in out and "p90" in out and "matches/s" in out
     probe = re.search(r"machine speed probe +([\d.]+) us before, ([\d.]+) us after", out)
@@ -88,12 +88,12 @@ def test_eval_protocol_reports_the_success_rate():
 
 
 def test_bench_gui_reports_step_and_change_latency():
-    out = ok("bench-gui")
+    out = ok("bench", "gui")
     assert "iteration step redraw" in out and "parameter change" in out and "p95" in out
 
 
 def test_eval_sequence_keeps_the_rows_when_interrupted(monkeypatch, tmp_path):
-    import mbicp_viz.sequence as seq
+    import mbicp_viz.evaluation.sequence as seq
 
     real = seq._match_row
     calls = []
@@ -125,13 +125,12 @@ def test_ctrl_c_stops_a_parallel_run_and_keeps_its_rows(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess",
                              "search", "--out", str(out_file), "--workers", "2"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    # the progress bar's label says the pool has started; a fixed delay from the start raced the
-    # run's own length, which varies with the machine's speed
-    seen, deadline = "", time.monotonic() + 60
-    while "matching" not in seen and time.monotonic() < deadline:
+    # interrupt once the first pairs are finished (the progress line of a run whose stderr is not a
+    # terminal); a fixed delay raced the run's own length, which varies with the machine's speed
+    seen, deadline = "", time.monotonic() + 120
+    while "matching: 1/359" not in seen and time.monotonic() < deadline and proc.poll() is None:
         if select.select([proc.stderr], [], [], 1.0)[0]:
             seen += os.read(proc.stderr.fileno(), 4096).decode()
-    time.sleep(1.5)  # some of its 359 pairs (about 8 s in all)
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=60)
     stderr = seen + stderr

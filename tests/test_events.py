@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-import core.mbicp
-from core import (FinishEvent, ImprovedParams, IterationEvent, MATCHERS, PairKind, PairStatus, Pose2, Recorder,
+import mbicp_viz.core.mbicp
+from mbicp_viz.core import (FinishEvent, ImprovedParams, IterationEvent, MATCHERS, PairKind, PairStatus, Pose2, Recorder,
                   StartEvent, match)
 
 
@@ -90,7 +90,7 @@ def test_point_line_resolves_shared_targets(intel):
 def test_no_event_payload_is_built_without_observer(intel, monkeypatch):
     built = []
     for cls in (StartEvent, IterationEvent, FinishEvent):
-        monkeypatch.setattr(core.mbicp, cls.__name__, lambda *a, _c=cls, **k: built.append(_c) or _c(*a, **k))
+        monkeypatch.setattr(mbicp_viz.core.mbicp, cls.__name__, lambda *a, _c=cls, **k: built.append(_c) or _c(*a, **k))
     match(intel.scans[11], intel.scans[12], Pose2(), ImprovedParams())
     assert built == []
     match(intel.scans[11], intel.scans[12], Pose2(), ImprovedParams(), observer=Recorder())

@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core import (MATCHERS, IcpParams, ImprovedParams, MbicpParams, PmwnParams, Pose2, PsmParams, Termination,
+from mbicp_viz.core import (MATCHERS, IcpParams, ImprovedParams, MbicpParams, PmwnParams, Pose2, PsmParams, Termination,
                   make_scan, match, pose_error)
-from mbicp_viz.params_io import load_params
-from mbicp_viz.protocols import displaced_self_matches
+from mbicp_viz.readers.params_toml import load_params
+from mbicp_viz.evaluation.protocols import displaced_self_matches
 from mbicp_viz.readers import read_log
 
 from .conftest import DATA
@@ -152,7 +152,7 @@ def test_corridor_degeneracy_points_along_the_walls():
 
 
 def test_params_validate_bounds_and_types():
-    from core import ParamError
+    from mbicp_viz.core import ParamError
 
     with pytest.raises(ParamError, match="Br"):
         MbicpParams(Br=-1.0)

@@ -5,10 +5,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core import PairStatus
-from core.metric import (mad_threshold, metric_distance_sq, metric_exact_sq, metric_normal_equations,
+from mbicp_viz.core import PairStatus
+from mbicp_viz.core.metric import (mad_threshold, metric_distance_sq, metric_exact_sq, metric_normal_equations,
                          svd_fit)
-from core.rejection import reject
+from mbicp_viz.core.rejection import reject
 
 # Paper 000 §2.4.2, Figure 9: 21 correspondence distances.
 PAPER_DISTANCES = np.array([12.281, 12.270, 12.712, 11.932, 11.053, 10.768, 11.077, 11.685, 6.393, 6.001, 5.549,

@@ -3,9 +3,9 @@
 import numpy as np
 from typer.testing import CliRunner
 
-from core import ImprovedParams, MbicpParams
+from mbicp_viz.core import ImprovedParams, MbicpParams
 from mbicp_viz.cli import app
-from mbicp_viz.overlap import case_pair, classify, make_cases, run_overlap, tables
+from mbicp_viz.evaluation.overlap import case_pair, classify, make_cases, run_overlap, tables
 from mbicp_viz.readers import read_log
 
 from .conftest import LASERAZOS

@@ -8,12 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from core import PmwnParams, Pose2, PsmParams, Recorder, ScanError, make_scan, match, pose_error, relative
-from core.polar import refine_parabola, refine_v
+from mbicp_viz.core import PmwnParams, Pose2, PsmParams, Recorder, ScanError, make_scan, match, pose_error, relative
+from mbicp_viz.core.polar import refine_parabola, refine_v
 from mbicp_viz.cli import app
 from mbicp_viz.readers import read_log
-from mbicp_viz.scenarios import seen_from
-from mbicp_viz.sequence import succeeded
+from mbicp_viz.evaluation.pairs import seen_from
+from mbicp_viz.evaluation.criteria import CONSECUTIVE
 
 from .conftest import DATA, EXAMPLES
 
@@ -155,7 +155,7 @@ def test_algo_choice_reaches_eval_sequence_and_bench(tmp_path, algo):
     res = r.invoke(app, ["eval", "sequence", str(EXAMPLES / "intel-excerpt.log.gz"), "--algo", algo, "--out", str(out),
                          "--limit", "4", "--guess", "identity", "--truth", "pose"])
     assert res.exit_code == 0 and "against the scan poses" in res.output, res.output
-    res = r.invoke(app, ["bench", str(DATA / "laserazosSM3-40.log"), "--algo", algo, "--limit", "3", "--repeat", "1"])
+    res = r.invoke(app, ["bench", "matches", str(DATA / "laserazosSM3-40.log"), "--algo", algo, "--limit", "3", "--repeat", "1"])
     assert res.exit_code == 0 and "events off" in res.output
 
 
@@ -173,7 +173,7 @@ def test_compare_prints_every_matcher_with_errors(tmp_path):
 def test_polar_recording_carries_cost_curves_and_the_circle(tmp_path):
     from rerun.chunk import RrdReader
 
-    from mbicp_viz.rrd import Run, record
+    from mbicp_viz.views.rrd import Run, record
 
     ref = scans("laserazos")[10]
     obj = seen_from(ref, Pose2(0.05, -0.02, math.radians(4.0)))
@@ -182,7 +182,8 @@ def test_polar_recording_carries_cost_curves_and_the_circle(tmp_path):
     record([Run("pmwn", ref, obj, Pose2(), PmwnParams())], str(path), extra_observer=rec)
     counts = {}
     for c in RrdReader(str(path)).stream().to_chunks():
-        counts[c.entity_path] = counts.get(c.entity_path, 0) + c.num_rows
+        if "iteration" in c.to_record_batch().schema.names:  # per-iteration rows (not the static styles)
+            counts[c.entity_path] = counts.get(c.entity_path, 0) + c.num_rows
     n = len(rec.iterations)
     assert counts["/pmwn/polar/cost/curve"] == n and counts["/pmwn/polar/cost/fit"] == n
     assert counts["/pmwn/scene/polar/circle_points"] == n and counts["/pmwn/plots/metric_weight"] == n
@@ -192,7 +193,7 @@ def test_polar_recording_carries_cost_curves_and_the_circle(tmp_path):
 def test_projection_compares_only_surfaces_facing_the_reference():
     """A wall seen from its back (the object sensor moved through it and turned round) still
     occludes but is never compared: Diosi's occlusion rule in the scan projection."""
-    from core.polar import Grid, preprocess, project
+    from mbicp_viz.core.polar import Grid, preprocess, project
 
     b = np.linspace(-0.45, 0.45, 41)
     wall = make_scan(2.0 / np.cos(b), b)  # the wall x = 2, seen from the origin
@@ -209,7 +210,7 @@ def test_projection_compares_only_surfaces_facing_the_reference():
 def test_projection_at_the_identity_returns_the_scan_itself(intel):
     """A scan projected onto its own bearings gives back its ranges wherever a surface facing the
     sensor passes (the interior of each segment)."""
-    from core.polar import Grid, preprocess, project
+    from mbicp_viz.core.polar import Grid, preprocess, project
 
     for scan in intel.scans[:10]:
         cur = preprocess(scan, 5, 0.1, 30.0, 0.2)
@@ -225,7 +226,7 @@ def test_projection_at_the_identity_returns_the_scan_itself(intel):
 def test_projection_turns_with_the_scan(intel, k, m, x, y):
     """Turning the moved scan by m bearing steps about the reference sensor shifts its projection by
     m bins (the orientation step of PSM §3 step 4 rests on this)."""
-    from core.polar import Grid, preprocess, project
+    from mbicp_viz.core.polar import Grid, preprocess, project
 
     grid = Grid.of(intel.scans[k], "psm")
     cur = preprocess(intel.scans[k + 1], 5, 0.1, 30.0, 0.2)
@@ -243,7 +244,7 @@ def _held_from_the_truth(params) -> int:
     """How many of the Intel excerpt's consecutive pairs, started at their corrected poses, stay there."""
     ss = scans("intel")
     truths = [relative(a.pose, b.pose) for a, b in zip(ss, ss[1:])]
-    return sum(succeeded(*pose_error(match(a, b, t, params).pose, t)) for a, b, t in zip(ss, ss[1:], truths))
+    return sum(CONSECUTIVE.judge(match(a, b, t, params).pose, t) for a, b, t in zip(ss, ss[1:], truths))
 
 
 @pytest.mark.parametrize("params", [PsmParams, PmwnParams])
@@ -259,7 +260,7 @@ def test_surface_jacobian_holds_intel_corridors_where_diosis_model_drifts(params
 @given(st.lists(st.floats(0.2, 8.0), min_size=30, max_size=30), st.lists(st.floats(0.2, 8.0), min_size=34, max_size=34),
        st.floats(0.05, 3.0))
 def test_capped_shift_cost_limits_every_difference_and_is_diosis_when_the_cap_is_loose(ref, proj, cap):
-    from core.polar import shift_costs
+    from mbicp_viz.core.polar import shift_costs
 
     ref_r, proj_ext = np.array(ref), np.array(proj)
     proj_ext[[3, 17]] = np.nan  # missing ranges are skipped either way
@@ -281,7 +282,7 @@ def test_truncated_orientation_cost_keeps_intel_pairs_that_diosis_mean_turns_awa
 
 @given(st.lists(st.floats(-5.0, 5.0), min_size=50, max_size=120), st.integers(3, 40), st.floats(0.05, 2.0))
 def test_relaxed_cut_keeps_at_least_min_pairs_and_changes_nothing_when_enough_are_inside(e, min_pairs, max_error):
-    from core.polar import preprocess, translation_residuals
+    from mbicp_viz.core.polar import preprocess, translation_residuals
 
     e = np.array(e)
     b = np.linspace(-1.0, 1.0, len(e))
@@ -307,8 +308,8 @@ def test_relaxed_cut_corrects_a_long_intel_move_that_ends_with_too_few_pairs(par
     a, b = scans("intel")[21:23]
     truth = relative(a.pose, b.pose)
     plain, relaxed = match(a, b, Pose2(), params()), match(a, b, Pose2(), params(relaxed_cut=True))
-    assert plain.reason.value == "too_few_pairs" and not succeeded(*pose_error(plain.pose, truth))
-    assert relaxed.converged and succeeded(*pose_error(relaxed.pose, truth))
+    assert plain.reason.value == "too_few_pairs" and not CONSECUTIVE.judge(plain.pose, truth)
+    assert relaxed.converged and CONSECUTIVE.judge(relaxed.pose, truth)
 
 
 @settings(max_examples=60)
@@ -317,7 +318,7 @@ def test_relaxed_cut_corrects_a_long_intel_move_that_ends_with_too_few_pairs(par
 def test_translation_step_solves_exact_residuals(tx, ty, weights, surface):
     """Residuals made by a translation T under the step's own model (e_i = u_i . T, or with the surface
     normals n_i: e_i (n_i . u_i) = n_i . T) give back T exactly, whatever the weights."""
-    from core.polar import preprocess, translation_step
+    from mbicp_viz.core.polar import preprocess, translation_step
 
     b = np.linspace(-1.5, 1.5, 60)
     ref = preprocess(make_scan(3.0 + np.sin(3 * b), b), 1, 0.0, 30.0, 10.0)
@@ -335,7 +336,7 @@ def test_translation_step_solves_exact_residuals(tx, ty, weights, surface):
 
 @given(st.lists(st.one_of(st.floats(0.0, 5.0), st.just(float("nan")), st.just(float("inf"))), min_size=1, max_size=40))
 def test_least_is_the_first_smallest_finite_cost(cost):
-    from core.polar import least
+    from mbicp_viz.core.polar import least
 
     c = np.array(cost)
     finite = np.isfinite(c)
@@ -347,7 +348,7 @@ def test_least_is_the_first_smallest_finite_cost(cost):
 def test_median_filter_is_scipys_with_the_ends_repeated(x, window):
     from scipy.ndimage import median_filter
 
-    from core.polar import median_nearest
+    from mbicp_viz.core.polar import median_nearest
 
     x = np.array(x)
     assert np.array_equal(median_nearest(x, window), median_filter(x, size=window, mode="nearest"))
@@ -357,7 +358,7 @@ def test_median_filter_is_scipys_with_the_ends_repeated(x, window):
 def test_segments_are_the_runs_of_close_valid_readings(beams, max_jump):
     """PSM §3 step 1: consecutive valid readings share a segment exactly when their ranges differ by
     at most max_jump; a reading with no such neighbour is in none."""
-    from core.polar import segment
+    from mbicp_viz.core.polar import segment
 
     r = np.array([b[0] for b in beams])
     valid = np.array([b[1] for b in beams])

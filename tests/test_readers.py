@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from mbicp_viz.readers import read_log, read_npz, write_npz
+from mbicp_viz.readers import read_log
+from mbicp_viz.readers.plain import read_npz, write_npz
 
 from .conftest import DATA, HOKUYO_BAG
 

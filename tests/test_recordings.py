@@ -8,8 +8,10 @@ from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.scenarios import RECORDINGS, load_scenario, scenario_paths
-from mbicp_viz.scene import OBJECT, REFERENCE
+from mbicp_viz.evaluation.scenarios import load_scenario, recordings_dir, scenario_paths
+
+RECORDINGS = recordings_dir()
+from mbicp_viz.views.scene import OBJECT, REFERENCE
 
 from .conftest import RERUN
 
@@ -46,15 +48,16 @@ def summary(name, out_dir) -> dict[str, str]:
 
 def test_scenarios_show_what_their_notes_promise(tmp_path):
     partial = summary("partial-overlap", tmp_path)
-    error_mm = {m: float(partial[m].split("error ")[1].split(" mm")[0]) for m in ("mbicp", "improved")}
+    error_mm = {m: float(partial[m].split("; ")[1].split(" mm")[0]) for m in ("mbicp", "improved")}
     assert error_mm["improved"] < 2.0 and error_mm["mbicp"] > 100.0  # improved lands, standard does not
     rotation = summary("large-rotation", tmp_path)
-    assert "37.06 deg" in rotation["icp"] and "error 0.0 mm" in rotation["mbicp"]
+    assert "37.064 deg from the known answer" in rotation["icp"]
+    assert "; 0.0 mm, 0.001 deg from the known answer" in rotation["mbicp"]
 
 
 def test_corridor_degeneracy_points_along_the_corridor():
     s = load_scenario(RECORDINGS / "scenarios" / "corridor.toml")
-    from core import match
+    from mbicp_viz.core import match
 
     r = match(s.ref, s.obj, s.guess, s.params["improved"])
     assert r.degeneracy.condition_number > 100
@@ -79,7 +82,7 @@ def test_rerun_viewer_renders_a_curated_recording(tmp_path):
     assert res.returncode == 0 and shot.exists(), res.stderr[-2000:]
     img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     near = lambda rgb: int(np.count_nonzero(np.abs(img - np.array(rgb)).max(axis=2) < 40))  # noqa: E731
-    assert near(REFERENCE) > 50 and near(OBJECT) > 50
+    assert near(REFERENCE.color) > 50 and near(OBJECT.color) > 50
 
 
 def test_a_scenario_thins_the_copy_it_names(tmp_path):

@@ -7,7 +7,7 @@ from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
 from mbicp_viz.errors import InputError
-from mbicp_viz.relations import read_relations
+from mbicp_viz.readers.relations import read_relations
 
 from .conftest import DATA
 

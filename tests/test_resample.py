@@ -4,7 +4,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core.resample import grid_resample, regular_picks
+from mbicp_viz.core.resample import grid_resample, regular_picks
 
 
 def test_real_scan_thins_near_cells_and_keeps_far_ones(laserazos):

@@ -1,4 +1,7 @@
-"""docs/results.md: every table is what its command prints (numbers byte for byte, same seed)."""
+"""docs/results.md: every table is what its command prints (numbers byte for byte, same seed).
+
+These read the full logs of ../shared/data: they carry the ``shared`` marker, which the README's
+test command leaves out and ``.ci/run`` runs as a step of its own where ../shared exists."""
 
 import re
 import shlex
@@ -11,6 +14,7 @@ from mbicp_viz.cli import app
 
 ROOT = Path(__file__).parent.parent
 DOC = ROOT / "docs" / "results.md"
+pytestmark = pytest.mark.shared
 
 
 def overlap_blocks():

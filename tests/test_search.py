@@ -8,17 +8,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from core import ImprovedParams, Pose2, match, pose_error, relative
-from core.search import SearchParams, correlative_search, likelihood_field
+from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error, relative
+from mbicp_viz.core.search import SearchParams, correlative_search, likelihood_field
 from mbicp_viz.cli import app
-from mbicp_viz.scenarios import seen_from
-from mbicp_viz.sequence import succeeded
+from mbicp_viz.evaluation.pairs import seen_from
+from mbicp_viz.evaluation.criteria import CONSECUTIVE
 
 from .conftest import INTEL
 
 
 def success(pose: Pose2, truth: Pose2) -> bool:
-    return succeeded(*pose_error(pose, truth))
+    return CONSECUTIVE.judge(pose, truth)
 
 
 @settings(max_examples=12, deadline=None)

@@ -3,10 +3,10 @@
 import numpy as np
 from typer.testing import CliRunner
 
-from core import Pose2, pose_error, relative
+from mbicp_viz.core import Pose2, pose_error, relative
 from mbicp_viz.cli import app
 from mbicp_viz.readers import read_log
-from mbicp_viz.trajectory import accumulate, kalman
+from mbicp_viz.evaluation.trajectory import accumulate, kalman
 
 from .conftest import INTEL, LASERAZOS
 

@@ -1,4 +1,5 @@
-"""The viser debugger driven from Python: the real server, GUI handles and scene nodes, no browser."""
+"""The viser debugger driven from Python: the real server, GUI handles and scene nodes, no browser.
+The model (``DebugState``) is tested without any server."""
 
 import math
 import re
@@ -7,13 +8,17 @@ import numpy as np
 import pytest
 import viser
 
-import mbicp_viz.viser_app as va
-from core import Pose2
+import mbicp_viz.views.debugger.state as st
+from mbicp_viz.core import MATCHERS, Pose2, field_specs, pose_error
+from mbicp_viz.evaluation.choices import Guess
 from mbicp_viz.readers import read_log
-from mbicp_viz.rrd import Run  # noqa: F401  (the export path imports it lazily; fail early if broken)
-from mbicp_viz.viser_app import COMPARE, Session, Source, source_for
+from mbicp_viz.views import scene
+from mbicp_viz.views.debugger.camera import TopDownCamera
+from mbicp_viz.views.debugger.session import Session
+from mbicp_viz.views.debugger.sources import files_source, scenario_source
+from mbicp_viz.views.debugger.state import DebugState, Source, parse_entry
 
-from .conftest import EXAMPLES, LASERAZOS
+from .conftest import EXAMPLES, INTEL, LASERAZOS
 
 PAIR = EXAMPLES / "hokuyo-125-130.npz"
 
@@ -32,56 +37,61 @@ def session(server):
     s.close()
 
 
+def submit(panel, **typed):
+    """Type each value into its box and press Enter, as a user does."""
+    for name, text in typed.items():
+        panel.boxes[name].handle.value = f"{text}\n"
+
+
 def test_opens_on_the_final_iteration_with_a_result(session):
-    n = session.max_iteration()
-    assert n > 5 and session.h_iter.value == n and session.h_iter.max == n
-    assert "improved" in session.h_result.content and "converged" in session.h_result.content
-    assert "condition number" in session.h_result.content
-    on_ref = re.search(r"within 5 cm of the reference: ([0-9.]+) %", session.h_result.content)
+    n = session.state.max_iteration()
+    assert n > 5 and session.playback.slider.value == n and session.playback.slider.max == n
+    content = session.h_result.content
+    assert "improved" in content and "converged" in content and "condition number" in content
+    on_ref = re.search(r"([0-9.]+) % of the object points lie within 5 cm", content)
     assert on_ref and 90.0 < float(on_ref.group(1)) <= 100.0  # the hand-held pair, matched
+    assert "(object frame in the reference frame)" in content  # the frame the pose is in
 
 
 def test_iteration_slider_redraws_without_rematching(session, monkeypatch):
     calls = []
-    monkeypatch.setattr(va, "run_match", lambda *a, **k: calls.append(a))
-    run = session.runs[0]
-    for k in (0, 1, 5, session.max_iteration()):
-        session.h_iter.value = k
+    monkeypatch.setattr(st, "run_match", lambda *a, **k: calls.append(a))
+    run = session.state.runs[0]
+    for k in (0, 1, 5, session.state.max_iteration()):
+        session.playback.slider.value = k
         obj = session.nodes["/improved/scene/object"]
-        if k == 0:
-            expected = run.start.initial_guess.apply(run.start.obj_points[run.start.used])
-        else:
-            expected = run.iterations[k - 1].moved_points
+        expected = (run.start.initial_guess.apply(run.start.obj_points[run.start.used]) if k == 0
+                    else run.iterations[k - 1].moved_points)
         np.testing.assert_allclose(obj.points[:, :2], expected, atol=1e-5)
-        assert f"iteration {k}" in session.h_iter_info.content
+        assert f"iteration {k}" in session.playback.text.content
     assert calls == []
 
 
 def test_previous_next_and_play(session):
-    session.h_iter.value = 3
-    session.step(+1)
-    assert session.iteration == 4
-    session.step(-1)
-    session.step(-1)
-    assert session.iteration == 2
-    session.fps = 30.0
-    session.playing = True
     import time
 
-    time.sleep(0.5)
-    session.playing = False
-    assert session.iteration != 2  # the player advanced
+    session.playback.slider.value = 3
+    session.step(+1)
+    assert session.state.iteration == 4
+    session.step(-1)
+    session.step(-1)
+    assert session.state.iteration == 2
+    session.fps = 30.0
     session.playing = True
+    deadline = time.monotonic() + 10
+    while session.state.iteration == 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert session.state.iteration != 2  # the player advanced
     session.close()  # stops the player even while playing
-    at = session.iteration
+    at = session.state.iteration
     time.sleep(0.2)
-    assert session.iteration == at
+    assert session.state.iteration == at
 
 
 def test_pairs_by_kind_match_the_events(session):
     k = 3
-    session.h_iter.value = k
-    ev = session.runs[0].iterations[k - 1]
+    session.playback.slider.value = k
+    ev = session.state.runs[0].iterations[k - 1]
     kept = ev.pairs.status == 0
     n_inter = int(np.count_nonzero(kept & (ev.pairs.kind == 1)))
     n_rej = int(np.count_nonzero(~kept))
@@ -89,140 +99,244 @@ def test_pairs_by_kind_match_the_events(session):
     assert len(session.nodes["/improved/scene/pairs/rejected"].points) == max(n_rej, 1)
 
 
-def test_layer_toggles_hide_nodes(session):
-    session._on_layer("rejected pairs", False)
-    assert session.nodes["/improved/scene/pairs/rejected"].visible is False
-    session._on_layer("rejected pairs", True)
-    assert session.nodes["/improved/scene/pairs/rejected"].visible is True
+def test_layer_toggles_hide_nodes_and_the_legend_lists_what_is_shown(session):
+    label = scene.PAIR_REJECTED.label
+    assert label in session.h_legend.content
+    session.layer_boxes[label].value = False
+    assert session.nodes["/improved/scene/pairs/rejected"].visible is False and label not in session.h_legend.content
+    session.layer_boxes[label].value = True
+    assert session.nodes["/improved/scene/pairs/rejected"].visible is True and label in session.h_legend.content
+    assert scene.HIDDEN.label not in session.h_legend.content  # off by default
 
 
-def test_parameter_change_rematches_and_updates_the_result(session):
-    before = session.h_result.content
-    assert session.set_param("improved", "MaxIter", 3)
-    assert session.max_iteration() == 3 and "3 iterations" in session.h_result.content
-    assert session.h_result.content != before
+def test_typed_parameters_reach_the_matcher_exactly(session):
+    panel = session.params_panel
+    submit(panel, errx_out="1e-5", MaxIter="1e2", Bw="12.5")
+    p = session.state.params["improved"]
+    assert p.errx_out == 1e-5 and p.MaxIter == 100 and p.Bw == pytest.approx(math.radians(12.5))
+    assert session.state.runs[0].start.params is p  # the match that is shown ran with them
+    assert panel.boxes["errx_out"].handle.value == "1e-5" and panel.message.content == ""  # as typed
 
 
-def test_invalid_entries_show_a_message_and_keep_the_last_result(session):
-    before = (session.h_result.content, session.params["improved"])
-    for name, value in (("Br", -1.0), ("L", float("nan")), ("Bw", 500.0), ("MaxIter", 2.5)):
-        assert not session.set_param("improved", name, value)
-        assert "⚠" in session.h_param_msg.content and name in session.h_param_msg.content
-        assert (session.h_result.content, session.params["improved"]) == before
+@pytest.mark.parametrize("name, typed, why", [
+    ("MaxIter", "2.5", "whole number"), ("Br", "-1", "below the minimum"), ("Bw", "500", "outside"),
+    ("L", "nan", "finite"), ("L", "1e", "not a number"), ("resample", "yes", "true or false")])
+def test_refused_entries_say_why_and_keep_the_last_result(session, name, typed, why):
+    before = (session.h_result.content, session.state.params["improved"])
+    submit(session.params_panel, **{name: typed})
+    assert why in session.params_panel.message.content and name in session.params_panel.message.content
+    assert (session.h_result.content, session.state.params["improved"]) == before
+    spec = next(s for s in field_specs(MATCHERS["improved"].params_type) if s.name == name)
+    assert session.params_panel.boxes[name].handle.value == st.shown_value(spec, getattr(before[1], name))
 
 
 def test_an_exception_inside_a_match_is_shown_and_the_server_keeps_serving(session, monkeypatch):
     good = session.h_result.content
 
     def broken(*a, **k):
-        raise RuntimeError("boom")
+        raise ValueError("boom")
 
-    monkeypatch.setattr(va, "run_match", broken)
-    assert not session.set_param("improved", "Br", 0.8)
+    monkeypatch.setattr(st, "run_match", broken)
+    submit(session.params_panel, Br="0.8")
     assert "boom" in session.h_status.content and session.h_result.content == good
-    assert session.params["improved"].Br != 0.8  # the failed change is not kept
+    assert session.state.params["improved"].Br != 0.8  # the failed change is not kept
     monkeypatch.undo()
-    assert session.set_param("improved", "Br", 0.8) and session.h_status.content == ""
+    submit(session.params_panel, Br="0.8")
+    assert session.state.params["improved"].Br == 0.8 and session.h_status.content == ""
 
 
-def test_algorithm_dropdown_and_compare(session):
-    session.h_algo.value = "icp"
-    assert [r.name for r in session.runs] == ["icp"] and "Parameters: icp" in session.param_folder.label
-    session.h_algo.value = COMPARE
-    assert [r.name for r in session.runs] == ["icp", "mbicp", "improved", "psm", "pmwn"]
-    assert "/mbicp/scene/object" in session.nodes and "/icp/scene/object" in session.nodes
+def test_parameter_form_stays_in_place_and_follows_the_matcher(session):
+    order = session.params_panel.folder.order
+    session.h_edit.value = "icp"
+    assert "Parameters: icp" in session.params_panel.folder.label and session.params_panel.folder.order == order
+    assert set(session.params_panel.boxes) == {s.name for s in field_specs(MATCHERS["icp"].params_type)}
+
+
+def test_compare_chosen_matchers_each_in_its_colour(session):
+    session.h_matchers["icp"].value = True
+    assert [r.name for r in session.state.runs] == ["icp", "improved"]
+    legend = session.h_legend.content
+    for name in ("icp", "improved"):
+        assert scene.run_style(name).label in legend
+        colors = np.asarray(session.nodes[f"/{name}/scene/object"].colors)
+        assert (colors == np.array(scene.RUN_COLORS[name])).all()
+    assert "**icp**" in session.playback.text.content and "**improved**" in session.playback.text.content
+    session.h_matchers["improved"].value = False
+    session.h_matchers["icp"].value = False  # none: refused, the last choice stays
+    assert [r.name for r in session.state.runs] == ["icp"] and "choose at least one" in session.h_status.content
 
 
 def test_initial_guess_by_numbers_and_by_gizmo(session):
-    session.h_gt.value = -10.0
-    assert session.guess.theta == pytest.approx(math.radians(-10.0))
-    assert session.runs[0].start.initial_guess == session.guess
+    session.h_guess["theta"].handle.value = "-10\n"
+    session.h_guess["x"].handle.value = "1e-3\n"
+    assert session.state.guess.theta == pytest.approx(math.radians(-10.0)) and session.state.guess.x == 1e-3
+    assert session.state.runs[0].start.initial_guess == session.state.guess
     session.gizmo.position = (0.3, -0.2, 0.0)
     session._on_gizmo()
-    assert (session.guess.x, session.guess.y) == pytest.approx((0.3, -0.2))
-    assert session.h_gx.value == pytest.approx(0.3)
+    assert (session.state.guess.x, session.state.guess.y) == pytest.approx((0.3, -0.2))
+    assert float(session.h_guess["x"].text) == pytest.approx(0.3) and "dragged" in session.h_guess_info.content
 
 
 def test_export_writes_a_readable_rrd_and_params(session, tmp_path):
     from rerun.chunk import RrdReader
 
-    data = session.export_rrd()
+    from mbicp_viz.readers.params_toml import load_params, load_search
+
     p = tmp_path / "s.rrd"
-    p.write_bytes(data)
+    p.write_bytes(session.export_rrd())
     paths = {c.entity_path for c in RrdReader(str(p)).stream().to_chunks()}
     assert "/improved/scene/pairs/point" in paths
-    text = session.export_params()
+    submit(session.search_panel, window_xy="0.75")
     f = tmp_path / "p.toml"
-    f.write_text(text)
-    from mbicp_viz.params_io import load_params
-
-    assert load_params(str(f), "improved") == session.params["improved"]
+    f.write_text(session.export_params())
+    assert load_params(str(f), "improved") == session.state.params["improved"]
+    assert load_search(str(f)).window_xy == 0.75
 
 
 def test_log_source_picks_any_pair(server):
-    s = Session(server, source_for(str(LASERAZOS), None, None))
-    assert s.pair == (0, 1)
+    s = Session(server, files_source(str(LASERAZOS), None))
+    assert s.state.pair == (0, 1)
     s.h_consecutive.value = False
-    s.h_ref.value = 3
-    s.h_obj.value = 7
-    assert s.pair == (3, 7) and s.runs[0].start.ref_points.shape[0] == s.ref.n_valid
-    s.h_obj.value = 999
-    assert "⚠" in s.h_status.content and s.pair == (3, 7)
+    s.h_ref.handle.value = "3\n"
+    s.h_obj.handle.value = "7\n"
+    assert s.state.pair == (3, 7) and s.state.runs[0].start.ref_points.shape[0] == s.state.ref.n_valid
+    s.h_obj.handle.value = "999\n"
+    assert "⚠" in s.h_status.content and s.state.pair == (3, 7) and s.h_obj.text == "7"
+    s.close()
 
 
-def test_scenario_source():
-    src = source_for(None, None, "partial-overlap")
-    assert src.truth is not None and set(src.params) == {"mbicp", "improved"}
+def test_scenario_source_shows_its_note_and_teaching_layers(server):
+    src = scenario_source("partial-overlap")
+    assert src.truth is not None and src.algorithms == ("mbicp", "improved") and src.teaching
+    s = Session(server, src)
+    assert s.state.visible[scene.ISO_METRIC.label]  # teaching = true: on from the start
+    assert scene.TRUTH.label in s.h_legend.content
+    s.close()
 
 
 def test_clicking_a_point_shows_its_iso_distance_curves(session):
-    session.h_iter.value = 2
-    run = session.runs[0]
+    session.playback.slider.value = 2
+    run = session.state.runs[0]
     ev = run.iterations[1]
     j = 40
     target = ev.moved_points[j]
-    # a view ray from above, straight down onto that point
-    chosen = session.click((target[0], target[1], 10.0), (0.0, 0.0, -1.0))
+    chosen = session.click((target[0], target[1], 10.0), (0.0, 0.0, -1.0))  # a ray straight down onto it
     assert chosen == int(run.start.used[j])
-    assert session.visible["iso-distance curves"] and session.nodes["/improved/scene/teaching/metric_isocurves"].visible
+    node = session.nodes["/improved/scene/teaching/metric_isocurves"]
+    assert session.state.visible[scene.ISO_METRIC.label] and node.visible
     row = np.flatnonzero(ev.pairs.obj_index == chosen)[0]
-    ellipse = session.nodes["/improved/scene/teaching/metric_isocurves"].points.reshape(-1, 3)[:, :2]
-    # one ellipse, centred on that point's target
-    np.testing.assert_allclose(ellipse.mean(axis=0), ev.pairs.target[row], atol=0.02)
+    ellipse = node.points.reshape(-1, 3)[:, :2]
+    np.testing.assert_allclose(ellipse.mean(axis=0), ev.pairs.target[row], atol=0.02)  # one ellipse, on its target
 
 
 def test_polar_cost_plot_follows_the_iteration(session):
-    session.h_algo.value = "pmwn"
-    session.h_iter.value = 1
-    x, cost, fit = session.h_cost.data
-    polar = session.runs[0].iterations[0].polar
-    np.testing.assert_allclose(cost, polar.cost)
-    assert np.isfinite(fit).sum() >= 2  # the V drawn at the minimum
-    session.h_algo.value = "mbicp"
-    assert len(session.h_cost.data[0]) == 1  # no cost curve for the MbICP family
+    session.h_matchers["pmwn"].value = True
+    session.h_matchers["improved"].value = False
+    session.playback.slider.value = 1
+    x, cost, fit = session.plots.cost.data
+    np.testing.assert_allclose(cost, session.state.runs[0].iterations[0].polar.cost)
+    assert np.isfinite(fit).sum() >= 2 and session.plots.cost.visible  # the V drawn at the minimum
+    session.h_matchers["mbicp"].value = True
+    session.h_matchers["pmwn"].value = False
+    assert not session.plots.cost.visible  # no cost curve for the MbICP family
 
 
 def test_search_button_finds_the_guess_a_corridor_needs(server):
     """Intel 12 -> 13: ~1 m along a corridor. From the identity improved MbICP shortens the motion;
-    the search button puts the guess (numbers and gizmo) near the truth and the match succeeds."""
-    from core import pose_error
-
-    from .conftest import INTEL
-
+    the search puts the guess (numbers and gizmo) near the truth and the match succeeds."""
     s = Session(server, Source("intel", read_log(INTEL), pair=(12, 13), pick_pair=True, guess=Pose2()))
-    truth = s.truth()
-    assert pose_error(s.runs[0].result.pose, truth)[0] > 0.5  # the failed match a user opens
-    found = s.search_guess()
-    assert pose_error(found, truth)[0] < 0.15
-    assert (s.h_gx.value, s.h_gy.value) == pytest.approx((found.x, found.y))
+    truth = s.state.truth()
+    assert pose_error(s.state.runs[0].result.pose, truth)[0] > 0.5  # the failed match a user opens
+    s._on_search()
+    found = s.state.guess
+    assert pose_error(found, truth)[0] < 0.15 and "searched" in s.h_guess_info.content
+    assert (float(s.h_guess["x"].text), float(s.h_guess["y"].text)) == pytest.approx((found.x, found.y))
     assert tuple(s.gizmo.position[:2]) == pytest.approx((found.x, found.y))
-    et, er = pose_error(s.runs[0].result.pose, truth)
-    assert et < 0.05 and er < math.radians(1.0) and "searched around the guess" in s.h_status.content
+    et, er = pose_error(s.state.runs[0].result.pose, truth)
+    assert et < 0.05 and er < math.radians(1.0)
+    s.close()
 
 
 def test_picking_a_pair_puts_its_guess_in_the_fields(server):
-    s = Session(server, Source("intel", read_log(EXAMPLES / "intel-excerpt.log.gz"), pick_pair=True))
-    s.h_ref.value = 12  # consecutive: object 13; the guess comes from the stored poses
-    assert s.pair == (12, 13)
-    assert (s.h_gx.value, s.h_gy.value) == pytest.approx((s.guess.x, s.guess.y))
-    assert s.h_gt.value == pytest.approx(math.degrees(s.guess.theta))
+    s = Session(server, Source("intel", read_log(INTEL), pick_pair=True))
+    s.h_ref.handle.value = "12\n"  # consecutive: object 13; the guess comes from the stored poses
+    assert s.state.pair == (12, 13) and s.state.guess_source == "scan poses"
+    assert float(s.h_guess["x"].text) == pytest.approx(s.state.guess.x)
+    assert float(s.h_guess["theta"].text) == pytest.approx(math.degrees(s.state.guess.theta))
+    s.close()
+
+
+@pytest.mark.parametrize("name", list(MATCHERS))
+def test_every_layer_of_every_matcher_has_a_place_in_both_front_ends(server, name, tmp_path):
+    """An unknown layer is an error in both front ends: draw every layer of every iteration of
+    every matcher in viser, and write them all to an .rrd."""
+    from mbicp_viz.views import viser_draw
+    from mbicp_viz.views.rrd import Run, record
+
+    log = read_log(LASERAZOS)
+    state = DebugState(Source("laserazos", log, guess=Pose2(0.05, 0.0, 0.05), algorithms=(name,)))
+    assert state.rematch() is None
+    drawn = set()
+    for k in range(state.max_iteration() + 1):
+        state.iteration = k
+        for layer in state.layers(state.runs[0]):
+            if viser_draw.in_scan_plane(layer):
+                viser_draw.draw(server.scene, f"/t/{layer.path}", layer)
+                drawn.add(layer.path)
+    assert "scene/reference" in drawn and "scene/pairs/point" in drawn
+    if name == "pmwn":
+        assert "scene/polar/circle_points" in drawn
+    record([Run(name, state.ref, state.obj, state.guess, state.params[name])], str(tmp_path / "all.rrd"),
+           teaching=True)
+    with pytest.raises(TypeError):
+        viser_draw.in_scan_plane(scene.Points("elsewhere/points", np.zeros((1, 2)), scene.OBJECT, 0.1))
+
+
+def test_parse_entry_is_exact():
+    specs = {s.name: s for s in field_specs(MATCHERS["improved"].params_type)}
+    assert parse_entry(specs["errx_out"], " 1e-5 ") == 1e-5
+    assert parse_entry(specs["Bw"], "45") == pytest.approx(math.radians(45.0))
+    assert parse_entry(specs["MaxIter"], "1e2") == 100 and isinstance(parse_entry(specs["MaxIter"], "1e2"), int)
+    with pytest.raises(Exception, match="whole number"):
+        parse_entry(specs["MaxIter"], "2.5")
+
+
+def test_the_camera_is_put_back_top_down():
+    assert TopDownCamera.is_top_down((1.0, 2.0, 10.0), (1.0, 2.0, 0.0), (0.0, 1.0, 0.0))
+    assert not TopDownCamera.is_top_down((1.0, 5.0, 10.0), (1.0, 2.0, 0.0), (0.0, 1.0, 0.0))  # tilted
+    assert not TopDownCamera.is_top_down((1.0, 2.0, 10.0), (1.0, 2.0, 0.0), (1.0, 0.2, 0.0))  # turned
+
+
+def test_guess_kind_of_the_source_and_where_it_came_from():
+    state = DebugState(files_source(str(INTEL), None, (12, 13), Guess.identity))
+    assert state.guess == Pose2() and state.guess_source == "identity"
+    assert state.truth() is not None  # the log's scan poses judge a guess not taken from them
+
+
+def test_a_foreign_origin_is_refused():
+    """A page of another site opens the debugger's websocket: closed before any data flows."""
+    import asyncio
+
+    import websockets
+    from websockets.asyncio.client import connect
+
+    import viser
+
+    async def attempt(origin):
+        async with connect(f"ws://127.0.0.1:{app.port}", origin=origin,
+                           subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+            try:
+                await asyncio.wait_for(ws.recv(), timeout=10)
+                return "data"
+            except websockets.ConnectionClosed as e:
+                return e.rcvd.code if e.rcvd else None
+
+    from mbicp_viz.views.debugger.app import App
+
+    app = App(Source("hokuyo pair", read_log(PAIR), guess=Pose2()), "127.0.0.1", 0)
+    try:
+        assert asyncio.run(attempt("http://evil.example")) == 1008
+        assert "http://evil.example" in app.refused.values() and not app.sessions
+        assert asyncio.run(attempt(f"http://127.0.0.1:{app.port}")) == "data"  # the debugger's own page
+    finally:
+        app.stop()

@@ -1,48 +1,69 @@
-"""Readers for the scan formats users have, chosen by file name or content.
+"""Readers for the scan formats users have, chosen by file name; every reader returns a ``ScanLog``.
 
 | format | files | reader |
 |---|---|---|
-| CARMEN log | ``*.log``, ``*.log.gz``, ``*.clf`` | :func:`read_carmen` |
+| CARMEN log | ``*.log``, ``*.clf`` (plain, ``.gz``, ``.bz2``, ``.xz``) | :func:`read_carmen` |
 | Minguez ``.off`` | ``*.off`` | :func:`read_off` |
 | CSM JSON laser_data | ``*.json``, ``*.jsonl`` | :func:`read_csm_json` |
 | ROS 1 / ROS 2 bag | ``*.bag``, ``*.db3``, ``*.mcap``, a rosbag2 folder | :func:`read_rosbag` |
 | plain text / numpy | ``*.scans``, ``*.txt``, ``*.npz`` | :mod:`.plain` |
+
+Text formats may be compressed whatever their name says (the reader looks at the first bytes);
+a compression suffix is looked through to the format's own (``intel.clf.bz2``).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError
-from .carmen import read_carmen
-from .csm_json import read_csm_json
+from mbicp_viz.errors import InputError
+
 from .log import ScanLog
-from .off import read_off
-from .plain import read_npz, read_plain_text, write_npz
-from .rosbag import read_rosbag
 
-_BY_SUFFIX = {
-    ".log": read_carmen, ".clf": read_carmen, ".gz": read_carmen,
-    ".off": read_off,
-    ".json": read_csm_json, ".jsonl": read_csm_json,
-    ".bag": read_rosbag, ".db3": read_rosbag, ".mcap": read_rosbag,
-    ".scans": read_plain_text, ".txt": read_plain_text,
-    ".npz": read_npz,
+_READERS = {
+    ".log": "carmen:read_carmen", ".clf": "carmen:read_carmen",
+    ".off": "off:read_off",
+    ".json": "csm_json:read_csm_json", ".jsonl": "csm_json:read_csm_json",
+    ".bag": "rosbag:read_rosbag", ".db3": "rosbag:read_rosbag", ".mcap": "rosbag:read_rosbag",
+    ".scans": "plain:read_plain_text", ".txt": "plain:read_plain_text",
+    ".npz": "plain:read_npz",
 }
+COMPRESSED = (".gz", ".bz2", ".xz")
+FORMATS = sorted(_READERS)
 
-FORMATS = sorted(_BY_SUFFIX)
+
+def format_suffix(path: Path) -> str:
+    """The suffix that names the format: ``.clf`` for ``a.clf.bz2``; a bare ``.gz`` is a CARMEN log
+    (how the corrected logs of the SLAM evaluations ship)."""
+    suffixes = [s.lower() for s in path.suffixes]
+    while suffixes and suffixes[-1] in COMPRESSED:
+        last = suffixes.pop()
+        if not suffixes or suffixes[-1] not in _READERS:
+            return ".log" if last == ".gz" else ""
+    return suffixes[-1] if suffixes else ""
 
 
-def read_log(path: str | Path) -> ScanLog:
-    """All scans of a file, with the reader chosen by its suffix (a folder: a rosbag2 bag)."""
+def read_log(path: str | Path, topic: str | None = None) -> ScanLog:
+    """All scans of a file, with the reader chosen by its name (a folder: a rosbag2 bag); ``topic``
+    picks a bag's scan topic."""
+    import importlib
+
     p = Path(path)
-    if p.is_dir():
-        return read_rosbag(str(p))
-    reader = _BY_SUFFIX.get(p.suffix.lower())
+    suffix = ".bag" if p.is_dir() else format_suffix(p)
+    reader = _READERS.get(suffix)
     if reader is None:
-        raise InputError(f"unknown file type {p.suffix!r}; known: {', '.join(FORMATS)}", str(p))
-    return reader(str(p))
+        known = ", ".join(FORMATS + [f"(any){c}" for c in COMPRESSED])
+        raise InputError(f"unknown file type {''.join(p.suffixes)[-20:]!r}; known: {known}", str(p))
+    module, name = reader.split(":")
+    fn = getattr(importlib.import_module(f".{module}", __name__), name)
+    if topic is not None and module != "rosbag":
+        raise InputError("only ROS bags have topics", str(p), field="--topic")
+    log = fn(str(p), topic) if module == "rosbag" else fn(str(p))
+    if not log.scans:
+        first = log.unusable[min(log.unusable)]
+        raise InputError(f"no usable scan: all {log.records} are unusable (scan {min(log.unusable)}: {first.reason})",
+                         str(p), first.source.line, "ranges")
+    return log
 
 
-__all__ = ["ScanLog", "read_log", "read_carmen", "read_csm_json", "read_off", "read_rosbag", "read_plain_text",
-           "read_npz", "write_npz", "FORMATS"]
+__all__ = ["ScanLog", "read_log", "FORMATS"]

@@ -7,20 +7,32 @@ import math
 
 import numpy as np
 
-from core import Pose2, ScanError, ScanSource, make_scan
+from mbicp_viz.core import Pose2, ScanSource
+from mbicp_viz.errors import InputError
 
-from ..errors import InputError
-from .log import ScanLog
-from .text import open_text
+from .log import ScanLog, scan_or_reason
+from .text import lines, open_text
+
+
+def _number(c) -> float | None:
+    """A JSON number as a finite-or-not float; None for anything else (bool, string, an integer
+    beyond a float's range)."""
+    if isinstance(c, bool) or not isinstance(c, (int, float)):
+        return None
+    try:
+        return float(c)
+    except OverflowError:
+        return None
 
 
 def _pose(obj, key, path, line_no):
     v = obj.get(key)
-    if v is None or not isinstance(v, list) or any(c is None for c in v):
+    if v is None or (isinstance(v, list) and any(c is None for c in v)):
         return None
-    if len(v) != 3 or not all(isinstance(c, (int, float)) and math.isfinite(c) for c in v):
-        raise InputError(f"expected [x, y, theta], got {str(v)[:60]}", path, line_no, key)
-    return Pose2(*map(float, v))
+    values = [_number(c) for c in v] if isinstance(v, list) else []
+    if len(values) != 3 or not all(c is not None and math.isfinite(c) for c in values):
+        raise InputError(f"expected [x, y, theta] of finite numbers, got {str(v)[:60]}", path, line_no, key)
+    return Pose2(*values)
 
 
 def _array(obj, key, n, path, line_no, allow_null=False):
@@ -30,46 +42,51 @@ def _array(obj, key, n, path, line_no, allow_null=False):
         raise InputError(f"expected a list of nrays={n} entries, got {got}", path, line_no, key)
     out = np.empty(n)
     for k, c in enumerate(v):
-        if c is None and allow_null:
-            out[k] = np.nan
-        elif isinstance(c, (int, float)) and not isinstance(c, bool):
-            out[k] = c
-        else:
-            raise InputError(f"entry {k} is {c!r}, not a number", path, line_no, key)
+        x = np.nan if c is None and allow_null else _number(c)
+        if x is None:
+            raise InputError(f"entry {k} is {str(c)[:40]}, not a number a float can hold", path, line_no, key)
+        out[k] = x
     return out
 
 
+def _object(text: str, path, line_no) -> dict:
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise InputError(f"invalid JSON ({e.msg}, column {e.colno})", path, line_no) from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply", path, line_no) from None
+    if not isinstance(obj, dict):
+        raise InputError("expected a JSON object (laser_data)", path, line_no)
+    return obj
+
+
+def _theta(obj, n, path, line_no) -> np.ndarray:
+    if "theta" in obj:
+        return _array(obj, "theta", n, path, line_no)
+    lo, hi = _number(obj.get("min_theta")), _number(obj.get("max_theta"))
+    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
+        raise InputError("needs 'theta' or finite 'min_theta' and 'max_theta'", path, line_no, "theta")
+    return np.linspace(lo, hi, n)
+
+
 def read_csm_json(path: str) -> ScanLog:
-    scans = []
+    log = ScanLog(str(path), [])
     with open_text(path) as f:
-        for line_no, line in enumerate(f, start=1):
-            if not line.strip():
+        for line in lines(f, path):
+            if not line.text.strip():
                 continue
-            try:
-                obj = json.loads(line)
-            except json.JSONDecodeError as e:
-                raise InputError(f"invalid JSON ({e.msg}, column {e.colno})", path, line_no) from None
-            if not isinstance(obj, dict):
-                raise InputError("expected a JSON object (laser_data)", path, line_no)
+            obj = _object(line.text, path, line.number)
             n = obj.get("nrays")
-            if not isinstance(n, int) or isinstance(n, bool) or n <= 0:
-                raise InputError(f"expected a positive integer, got {n!r}", path, line_no, "nrays")
-            readings = _array(obj, "readings", n, path, line_no, allow_null=True)
-            if "theta" in obj:
-                theta = _array(obj, "theta", n, path, line_no)
-            else:
-                lo, hi = obj.get("min_theta"), obj.get("max_theta")
-                if not all(isinstance(v, (int, float)) for v in (lo, hi)):
-                    raise InputError("needs 'theta' or numeric 'min_theta' and 'max_theta'", path, line_no, "theta")
-                theta = np.linspace(lo, hi, n)
-            valid = _array(obj, "valid", n, path, line_no) != 0 if "valid" in obj else None
-            pose = _pose(obj, "true_pose", path, line_no) or _pose(obj, "estimate", path, line_no)
-            try:
-                scans.append(make_scan(readings, theta, valid=valid, pose=pose,
-                                       odometry=_pose(obj, "odometry", path, line_no),
-                                       source=ScanSource(str(path), len(scans), line_no)))
-            except ScanError as e:
-                raise InputError(e.reason, path, line_no, "readings") from None
-    if not scans:
+            if not isinstance(n, int) or isinstance(n, bool) or not 0 < n <= 100_000:
+                raise InputError(f"expected a whole number 1..100000, got {str(n)[:40]}", path, line.number, "nrays")
+            readings = _array(obj, "readings", n, path, line.number, allow_null=True)
+            theta = _theta(obj, n, path, line.number)
+            valid = _array(obj, "valid", n, path, line.number) != 0 if "valid" in obj else None
+            pose = _pose(obj, "true_pose", path, line.number) or _pose(obj, "estimate", path, line.number)
+            log.add(scan_or_reason(readings, theta, path, line.number, "theta", valid=valid, pose=pose,
+                                   odometry=_pose(obj, "odometry", path, line.number),
+                                   source=ScanSource(str(path), log.records, line.number)))
+    if not log.records:
         raise InputError("no laser_data objects in the file", path)
-    return ScanLog(str(path), scans)
+    return log

@@ -11,87 +11,84 @@ with NaN, inf or 0 for a reading with no return. ``.npz`` (numpy, loaded without
 
 from __future__ import annotations
 
-import math
 import zipfile
+import zlib
 
 import numpy as np
 
-from core import Pose2, ScanError, ScanSource, make_scan, uniform_bearings
+from mbicp_viz.core import Pose2, ScanSource, uniform_bearings
+from mbicp_viz.errors import InputError
 
-from ..errors import InputError
-from .log import ScanLog
-from .text import open_text
+from .log import ScanLog, scan_or_reason
+from .text import token_lines
 
 
 def read_plain_text(path: str) -> ScanLog:
-    scans = []
-    with open_text(path) as f:
-        for line_no, line in enumerate(f, start=1):
-            toks = line.split("#", 1)[0].split()
-            if not toks:
-                continue
-            if len(toks) < 4:
-                raise InputError(f"expected 'angle_min_rad angle_increment_rad range_1_m ...', got {len(toks)} fields",
-                                 path, line_no)
-            try:
-                values = np.array(toks, dtype=float)
-            except ValueError:
-                k = next(i for i, t in enumerate(toks) if not _is_float(t))
-                name = ("angle_min_rad", "angle_increment_rad")[k] if k < 2 else f"range[{k - 2}]"
-                raise InputError(f"expected a number, got {toks[k][:40]!r}", path, line_no, name) from None
-            start, inc = values[:2]
-            for name, v in (("angle_min_rad", start), ("angle_increment_rad", inc)):
-                if not math.isfinite(v):
-                    raise InputError(f"not finite: {v}", path, line_no, name)
-            if inc <= 0:
-                raise InputError(f"must be positive, got {inc}", path, line_no, "angle_increment_rad")
-            ranges = values[2:]
-            scans.append(_make(ranges, uniform_bearings(len(ranges), start, inc), None,
-                               ScanSource(str(path), len(scans), line_no)))
-    if not scans:
+    log = ScanLog(str(path), [])
+    for fields in token_lines(path):
+        if len(fields.t) < 4:
+            raise fields.error(f"expected 'angle_min_rad angle_increment_rad range_1_m ...', got {len(fields.t)} "
+                               "fields")
+        start = fields.take("angle_min_rad")
+        inc = fields.take("angle_increment_rad")
+        if inc <= 0:
+            raise fields.error(f"must be positive, got {inc}", "angle_increment_rad")
+        ranges = fields.take_floats(fields.left, "range")
+        log.add(scan_or_reason(ranges, uniform_bearings(len(ranges), start, inc), path, fields.line, "ranges",
+                               source=ScanSource(str(path), log.records, fields.line)))
+    if not log.records:
         raise InputError("no scan lines", path)
-    return ScanLog(str(path), scans)
+    return log
 
 
-def _is_float(t):
+# Uncompressed size a .npz may announce: a small file must not unpack into gigabytes.
+MAX_NPZ_BYTES = 512 * 1024 * 1024
+
+
+def _load_npz(path: str) -> dict[str, np.ndarray]:
     try:
-        float(t)
-        return True
-    except ValueError:
-        return False
+        with zipfile.ZipFile(path) as zf:
+            size = sum(i.file_size for i in zf.infolist())
+        if size > MAX_NPZ_BYTES:
+            raise InputError(f"unpacks to {size / 1e6:.0f} MB, over the {MAX_NPZ_BYTES / 1e6:.0f} MB a scan file may",
+                             path)
+        with np.load(path, allow_pickle=False) as z:  # never unpickle a user's file
+            return {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise InputError("no such file", path) from None
+    except IsADirectoryError:
+        raise InputError("is a folder, not a file", path) from None
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError, zlib.error, KeyError) as e:
+        raise InputError(f"not a readable .npz file ({type(e).__name__}: {e})", path) from None
 
 
-def _make(ranges, bearings, pose, src):
-    try:
-        return make_scan(ranges, bearings, pose=pose, source=src)
-    except ScanError as e:
-        raise InputError(e.reason, src.path, src.line, "ranges" if src.line else f"scan {src.index}") from None
+def _real_array(arrays: dict, name: str, path: str) -> np.ndarray:
+    a = arrays[name]
+    if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise InputError(f"expected real numbers, got dtype {a.dtype}", path, field=name)
+    return a.astype(float)
 
 
 def read_npz(path: str) -> ScanLog:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except FileNotFoundError:
-        raise InputError("no such file", path) from None
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
-        raise InputError(f"not a readable .npz file ({e})", path) from None
+    arrays = _load_npz(path)
     if "ranges" not in arrays or "bearings" not in arrays:
         raise InputError(f"needs arrays 'ranges' and 'bearings', has {sorted(arrays)}", path)
-    ranges = np.atleast_2d(arrays["ranges"])
-    if ranges.ndim != 2 or not np.issubdtype(ranges.dtype, np.number):
-        raise InputError(f"expected a numeric (S, N) array, got shape {ranges.shape}", path, field="ranges")
-    bearings = arrays["bearings"]
-    if not np.issubdtype(bearings.dtype, np.number) or bearings.shape not in ((ranges.shape[1],), ranges.shape):
+    ranges = np.atleast_2d(_real_array(arrays, "ranges", path))
+    if ranges.ndim != 2 or ranges.size == 0:
+        raise InputError(f"expected an (S, N) array of scans, got shape {ranges.shape}", path, field="ranges")
+    bearings = _real_array(arrays, "bearings", path)
+    if bearings.shape not in ((ranges.shape[1],), ranges.shape):
         raise InputError(f"expected shape ({ranges.shape[1]},) or {ranges.shape}, got {bearings.shape}", path,
                          field="bearings")
     bearings = np.broadcast_to(bearings, ranges.shape)
-    poses = arrays.get("poses")
+    poses = _real_array(arrays, "poses", path) if "poses" in arrays else None
     if poses is not None and (poses.shape != (len(ranges), 3) or not np.all(np.isfinite(poses))):
         raise InputError(f"expected a finite ({len(ranges)}, 3) array, got shape {poses.shape}", path, field="poses")
-    scans = [_make(ranges[k], bearings[k], Pose2(*poses[k]) if poses is not None else None,
-                   ScanSource(str(path), k)) for k in range(len(ranges))]
-    return ScanLog(str(path), scans)
+    log = ScanLog(str(path), [])
+    for k in range(len(ranges)):
+        log.add(scan_or_reason(ranges[k], bearings[k], path, None, f"scan {k}", source=ScanSource(str(path), k),
+                               pose=Pose2(*poses[k]) if poses is not None else None))
+    return log
 
 
 def write_npz(path: str, scans, with_poses: bool = True) -> None:

@@ -14,10 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from core import ScanError, ScanSource, make_scan
+from mbicp_viz.core import ScanSource
 
-from ..errors import InputError
-from .log import ScanLog
+from mbicp_viz.errors import InputError
+
+from .log import ScanLog, scan_or_reason
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 _MAGIC = b"#ROSBAG V2.0\n"
@@ -147,7 +148,7 @@ def _walk_ros1(p: Path, topic):
 
 
 def _to_log(path: str, messages) -> ScanLog:
-    scans = []
+    log = ScanLog(path, [])
     for k, m in enumerate(messages):
         ranges = np.asarray(m.ranges, dtype=float)
         inc = float(m.angle_increment)
@@ -155,11 +156,8 @@ def _to_log(path: str, messages) -> ScanLog:
         if inc < 0:  # clockwise scanners: store bearings increasing
             ranges, bearings = ranges[::-1], bearings[::-1]
         stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
-        try:
-            scans.append(make_scan(ranges, bearings, range_min=float(m.range_min), range_max=float(m.range_max),
-                                   stamp=stamp, source=ScanSource(path, k)))
-        except ScanError as e:
-            raise InputError(e.reason, path, field=f"message {k}") from None
-    if not scans:
+        log.add(scan_or_reason(ranges, bearings, path, None, f"message {k}", range_min=float(m.range_min),
+                               range_max=float(m.range_max), stamp=stamp, source=ScanSource(path, k)))
+    if not log.records:
         raise InputError("no LaserScan messages", path)
-    return ScanLog(path, scans)
+    return log

@@ -1,7 +1,7 @@
 """``eval basin``: a convergence atlas — which initial guesses lead each matcher to the answer.
 
 A grid of initial offsets (x, y, theta) around the reference answer; every grid point is matched
-by every chosen matcher and coloured by outcome: correct (within 0.1 m and 3 deg of the answer),
+by every chosen matcher and coloured by outcome: correct (within ``CONSECUTIVE``'s tolerances of the answer),
 converged wrong, or not converged. The reference answer is ``--truth`` when given, else the
 relative pose of the scans' stored poses, else each matcher's own answer from the zero offset.
 """
@@ -13,15 +13,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core import Params, Pose2, Scan, match, pose_error
+from mbicp_viz.core import Params, Pose2, Scan, match
+from mbicp_viz.errors import InputError
 
-from .errors import InputError
+from .criteria import CONSECUTIVE
 from .pool import ordered_map
 
 CORRECT, WRONG, NOT_CONVERGED = 0, 1, 2
 OUTCOME_NAMES = ("correct", "converged wrong", "not converged")
 OUTCOME_COLORS = ((40, 160, 70), (220, 40, 40), (160, 160, 160))
-FAIL_M, FAIL_RAD = 0.1, math.radians(3.0)
 
 
 @dataclass(frozen=True)
@@ -37,8 +37,7 @@ def _run(args):
     out = []
     for g in guesses:
         r = match(ref, obj, g, params)
-        et, er = pose_error(r.pose, answer)
-        ok = et <= FAIL_M and er <= FAIL_RAD
+        ok = CONSECUTIVE.judge(r.pose, answer)
         out.append(CORRECT if ok and r.converged else (WRONG if r.converged else NOT_CONVERGED))
     return out
 
@@ -85,34 +84,6 @@ def plot_png(atlas: Atlas, path: str) -> None:
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-def record_rrd(atlas: Atlas, path: str) -> None:
-    """Outcome points per matcher in the (dx, dy) plane, one ``theta_offset`` step per slice."""
-    import rerun as rr
-    import rerun.blueprint as rrb
-
-    from .rrd import new_stream
-
-    stream = new_stream("mbicp-viz/basin")
-    names = list(atlas.outcome)
-    stream.save(path, default_blueprint=rrb.Blueprint(
-        rrb.Horizontal(*[rrb.Spatial2DView(origin=f"/basin/{n}", name=f"{n}: outcome per initial offset")
-                         for n in names]), rrb.TimePanel(timeline="theta_offset", expanded=True), collapse_panels=True))
-    gx, gy = np.meshgrid(atlas.offsets_xy, atlas.offsets_xy)
-    pts = np.column_stack((gx.ravel(), gy.ravel()))
-    colors = np.array(OUTCOME_COLORS, dtype=np.uint8)
-    step = float(atlas.offsets_xy[1] - atlas.offsets_xy[0]) if len(atlas.offsets_xy) > 1 else 0.1
-    for t, th in enumerate(atlas.thetas):
-        stream.set_time("theta_offset", sequence=t)
-        for n in names:
-            o = atlas.outcome[n][t].ravel()
-            stream.log(f"basin/{n}/outcome", rr.Points2D(pts, colors=colors[o], radii=step * 0.4,
-                                                         labels=[OUTCOME_NAMES[k] for k in o], show_labels=False))
-            stream.log(f"basin/{n}/note", rr.TextLog(f"dtheta {math.degrees(th):+.1f} deg: "
-                                                     f"{np.mean(o == CORRECT) * 100:.0f} % correct"))
-    stream.flush()
-    stream.disconnect()
 
 
 def summary(atlas: Atlas) -> str:

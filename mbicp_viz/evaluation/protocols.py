@@ -6,7 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core import Params, Pose2, Scan, match, pose_error
+from mbicp_viz.core import Params, Pose2, Scan, match, pose_error
+
+from .criteria import CONSECUTIVE, MBICP_PROTOCOL
 
 
 @dataclass(frozen=True)
@@ -32,3 +34,13 @@ def displaced_self_matches(scans: list[Scan], n_cases: int, params: Params, seed
         et, er = pose_error(r.pose, Pose2())
         out.append(DisplacedCase(k, d, et, er, r.iterations, r.converged))
     return out
+
+
+def protocol_summary(name: str, cases: list[DisplacedCase]) -> str:
+    """One line: how many cases met MbICP's criteria, how many were off grossly, the median iterations."""
+    ok = sum(MBICP_PROTOCOL.correct(c.error_m, c.error_rad) for c in cases)
+    gross = sum(not CONSECUTIVE.correct(c.error_m, c.error_rad) for c in cases)
+    its = sorted(c.iterations for c in cases)
+    n = len(cases)
+    return (f"{name}: {ok}/{n} within {MBICP_PROTOCOL.text()} ({100.0 * ok / n:.1f} %); {gross} off by more than "
+            f"{CONSECUTIVE.text().replace(' and ', ' or ')}; median {its[len(its) // 2]} iterations")

@@ -1,27 +1,17 @@
-"""``eval sequence``: match every consecutive pair of a log."""
+"""``eval sequence``: match every consecutive pair of a log; ``eval ceiling``: what its truth allows."""
 
 from __future__ import annotations
 
-import math
 import time
 
-from core import MatchResult, Params, Pose2, Scan, match, pose_error, relative
-from core.agreement import inlier_fraction
-from core.search import correlative_search
+from mbicp_viz.core import MatchResult, Params, Scan, SearchParams, match, pose_error
+from mbicp_viz.core.agreement import inlier_fraction
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers import ScanLog
 
-from .errors import InputError
-from .inputs import consecutive_pairs, stored_guess
+from .criteria import CONSECUTIVE
+from .pairs import Guess, pair_guess, stored_truth
 from .pool import ordered_map
-from .readers import ScanLog
-
-GUESSES = ("stored", "pose", "odometry", "identity", "search")
-# Paper 000 §3.1's failure threshold, used for the success rate against known poses.
-SUCCESS_M, SUCCESS_RAD = 0.1, math.radians(3.0)
-
-
-def succeeded(et: float, er: float) -> bool:
-    """Translation error et [m] and rotation error er [rad] within the success thresholds."""
-    return bool(et < SUCCESS_M and er < SUCCESS_RAD)
 
 
 def truth_doubted(row: dict) -> bool:
@@ -30,11 +20,11 @@ def truth_doubted(row: dict) -> bool:
     return not row["success"] and row["inliers_match"] > row["inliers_truth"]
 
 
-def scored(ref: Scan, obj: Scan, pose: Pose2, truth: Pose2) -> dict:
+def scored(ref: Scan, obj: Scan, pose, truth) -> dict:
     """Error of ``pose`` against ``truth`` and, for a failure, what the points say of each (the
     fields ``truth_doubted`` reads)."""
     et, er = pose_error(pose, truth)
-    row = {"error_xy": et, "error_theta": er, "success": succeeded(et, er)}
+    row = {"error_xy": et, "error_theta": er, "success": CONSECUTIVE.correct(et, er)}
     if not row["success"]:  # is the matcher wrong, or the stored pose? Ask the points.
         row |= {"inliers_match": inlier_fraction(ref, obj, pose), "inliers_truth": inlier_fraction(ref, obj, truth)}
     return row
@@ -46,55 +36,45 @@ def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
             "iterations": r.iterations, "converged": r.converged, "reason": r.reason.value, "time_ms": time_ms}
 
 
-def pair_guess(ref: Scan, obj: Scan, kind: str) -> tuple[Pose2, str]:
-    """The initial guess: ``stored`` (poses, else odometry, else identity), one source explicitly, or
-    ``search``: the correlative search around the identity (core/search.py), using nothing stored."""
-    if kind == "stored":
-        return stored_guess(ref, obj)
-    if kind == "identity":
-        return Pose2(), "identity"
-    if kind == "search":
-        return correlative_search(ref, obj).pose, "search"
-    a, b = (ref.pose, obj.pose) if kind == "pose" else (ref.odometry, obj.odometry)
-    if a is None or b is None:
-        raise InputError(f"the log stores no {kind} for scans {ref.source.index} and {obj.source.index}",
-                         ref.source.path, field="--guess")
-    return relative(a, b), kind
-
-
-def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess: str = "stored",
-                   truth: str | None = None, on_row=None, workers: int | None = None) -> list[dict]:
-    """One row per consecutive pair, in order; with ``truth="pose"`` also the error against the log's
-    scan poses. Pairs are spread over ``workers`` processes (default: every core; the standard
-    library's pool); ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
-    if truth == "pose" and guess in ("pose", "stored"):
+def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess: Guess | str = Guess.stored,
+                   truth: str | None = None, on_row=None, workers: int | None = None,
+                   search: SearchParams | None = None) -> list[dict]:
+    """One row per consecutive pair of usable scans, in order; with ``truth="pose"`` also the error
+    against the log's scan poses. Pairs are spread over ``workers`` processes (default: every
+    core); ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
+    guess = Guess(guess)
+    if truth == "pose" and guess in (Guess.pose, Guess.stored):
         raise InputError("the scan poses cannot be both the truth and the guess: use --guess identity or odometry",
                          field="--truth")
-    jobs = [(log.path, i, j, log.scans[i], log.scans[j], params, guess, truth) for i, j in consecutive_pairs(log, limit)]
+    jobs = [(log.path, i, j, log.scan(i), log.scan(j), params, guess, truth, search)
+            for i, j in log.consecutive_pairs(limit)]
     return ordered_map(_match_row, jobs, workers, on_row)
 
 
 def _match_row(job) -> dict:
-    path, i, j, ref, obj, params, guess, truth = job
+    path, i, j, ref, obj, params, guess, truth, search = job
     t0 = time.perf_counter()
-    g, source = pair_guess(ref, obj, guess)
+    g, source = pair_guess(ref, obj, guess, search)
     t1 = time.perf_counter()
     r = match(ref, obj, g, params)
     row = result_row(i, j, r, 1000.0 * (time.perf_counter() - t1)) | {"guess": source}
-    if guess == "search":
+    if guess is Guess.search:
         row["guess_ms"] = 1000.0 * (t1 - t0)
     if truth == "pose":
-        if ref.pose is None or obj.pose is None:
+        answer = stored_truth(ref, obj)
+        if answer is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
-        row |= scored(ref, obj, r.pose, relative(ref.pose, obj.pose))
+        row |= scored(ref, obj, r.pose, answer)
     return row
 
 
 def _ceiling_row(job) -> tuple[bool, list[tuple[bool, bool]]]:
+    from mbicp_viz.core.search import correlative_search
+
     ref, obj, params = job
-    truth = relative(ref.pose, obj.pose)
+    truth = stored_truth(ref, obj)
     rows = [scored(ref, obj, match(ref, obj, truth, p).pose, truth) for p in params]
-    found = succeeded(*pose_error(correlative_search(ref, obj).pose, truth))
+    found = CONSECUTIVE.judge(correlative_search(ref, obj).pose, truth)
     return found, [(r["success"], truth_doubted(r)) for r in rows]
 
 
@@ -105,11 +85,11 @@ def ceiling(log: ScanLog, params: list[Params], limit: int | None = None, worker
     (its fixed point: no guess can do better). Of the pairs a matcher leaves, those where more object
     points lie on the reference at its pose than at the stored one are counted as doubting the truth
     (see ``truth_doubted``). Returns (search hits, hits per matcher, doubts per matcher, pairs)."""
-    pairs = consecutive_pairs(log, limit)
+    pairs = log.consecutive_pairs(limit)
     for i, j in pairs:
-        if log.scans[i].pose is None or log.scans[j].pose is None:
+        if stored_truth(log.scan(i), log.scan(j)) is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", log.path, field="poses")
-    rows = ordered_map(_ceiling_row, [(log.scans[i], log.scans[j], params) for i, j in pairs], workers, on_row)
+    rows = ordered_map(_ceiling_row, [(log.scan(i), log.scan(j), params) for i, j in pairs], workers, on_row)
     per_matcher = [[r[1][k] for r in rows] for k in range(len(params))]
     return (sum(r[0] for r in rows), [sum(ok for ok, _ in m) for m in per_matcher],
             [sum(doubt for _, doubt in m) for m in per_matcher], len(rows))

@@ -23,12 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core import Params, Pose2, Scan, match, pose_error
+from mbicp_viz.core import Params, Pose2, Scan, match, pose_error
 
+from .criteria import PAPER_000
+from .choices import Removal, Thin
+from .pairs import block_mask, displaced_pair
 from .pool import ordered_map
-from .scenarios import block_mask, displaced_pair
 
-FAIL_M, FAIL_RAD = 0.1, math.radians(3.14)  # paper 000 §3.1
 CLASSES = ("TP", "FP", "TN", "FN")
 
 
@@ -37,8 +38,8 @@ class OverlapCase:
     scene: int  # index into the scenes
     ratio: float  # eta, the kept fraction
     run: int
-    removal: str  # "block" | "random"
-    thin: str  # "reference" | "object": the copy that loses the points
+    removal: str  # a Removal's value
+    thin: str  # a Thin's value: the copy that loses the points
     truth: Pose2
     keep: np.ndarray  # bool over the scene's valid points
 
@@ -58,8 +59,9 @@ class OverlapRow:
     cls: str
 
 
-def make_cases(scenes: list[Scan], ratios, runs: int, removal: str, seed: int, max_xy: float,
-               max_theta: float, thin: str = "reference") -> list[OverlapCase]:
+def make_cases(scenes: list[Scan], ratios, runs: int, removal: Removal | str, seed: int, max_xy: float,
+               max_theta: float, thin: Thin | str = Thin.reference) -> list[OverlapCase]:
+    removal, thin = Removal(removal).value, Thin(thin).value
     rng = np.random.default_rng(seed)
     cases = []
     for s, scan in enumerate(scenes):
@@ -76,6 +78,13 @@ def make_cases(scenes: list[Scan], ratios, runs: int, removal: str, seed: int, m
                     keep[rng.choice(n, drop, replace=False)] = False
                 cases.append(OverlapCase(s, float(ratio), r, removal, thin, truth, keep))
     return cases
+
+
+def scene_scans(log, per_log: int, picked: list[int] | None = None) -> list[Scan]:
+    """The scenes of one log: the scans numbered ``picked``, else ``per_log`` scans picked evenly."""
+    if picked:
+        return [log.scan(i) for i in picked]
+    return [log.scans[int(round(k))] for k in np.linspace(0, len(log.scans) - 1, per_log + 2)[1:-1]]
 
 
 def classify(converged: bool, correct: bool) -> str:
@@ -95,7 +104,7 @@ def run_case(args) -> list[OverlapRow]:
         r = match(ref, obj, Pose2(), p)
         et, er = pose_error(r.pose, case.truth)
         rows.append(OverlapRow(name, case.scene, case.ratio, case.run, case.removal, case.thin, et, math.degrees(er),
-                               r.converged, r.iterations, classify(r.converged, et <= FAIL_M and er <= FAIL_RAD)))
+                               r.converged, r.iterations, classify(r.converged, PAPER_000.correct(et, er))))
     return rows
 
 

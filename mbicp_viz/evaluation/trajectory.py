@@ -11,9 +11,16 @@ import math
 
 import numpy as np
 
-from core import Pose2, relative
+from mbicp_viz.core import Pose2, relative
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers import ScanLog
 
-from .readers import ScanLog
+# The EKF's noise, per axis (m, m, rad): odometry increments predict, matches correct.
+ODOMETRY_SIGMA = (0.05, 0.05, math.radians(2.0))
+MATCH_SIGMA = (0.02, 0.02, math.radians(0.5))
+MATCHED = "matcher"
+FUSED = "kalman (matcher + odometry)"
+STORED = "log poses"
 
 
 def accumulate(rows: list[dict]) -> list[Pose2]:
@@ -24,13 +31,38 @@ def accumulate(rows: list[dict]) -> list[Pose2]:
     return poses
 
 
+def scan_indices(rows: list[dict]) -> list[int]:
+    """The scans a sequence of consecutive rows visits."""
+    return [rows[0]["ref"]] + [r["obj"] for r in rows]
+
+
 def log_poses(log: ScanLog, rows: list[dict]) -> list[Pose2] | None:
     """The log's own scan poses for the same scans, in the first scan's frame (None if missing)."""
-    idx = [rows[0]["ref"]] + [r["obj"] for r in rows]
-    if any(log.scans[i].pose is None for i in idx):
+    scans = [log.scan(i) for i in scan_indices(rows)]
+    if any(s.pose is None for s in scans):
         return None
-    first = log.scans[idx[0]].pose
-    return [relative(first, log.scans[i].pose) for i in idx]
+    return [relative(scans[0].pose, s.pose) for s in scans]
+
+
+def sequence_tracks(log: ScanLog, rows: list[dict], fuse: bool) -> dict[str, list[Pose2]]:
+    """The trajectories of a sequence: the matches composed, the log's poses when it stores them, and
+    with ``fuse`` the EKF of the matches with the log's odometry (last; the one a map is drawn on)."""
+    out = {MATCHED: accumulate(rows)}
+    stored = log_poses(log, rows)
+    if stored is not None:
+        out[STORED] = stored
+    if fuse:
+        odo = [log.scan(i).odometry for i in scan_indices(rows)]
+        if any(o is None for o in odo):
+            raise InputError("--kalman needs odometry for every scan; this log has none", log.path, field="--kalman")
+        out[FUSED] = kalman(rows, odo, ODOMETRY_SIGMA, MATCH_SIGMA)
+    return out
+
+
+def stamps(log: ScanLog, rows: list[dict]) -> list[float]:
+    """Each visited scan's time stamp (its record number when it has none)."""
+    return [s.stamp if s.stamp is not None else float(i) for i, s in
+            ((i, log.scan(i)) for i in scan_indices(rows))]
 
 
 def _jacobians(x: Pose2, u: Pose2):
@@ -83,10 +115,9 @@ def plot_png(log: ScanLog, rows: list[dict], tracks: dict[str, list[Pose2]], pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    idx = [rows[0]["ref"]] + [r["obj"] for r in rows]
     fig, ax = plt.subplots(figsize=(8, 8))
-    for i, pose in zip(idx, tracks[map_track]):
-        pts = pose.apply(log.scans[i].points()[::2])
+    for i, pose in zip(scan_indices(rows), tracks[map_track]):
+        pts = pose.apply(log.scan(i).points()[::2])
         ax.plot(pts[:, 0], pts[:, 1], ",", color=(0.85, 0.15, 0.15), alpha=0.5)
     for name, poses in tracks.items():
         xy = np.array([[p.x, p.y] for p in poses])

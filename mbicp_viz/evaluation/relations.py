@@ -7,55 +7,16 @@ matched when both of its times fall within ``tolerance`` of a scan's stamp (afte
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
-from core import Params, Pose2, match, pose_error, relative
+from mbicp_viz.core import Params, SearchParams, match, pose_error
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers import ScanLog
+from mbicp_viz.readers.relations import Relation
 
-from .errors import InputError
-from .readers import ScanLog
-from .readers.text import open_text
-from .sequence import pair_guess
-
-
-@dataclass(frozen=True)
-class Relation:
-    t1: float
-    t2: float
-    pose: Pose2  # pose at t2 in the frame of the pose at t1
-
-
-def read_relations(path: str) -> list[Relation]:
-    out = []
-    with open_text(path) as f:
-        for line_no, line in enumerate(f, start=1):
-            toks = line.split("#", 1)[0].split()
-            if not toks:
-                continue
-            if len(toks) != 8:
-                raise InputError(f"expected 't1 t2 x y z roll pitch yaw', got {len(toks)} fields", path, line_no)
-            try:
-                v = [float(t) for t in toks]
-            except ValueError:
-                bad = next(t for t in toks if not _is_float(t))
-                raise InputError(f"expected a number, got {bad[:40]!r}", path, line_no) from None
-            if not all(math.isfinite(x) for x in v):
-                raise InputError("not finite", path, line_no)
-            out.append(Relation(v[0], v[1], Pose2(v[2], v[3], v[7])))
-    if not out:
-        raise InputError("no relations", path)
-    return out
-
-
-def _is_float(t):
-    try:
-        float(t)
-        return True
-    except ValueError:
-        return False
+from .pairs import Guess, pair_guess, stored_truth
 
 
 def nearest_scan(stamps: np.ndarray, t: float, tolerance: float) -> int | None:
@@ -64,8 +25,10 @@ def nearest_scan(stamps: np.ndarray, t: float, tolerance: float) -> int | None:
 
 
 def match_relations(log: ScanLog, relations: list[Relation], params: Params, offset: float, tolerance: float,
-                    guess: str = "identity") -> tuple[list[dict], int]:
-    """Rows for the relations whose both ends have a scan; and how many relations had none."""
+                    guess: Guess | str = Guess.identity, search: SearchParams | None = None) -> tuple[list[dict], int]:
+    """Rows for the relations whose both ends have a scan; and how many relations had none.
+    ``ref`` and ``obj`` of a row are scan record numbers."""
+    records = log.record_numbers()
     stamps = np.array([s.stamp if s.stamp is not None else np.nan for s in log.scans]) + offset
     if np.all(np.isnan(stamps)):
         raise InputError("the log's scans carry no time stamps", log.path, field="stamps")
@@ -75,16 +38,18 @@ def match_relations(log: ScanLog, relations: list[Relation], params: Params, off
         if i is None or j is None or i == j:
             missing += 1
             continue
-        g, _ = pair_guess(log.scans[i], log.scans[j], guess)
+        ref, obj = log.scans[i], log.scans[j]
+        g, _ = pair_guess(ref, obj, guess, search)
         t0 = time.perf_counter()
-        r = match(log.scans[i], log.scans[j], g, params)
+        r = match(ref, obj, g, params)
         et, er = pose_error(r.pose, rel.pose)
-        row = {"ref": i, "obj": j, "t1": rel.t1, "t2": rel.t2, "x": r.pose.x, "y": r.pose.y,
+        row = {"ref": records[i], "obj": records[j], "t1": rel.t1, "t2": rel.t2, "x": r.pose.x, "y": r.pose.y,
                "theta": r.pose.theta, "error_xy": et, "error_theta": er, "converged": r.converged,
                "iterations": r.iterations, "time_ms": 1000.0 * (time.perf_counter() - t0)}
-        if log.scans[i].pose is not None and log.scans[j].pose is not None:
+        stored = stored_truth(ref, obj)
+        if stored is not None:
             # the log's own poses judged by the same relation: how good a truth they are for --truth pose
-            st, sr = pose_error(relative(log.scans[i].pose, log.scans[j].pose), rel.pose)
+            st, sr = pose_error(stored, rel.pose)
             row |= {"stored_error_xy": st, "stored_error_theta": sr}
         rows.append(row)
     return rows, missing

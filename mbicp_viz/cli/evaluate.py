@@ -1,0 +1,252 @@
+"""``eval``: matchers on whole logs, against stored poses, relations or known displacements."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.choices import Removal, Thin
+
+from .options import (ALL_ALGOS, Progress, DEFAULT_ALGO, SEARCH, AlgoOpt, AlgosOpt, FirstArg, Guess, GuessOpt, PairOpt,
+                      ParamsOpt, RrdOpt, SecondArg, TopicOpt, WorkersOpt, finite, number_list, params_for,
+                      pose_from_deg, say, user_errors)
+
+LogArg = Annotated[str, typer.Argument(help="scan log")]
+LimitOpt = Annotated[Optional[int], typer.Option("--limit", min=1, help="only the first N pairs")]
+SeedOpt = Annotated[int, typer.Option("--seed", min=0, help="random seed")]
+
+
+def _read(log: str, topic: str | None = None):
+    """A log, with a line for the scans skipped as unusable."""
+    from mbicp_viz.readers import read_log
+
+    lg = read_log(log, topic)
+    if (skipped := lg.unusable_summary()) is not None:
+        say(skipped)
+    return lg
+
+
+def sequence(log: LogArg,
+             out: Annotated[Path, typer.Option("--out", help="JSON file: one object per consecutive pair")],
+             algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None, limit: LimitOpt = None, rrd: RrdOpt = None,
+             guess: GuessOpt = Guess.stored,
+             truth: Annotated[Optional[str], typer.Option("--truth", help="'pose': score against the log's scan poses "
+                                                                          "(corrected logs)")] = None,
+             png: Annotated[Optional[Path], typer.Option("--png", help="plot the trajectories and the map")] = None,
+             tum: Annotated[Optional[Path], typer.Option("--tum", help="write the trajectory in TUM format (for evo)")]
+             = None,
+             tum_ref: Annotated[Optional[Path], typer.Option("--tum-ref", help="write the log's scan poses in TUM "
+                                                                               "format")] = None,
+             kalman: Annotated[bool, typer.Option("--kalman", help="fuse the matches with the log's odometry (EKF, "
+                                                  "paper 003 §5.3); the TUM file and map then use the fused track")]
+             = False,
+             workers: WorkersOpt = None, topic: TopicOpt = None):
+    """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
+    from mbicp_viz.core.agreement import INLIER_RADIUS_M
+    from mbicp_viz.evaluation.criteria import CONSECUTIVE
+    from mbicp_viz.evaluation.sequence import match_sequence, truth_doubted
+    from mbicp_viz.readers.params_toml import load_search, make_params
+
+    if truth not in (None, "pose"):
+        raise InputError("the only truth a log carries is 'pose'", field="--truth")
+    p = make_params(algo.value, params)
+    lg = _read(log, topic)
+    total = len(lg.consecutive_pairs(limit))
+    with Progress(total) as bar:
+        rows = match_sequence(lg, p, limit, guess, truth, on_row=lambda _: bar.update(1), workers=workers,
+                              search=load_search(params))
+    if not rows:
+        raise InputError("interrupted before the first pair was matched", log)
+    out.write_text(json.dumps(rows, indent=1) + "\n")
+    conv = sum(r["converged"] for r in rows)
+    cut = "" if len(rows) == total else f" (interrupted after {len(rows)} of {total}: the rows so far are kept)"
+    typer.echo(f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}{cut}")
+    if truth:
+        ok = sum(r["success"] for r in rows)
+        typer.echo(f"against the scan poses: {ok}/{len(rows)} within {CONSECUTIVE.text()} "
+                   f"({100.0 * ok / len(rows):.1f} %)")
+        doubted = sum(truth_doubted(r) for r in rows)
+        typer.echo(f"failures where more object points lie within {100 * INLIER_RADIUS_M:.0f} cm of the reference "
+                   f"at the matched pose than at the scan poses: {doubted} of {len(rows) - ok}")
+    if png or tum or tum_ref or kalman:
+        _trajectories(lg, rows, png, tum, tum_ref, kalman)
+    if rrd:
+        from mbicp_viz.views.rrd import record_sequence
+
+        record_sequence(lg, rows, str(rrd))
+        say(f"sequence recording written to {rrd}; open a failed pair as it failed with: "
+            f"mbicp-viz serve {log} --rows {out}")
+
+
+def _trajectories(lg, rows, png, tum, tum_ref, fuse) -> None:
+    from mbicp_viz.evaluation.trajectory import MATCHED, STORED, plot_png, sequence_tracks, stamps, tum_text
+
+    tracks = sequence_tracks(lg, rows, fuse)
+    main = list(tracks)[-1] if fuse else MATCHED
+    times = stamps(lg, rows)
+    if tum:
+        tum.write_text(tum_text(tracks[main], times))
+    if tum_ref:
+        if STORED not in tracks:
+            raise InputError("the log stores no scan poses to export", lg.path, field="--tum-ref")
+        tum_ref.write_text(tum_text(tracks[STORED], times))
+    if png:
+        plot_png(lg, rows, tracks, str(png), main)
+
+
+def protocol(log: LogArg, algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None,
+             cases: Annotated[int, typer.Option("--cases", min=1, help="number of random cases")] = 200,
+             seed: SeedOpt = 24,
+             max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, callback=finite,
+                                                   help="largest |x|, |y| of the guess [m]")] = 0.2,
+             max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
+                                                          help="largest |theta| of the guess [deg]")] = 45.0):
+    """MbICP's own protocol: every case matches a scan against itself from a random guess."""
+    from mbicp_viz.evaluation.protocols import displaced_self_matches, protocol_summary
+    from mbicp_viz.readers.params_toml import make_params
+
+    res = displaced_self_matches(_read(log).scans, cases, make_params(algo.value, params), seed, max_xy,
+                                 math.radians(max_theta_deg))
+    typer.echo(protocol_summary(algo.value, res))
+
+
+def overlap(logs: Annotated[list[str], typer.Argument(help="scan logs; scenes are picked evenly from each")],
+            scenes_per_log: Annotated[int, typer.Option("--scenes-per-log", min=1, help="scenes taken from each log")]
+            = 1,
+            scans: Annotated[Optional[str], typer.Option("--scans", help="explicit scene numbers I,J,... (one log)")]
+            = None,
+            ratios: Annotated[str, typer.Option("--ratios", help="kept fractions in %")] = "100,90,80,70,60",
+            runs: Annotated[int, typer.Option("--runs", min=1, help="random displacements per scene and ratio")] = 10,
+            removal: Annotated[Removal, typer.Option("--removal", help="one block (occlusion-like) or random points")]
+            = Removal.block,
+            thin: Annotated[Thin, typer.Option("--thin", help="the copy that loses the points: reference (its object "
+                                                              "points then lack counterparts) or object")]
+            = Thin.reference,
+            algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, seed: SeedOpt = 0,
+            max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, callback=finite,
+                                                  help="largest |x|, |y| of a displacement [m]")] = 0.5,
+            max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
+                                                         help="largest |theta| of a displacement [deg]")] = 15.0,
+            csv: Annotated[Optional[Path], typer.Option("--csv", help="write every run as CSV")] = None,
+            png: Annotated[Optional[Path], typer.Option("--png", help="write a plot")] = None,
+            workers: WorkersOpt = None):
+    """Paper 000's partial-overlap protocol (§3.1): Tables 1-3 for each matcher, as Markdown."""
+    from mbicp_viz.evaluation.overlap import csv_text, make_cases, markdown, plot_png, run_overlap, scene_scans, tables
+
+    etas = [v / 100.0 for v in number_list(ratios, "--ratios", "100,90,80")]
+    if not all(0.0 < e <= 1.0 for e in etas):
+        raise InputError("each ratio must lie in (0, 100]", field="--ratios")
+    ps = params_for(algos, params)
+    picked = number_list(scans, "--scans", "3,10,25", int) if scans else None
+    scenes = [s for log in logs for s in scene_scans(_read(log), scenes_per_log, picked)]
+    cases = make_cases(scenes, etas, runs, removal, seed, max_xy, math.radians(max_theta_deg), thin)
+    t0 = time.perf_counter()
+    with Progress(len(cases)) as bar:
+        done = [0]
+
+        def progress(rows):
+            n = len(rows) // len(ps)
+            bar.update(n - done[0])
+            done[0] = n
+
+        rows = run_overlap(scenes, ps, cases, workers, progress)
+    tab = tables(rows)
+    typer.echo(markdown(tab))
+    say(f"{len(rows)} matches ({len(rows) // max(len(ps), 1)}/{len(cases)} cases) in {time.perf_counter() - t0:.1f} s; "
+        f"{len(scenes)} scenes, removal {removal.value} from the {thin.value}, seed {seed}")
+    if csv:
+        csv.write_text(csv_text(rows))
+    if png:
+        plot_png(tab, str(png))
+
+
+def ceiling(log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
+            algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, limit: LimitOpt = None, workers: WorkersOpt = None):
+    """How well any guess could do on a log: each matcher started at the truth, and the search alone."""
+    from mbicp_viz.core.agreement import INLIER_RADIUS_M
+    from mbicp_viz.evaluation.criteria import CONSECUTIVE
+    from mbicp_viz.evaluation.sequence import ceiling as ceiling_of
+
+    by_name = params_for(algos, params)
+    lg = _read(log)
+    with Progress(len(lg.consecutive_pairs(limit))) as bar:
+        found, kept, doubted, n = ceiling_of(lg, list(by_name.values()), limit, workers, on_row=lambda _: bar.update(1))
+    if n == 0:
+        raise InputError("interrupted before the first pair was matched", log)
+    within = CONSECUTIVE.text()
+    typer.echo(f"correlative search alone: {found}/{n} within {within} ({100 * found / n:.1f} %)")
+    for name, k, d in zip(by_name, kept, doubted):
+        typer.echo(f"{name} started at the scan poses: {k}/{n} stay within {within} ({100 * k / n:.1f} %); "
+                   f"of the {n - k} it leaves, {d} lay more object points within {100 * INLIER_RADIUS_M:.0f} cm of the "
+                   "reference")
+
+
+def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps")],
+              relations_file: Annotated[str, typer.Argument(metavar="RELATIONS",
+                                                            help="relations file (t1 t2 x y z roll pitch yaw)")],
+              algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None,
+              offset: Annotated[float, typer.Option("--offset", callback=finite,
+                                                    help="seconds added to the log's stamps (Intel corrected: "
+                                                         "976052857.337)")] = 0.0,
+              tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
+                                                       help="largest stamp mismatch [s]")] = 0.025,
+              guess: Annotated[Guess, typer.Option("--guess", help="identity, pose, odometry or search (a correlative "
+                                                   f"search within {SEARCH} of the identity)")] = Guess.identity,
+              out: Annotated[Optional[Path], typer.Option("--out", help="JSON file: one object per matched relation")]
+              = None):
+    """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""
+    from mbicp_viz.evaluation.relations import match_relations, stored_summary, summary
+    from mbicp_viz.readers.params_toml import load_search, make_params
+    from mbicp_viz.readers.relations import read_relations
+
+    rows, missing = match_relations(_read(log), read_relations(relations_file), make_params(algo.value, params),
+                                    offset, tolerance, guess, load_search(params))
+    if out:
+        out.write_text(json.dumps(rows, indent=1) + "\n")
+    typer.echo(f"{algo.value}: {summary(rows)} ({missing} relations without a scan at both ends)")
+    if stored := stored_summary(rows):
+        typer.echo(stored)
+
+
+def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
+          truth: Annotated[Optional[tuple[float, float, float]], typer.Option(
+              "--truth", help="the answer X Y THETA_DEG (default: the stored poses, else each matcher's own)")] = None,
+          algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None,
+          range_xy: Annotated[float, typer.Option("--range-xy", min=0.0, callback=finite,
+                                                  help="largest |dx|, |dy| offset [m]")] = 1.0,
+          steps: Annotated[int, typer.Option("--steps", min=2, max=201, help="grid points per axis")] = 11,
+          thetas_deg: Annotated[str, typer.Option("--thetas-deg", help="theta offsets [deg]")] = "-30,-15,0,15,30",
+          png: Annotated[Optional[Path], typer.Option("--png", help="write the atlas as a PNG")] = None,
+          rrd: RrdOpt = None, workers: WorkersOpt = None, topic: TopicOpt = None):
+    """A convergence atlas: every matcher from a grid of initial offsets, coloured by outcome."""
+    from mbicp_viz.evaluation.basin import basin as atlas_of, plot_png, summary
+    from mbicp_viz.evaluation.pairs import load_pair, stored_truth
+
+    thetas = [math.radians(v) for v in number_list(thetas_deg, "--thetas-deg", "-15,0,15")]
+    ps = params_for(algos, params)
+    sp = load_pair(first, second, pair, topic)
+    answer = pose_from_deg(truth, "--truth") or stored_truth(sp.ref, sp.obj)
+    t0 = time.perf_counter()
+    atlas = atlas_of(sp.ref, sp.obj, ps, answer, range_xy, steps, thetas, workers)
+    typer.echo(summary(atlas))
+    say(f"{len(ps) * len(thetas) * steps * steps} matches in {time.perf_counter() - t0:.1f} s")
+    if png:
+        plot_png(atlas, str(png))
+    if rrd:
+        from mbicp_viz.views.rrd import record_basin
+
+        record_basin(atlas, str(rrd))
+
+
+def register(app: typer.Typer) -> None:
+    group = typer.Typer(no_args_is_help=True, help="Evaluate matchers on whole logs.")
+    for name, fn in (("sequence", sequence), ("protocol", protocol), ("overlap", overlap), ("ceiling", ceiling),
+                     ("relations", relations), ("basin", basin)):
+        group.command(name)(user_errors(fn))
+    app.add_typer(group, name="eval")

@@ -1,0 +1,47 @@
+"""``record`` and ``params``: the curated recordings, and parameter files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from .options import DEFAULT_ALGO, AlgoOpt, user_errors
+
+
+def record(names: Annotated[Optional[list[str]], typer.Argument(help="scenario names (default: all)")] = None,
+           out_dir: Annotated[Optional[Path], typer.Option(
+               "--out-dir", help="write the .rrd files here (made if missing; default: the checkout's recordings/)")]
+           = None,
+           list_only: Annotated[bool, typer.Option("--list", help="list the scenarios and stop")] = False):
+    """Regenerate the curated recordings (.rrd) from the scenario files."""
+    from mbicp_viz.evaluation.scenarios import load_scenario, scenario_paths
+    from mbicp_viz.views.recordings import record_all
+
+    if list_only:
+        for p in scenario_paths():
+            typer.echo(f"{p.stem:<18} {load_scenario(p).title}")
+        return
+    for s, out, lines in record_all(names, out_dir):
+        typer.echo(f"{out}  ({s.title})")
+        for line in lines:
+            typer.echo(f"    {line}")
+
+
+def params(algo: AlgoOpt = DEFAULT_ALGO,
+           out: Annotated[Optional[Path], typer.Option("--out", help="write to this file")] = None):
+    """Print (or write) the default parameters of a matcher and of the search, as a file for --params."""
+    from mbicp_viz.core import SearchParams
+    from mbicp_viz.readers.params_toml import make_params, params_to_toml
+
+    text = params_to_toml(make_params(algo.value, None), SearchParams())
+    if out:
+        out.write_text(text)
+    else:
+        typer.echo(text, nl=False)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("record")(user_errors(record))
+    app.command("params")(user_errors(params))

@@ -1,0 +1,85 @@
+"""``match`` and ``compare``: one pair, every iteration, optionally recorded for rerun."""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from typing import Annotated
+
+import typer
+
+from .options import (ALL_ALGOS, DEFAULT_ALGO, AlgoOpt, Guess, AlgosOpt, ConnectOpt, FirstArg, GuessOpt, InitOpt, PairOpt, ParamsOpt,
+                      PortOpt, RrdOpt, SearchFlag, SecondArg, ServeOpt, TeachOpt, TopicOpt, TruthOpt, pose_from_deg,
+                      say, user_errors)
+
+JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object with the result fields")]
+
+
+def _pair_and_setup(first, second, pair, topic, guess, init, search, truth, params):
+    from mbicp_viz.evaluation.pairs import load_pair
+    from mbicp_viz.evaluation.single import setup
+    from mbicp_viz.readers.params_toml import load_search
+
+    sp = load_pair(first, second, pair, topic)
+    return sp, setup(sp, guess, pose_from_deg(init, "--init"), search, pose_from_deg(truth, "--truth"),
+                     load_search(params))
+
+
+def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, algo: AlgoOpt = DEFAULT_ALGO,
+              guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
+              params: ParamsOpt = None, as_json: JsonOpt = False, rrd: RrdOpt = None, teach: TeachOpt = False,
+              connect: ConnectOpt = None, serve: ServeOpt = False, port: PortOpt = 9090, topic: TopicOpt = None):
+    """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
+    from mbicp_viz.evaluation import single
+    from mbicp_viz.readers.params_toml import make_params
+    from mbicp_viz.views.text import match_report
+
+    p = make_params(algo.value, params)
+    sp, s = _pair_and_setup(first, second, pair, topic, guess, init, search, truth, params)
+    outcome = single.run(sp.ref, sp.obj, s.guess, p, record=not as_json)
+    if as_json:
+        indices = (0, 0) if second else (pair or (0, 1))  # scan numbers within each file
+        typer.echo(json.dumps(single.row(indices, s, outcome)))
+    else:
+        typer.echo("\n".join(match_report(sp.label, s, outcome)))
+    if rrd or connect or serve:
+        from mbicp_viz.views.rrd import Run
+
+        _record([Run(algo.value, sp.ref, sp.obj, s.guess, p, s.truth)], rrd, connect, serve, port, teach)
+
+
+def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, algos: AlgosOpt = ALL_ALGOS,
+                guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
+                params: ParamsOpt = None, rrd: RrdOpt = None, teach: TeachOpt = False, connect: ConnectOpt = None,
+                serve: ServeOpt = False, port: PortOpt = 9090, topic: TopicOpt = None):
+    """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
+    from mbicp_viz.evaluation.compare import compare_table
+    from mbicp_viz.views.rrd import Run
+
+    from .options import params_for
+
+    ps = params_for(algos, params)
+    sp, s = _pair_and_setup(first, second, pair, topic, guess, init, search, truth, params)
+    typer.echo(f"{sp.label}\ninitial guess {s.guess} (from: {s.guess_source})")
+    typer.echo(f"errors against: {s.truth_source or 'nothing (no known answer; give --truth X Y THETA_DEG)'}\n")
+    typer.echo(compare_table(sp.ref, sp.obj, s.guess, ps, s.truth))
+    if rrd or connect or serve:
+        _record([Run(a, sp.ref, sp.obj, s.guess, p, s.truth) for a, p in ps.items()], rrd, connect, serve, port, teach)
+
+
+def _record(runs, rrd, connect, serve, port, teach) -> None:
+    """Write the runs to an .rrd, stream them to a viewer, and/or serve them on 127.0.0.1."""
+    from mbicp_viz.views.rrd import record, serve as serve_rrd
+
+    path = str(rrd) if rrd else (tempfile.mkdtemp(prefix="mbicp-viz-") + "/match.rrd" if serve else None)
+    record(runs, path, connect, teach)
+    if path:
+        say(f"recording written to {path} (open it with: rerun {path})")
+    if serve:
+        say(f"serving rerun's web viewer on http://127.0.0.1:{port} (Ctrl-C stops)")
+        serve_rrd(path, port)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("match")(user_errors(match_cmd))
+    app.command("compare")(user_errors(compare_cmd))

@@ -1,0 +1,166 @@
+"""What every command shares: option types, choices, and the error handling that turns bad input
+into one line and exit code 2. Nothing heavy is imported here (``--help`` answers at once)."""
+
+from __future__ import annotations
+
+import enum
+import functools
+import math
+import os
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from mbicp_viz.core.matchers import MATCHERS
+from mbicp_viz.core.errors import ScanError
+from mbicp_viz.core.params import ParamError, SearchParams
+from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.choices import Guess
+
+Algo = enum.Enum("Algo", {name: name for name in MATCHERS}, type=str)
+DEFAULT_ALGO = Algo["improved"]
+ALL_ALGOS = ",".join(MATCHERS)
+SEARCH = SearchParams().window_text()
+
+FirstArg = Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")]
+SecondArg = Annotated[Optional[str], typer.Argument(help="object scan file")]
+AlgoOpt = Annotated[Algo, typer.Option("--algo", help="matcher")]
+AlgosOpt = Annotated[str, typer.Option("--algos", help=f"comma-separated matchers of: {ALL_ALGOS}")]
+ParamsOpt = Annotated[Optional[Path], typer.Option(
+    "--params", help="TOML file of matcher parameters (and a [search] table for the correlative search)")]
+PairOpt = Annotated[Optional[tuple[int, int]], typer.Option(
+    "--pair", help="scan numbers I J of one log (ref obj; -1 is the last)")]
+InitOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
+    "--init", help="initial guess X Y THETA_DEG: object frame in the reference frame (m, m, deg); "
+                   "overrides --guess")]
+GuessOpt = Annotated[Guess, typer.Option(
+    "--guess", help="initial guess: stored (the log's scan poses, else its odometry, else the identity), pose, "
+                    f"odometry, identity, or search (a correlative search within {SEARCH} of the identity)")]
+TruthOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
+    "--truth", help="the known answer X Y THETA_DEG (default: the log's scan poses when the guess is not "
+                    "taken from them)")]
+TopicOpt = Annotated[Optional[str], typer.Option("--topic", help="a bag's LaserScan topic (needed when it has "
+                                                                 "several)")]
+RrdOpt = Annotated[Optional[Path], typer.Option("--rrd", help="write the run to this rerun .rrd file")]
+TeachOpt = Annotated[bool, typer.Option("--teach", help="add teaching layers: iso-distance curves, distance "
+                                                        "histogram")]
+ConnectOpt = Annotated[Optional[str], typer.Option(
+    "--connect", help="stream into a running rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")]
+ServeOpt = Annotated[bool, typer.Option("--serve", help="serve rerun's web viewer on 127.0.0.1 with the run")]
+PortOpt = Annotated[int, typer.Option("--port", min=1, max=65534, help="web viewer port for --serve (data: PORT+1)")]
+WorkersOpt = Annotated[Optional[int], typer.Option("--workers", min=1, help="processes (default: all cores)")]
+SearchFlag = Annotated[bool, typer.Option("--search", help=f"first search the pose within {SEARCH} of the guess "
+                                                           "(correlative search), then match from the best")]
+
+
+def finite(value: float) -> float:
+    """Typer callback: bounds checks let inf (and NaN, with no lower bound) through."""
+    if value is not None and not math.isfinite(value):
+        raise typer.BadParameter(f"must be a finite number, got {value}")
+    return value
+
+
+# Options that name a file a command writes, by the same names in every command.
+OUTPUT_FILES = ("rrd", "out", "png", "tum", "tum_ref", "csv")
+
+
+def check_outputs(options: dict) -> None:
+    """Refuse an output file whose folder is missing or read-only before any work is done (a run
+    must not end in an error after its work); make ``--out-dir`` when missing."""
+    for name in OUTPUT_FILES:
+        path, field = options.get(name), "--" + name.replace("_", "-")
+        if not isinstance(path, Path):  # unset, or a flag (bench --rrd)
+            continue
+        if path.is_dir():
+            raise InputError(f"{path} is a folder; give a file name", field=field)
+        if not path.parent.is_dir():
+            raise InputError(f"folder {path.parent} does not exist", field=field)
+        if not os.access(path.parent, os.W_OK):
+            raise InputError(f"folder {path.parent} is not writable", field=field)
+    if isinstance(options.get("out_dir"), Path):
+        try:
+            options["out_dir"].mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise InputError(f"cannot make folder {options['out_dir']}: {e.strerror}", field="--out-dir") from None
+
+
+def user_errors(fn):
+    """Bad input ends in one readable line on stderr and exit code 2, never a traceback."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            check_outputs(kwargs)
+            return fn(*args, **kwargs)
+        except (InputError, ScanError, ParamError) as e:
+            typer.echo(f"mbicp-viz: error: {e}", err=True)
+            raise typer.Exit(2) from None
+
+    return wrapper
+
+
+def say(text: str) -> None:
+    """A line for the user beside the results (stderr, so that stdout stays the results)."""
+    typer.echo(text, err=True)
+
+
+def pose_from_deg(value: tuple[float, float, float] | None, option: str):
+    """A pose given as X Y THETA_DEG on the command line (``option`` names it in errors)."""
+    if value is None:
+        return None
+    from mbicp_viz.core import Pose2
+
+    x, y, th = value
+    for name, v in (("X", x), ("Y", y), ("THETA_DEG", th)):
+        if not math.isfinite(v):
+            raise InputError(f"must be finite, got {v}", field=f"{option} {name}")
+    return Pose2(x, y, math.radians(th))
+
+
+def number_list(text: str, field: str, example: str, kind=float) -> list:
+    """``--field 1,2,3`` as numbers of ``kind``; one clear error for anything else."""
+    try:
+        values = [kind(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"expected numbers like {example}, got {text!r}", field=field) from None
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(f"expected finite numbers, got {text!r}", field=field)
+    return values
+
+
+def params_for(algos: str, params_file: Path | None) -> dict:
+    """``--algos a,b,c`` with their parameters (defaults, or the file's table for each)."""
+    from mbicp_viz.readers.params_toml import make_params
+
+    names = [a.strip() for a in algos.split(",") if a.strip()]
+    if not names:
+        raise InputError(f"name at least one matcher: {ALL_ALGOS}", field="--algos")
+    return {a: make_params(a, params_file) for a in names}
+
+
+class Progress:
+    """A progress bar on a terminal; elsewhere (a log, a pipe) a line after the first item and
+    then every tenth, so that a log shows the run moving as well."""
+
+    def __init__(self, total: int, label: str = "matching"):
+        import sys
+
+        self.total, self.label, self.done, self.shown = total, label, 0, 0
+        self.bar = typer.progressbar(length=total, label=label, file=sys.stderr) if sys.stderr.isatty() else None
+
+    def __enter__(self):
+        if self.bar is not None:
+            self.bar.__enter__()
+        return self
+
+    def update(self, n: int = 1) -> None:
+        self.done += n
+        if self.bar is not None:
+            self.bar.update(n)
+        elif self.done == 1 or self.done >= self.shown + max(1, self.total // 10) or self.done == self.total:
+            self.shown = self.done
+            say(f"{self.label}: {self.done}/{self.total}")
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.__exit__(*exc)

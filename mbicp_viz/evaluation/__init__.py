@@ -1,0 +1,1 @@
+"""Evaluations on real data: criteria, protocols, sequences, relations, atlases, timings."""

@@ -1,0 +1,107 @@
+"""``bench``: time per match on consecutive pairs of a log, events off and with a recording observer."""
+
+from __future__ import annotations
+
+import platform
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from mbicp_viz.core import Params, Recorder, match
+from mbicp_viz.readers import ScanLog
+
+from .pairs import stored_guess
+
+
+@dataclass(frozen=True)
+class Timing:
+    label: str
+    times_ms: np.ndarray
+    what: str = "matches"
+
+    @property
+    def median(self) -> float:
+        return float(np.median(self.times_ms))
+
+    @property
+    def p90(self) -> float:
+        return float(np.percentile(self.times_ms, 90))
+
+    def line(self) -> str:
+        return (f"{self.label:<22} median {self.median:7.2f} ms   p90 {self.p90:7.2f} ms   "
+                f"p95 {np.percentile(self.times_ms, 95):7.2f} ms   "
+                f"{1000.0 / self.median:8.1f} {self.what}/s   ({len(self.times_ms)} {self.what})")
+
+
+def time_matches(log: ScanLog, params: Params, pairs, observe: bool, repeat: int) -> np.ndarray:
+    out = []
+    for i, j in pairs:
+        ref, obj = log.scan(i), log.scan(j)
+        guess, _ = stored_guess(ref, obj)
+        for _ in range(repeat):
+            obs = Recorder() if observe else None
+            t0 = time.perf_counter()
+            match(ref, obj, guess, params, obs)
+            out.append(1000.0 * (time.perf_counter() - t0))
+    return np.array(out)
+
+
+def bench(log: ScanLog, params: Params, limit: int | None, repeat: int) -> list[Timing]:
+    pairs = log.consecutive_pairs(limit)
+    time_matches(log, params, pairs[:3], False, 1)  # warm caches and imports
+    return [Timing("events off", time_matches(log, params, pairs, False, repeat)),
+            Timing("recording observer", time_matches(log, params, pairs, True, repeat))]
+
+
+def machine_line() -> str:
+    import os
+
+    return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def speed_probe_us() -> float:
+    """Time of a fixed small numpy workload [us] (best of several): how fast the machine runs right
+    now. Shared virtual machines drift by tens of percent from one minute to the next; printed
+    beside a benchmark, it tells a slow minute from a slow matcher."""
+    import timeit
+
+    a = np.random.default_rng(0).normal(size=300)
+    return 1e6 * min(timeit.repeat(lambda: np.sort(a) + np.arctan2(a, a), number=2000, repeat=5)) / 2000
+
+
+def _run_seconds(args: list[str], env: dict | None = None) -> float:
+    """Wall time of one command to its end [s]; an error if it fails."""
+    import subprocess
+
+    t0 = time.perf_counter()
+    proc = subprocess.run(args, capture_output=True, text=True, env=env)
+    took = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(args)} failed: {proc.stderr.strip()[-300:]}")
+    return took
+
+
+def startup(commands: list[list[str]], match: list[str], debugger: list[str], repeat: int) -> list[Timing]:
+    """How soon the tool answers: ``--help`` of every command (``repeat`` runs each), the first match
+    with numba's kernel cache empty (as after a fresh install) and cached, and the debugger's first
+    result with an empty cache (server start, kernels compiled, the first tab's match)."""
+    import os
+    import tempfile
+
+    helps = [_run_seconds(c) for _ in range(repeat) for c in commands[:1]]
+    each = [min(_run_seconds(c) for _ in range(max(1, repeat // 3))) for c in commands[1:]]
+    cold, warm, first_result = [], [], []
+    for _ in range(max(1, repeat // 3)):
+        with tempfile.TemporaryDirectory() as cache:
+            env = os.environ | {"NUMBA_CACHE_DIR": cache}
+            cold.append(_run_seconds(match, env))
+            warm.append(_run_seconds(match, env))
+        with tempfile.TemporaryDirectory() as cache:
+            first_result.append(_run_seconds(debugger, os.environ | {"NUMBA_CACHE_DIR": cache}))
+    to_ms = lambda v: 1000.0 * np.array(v)  # noqa: E731
+    return [Timing("mbicp-viz --help", to_ms(helps), "runs"),
+            Timing("each command's --help", to_ms(each), "commands"),
+            Timing("first match, empty cache", to_ms(cold), "runs"),
+            Timing("first match, cached", to_ms(warm), "runs"),
+            Timing("debugger first result", to_ms(first_result), "runs")]

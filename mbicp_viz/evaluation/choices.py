@@ -1,0 +1,30 @@
+"""The choices the evaluations offer (command-line choice options take them as they are): plain
+enums, importable without loading numpy, so that ``--help`` lists them at once."""
+
+from __future__ import annotations
+
+import enum
+
+
+class Guess(str, enum.Enum):
+    """Where an initial guess comes from (``--guess``)."""
+
+    stored = "stored"  # the scan poses the log stores, else its odometry, else the identity
+    pose = "pose"
+    odometry = "odometry"
+    identity = "identity"
+    search = "search"  # the correlative search around the identity (core/search.py)
+
+
+class Thin(str, enum.Enum):
+    """The copy of a displaced scan that loses points (``--thin``, a scenario's ``thin``)."""
+
+    reference = "reference"  # the object's points there then lack counterparts (paper 000 §3.1)
+    object = "object"
+
+
+class Removal(str, enum.Enum):
+    """How the 1 - eta of the points are removed (``--removal``)."""
+
+    block = "block"  # one contiguous block, as an occlusion leaves
+    random = "random"  # paper 000's wording (§3.2)

@@ -1,0 +1,106 @@
+"""Scan pairs and their initial guesses: read from files, made from one scan, guessed.
+
+Every pose maps object-frame points into the reference frame (``T_ref_obj``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mbicp_viz.core import Pose2, Scan, ScanSource, SearchParams, make_scan, relative
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers import read_log
+
+from .choices import Guess, Thin
+
+
+@dataclass(frozen=True)
+class ScanPair:
+    ref: Scan
+    obj: Scan
+    label: str
+
+
+def load_pair(first: str, second: str | None, pair: tuple[int, int] | None, topic: str | None = None) -> ScanPair:
+    """``REF OBJ`` (the first scan of each file) or ``LOG --pair I J``."""
+    if second is not None and pair is not None:
+        raise InputError("give either two files or one log with --pair I J, not both", field="--pair")
+    if second is not None:
+        return ScanPair(read_log(first, topic).scan(0), read_log(second, topic).scan(0), f"{first} -> {second}")
+    log = read_log(first, topic)
+    i, j = pair if pair is not None else (0, 1)
+    return ScanPair(log.scan(i), log.scan(j), f"{first} scans {i} -> {j}")
+
+
+def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:
+    """Initial guess from the poses (else odometry) the log stores, identity when it has neither."""
+    if ref.pose is not None and obj.pose is not None:
+        return relative(ref.pose, obj.pose), "scan poses"
+    if ref.odometry is not None and obj.odometry is not None:
+        return relative(ref.odometry, obj.odometry), "odometry"
+    return Pose2(), "identity"
+
+
+def pair_guess(ref: Scan, obj: Scan, kind: Guess | str, search: SearchParams | None = None) -> tuple[Pose2, str]:
+    """The initial guess of a pair and where it came from: ``stored`` (poses, else odometry, else
+    identity), one stored source explicitly, the identity, or the correlative search around it."""
+    kind = Guess(kind)
+    if kind is Guess.stored:
+        return stored_guess(ref, obj)
+    if kind is Guess.identity:
+        return Pose2(), "identity"
+    if kind is Guess.search:
+        from mbicp_viz.core.search import correlative_search
+
+        return correlative_search(ref, obj, Pose2(), search).pose, "search"
+    a, b = (ref.pose, obj.pose) if kind is Guess.pose else (ref.odometry, obj.odometry)
+    if a is None or b is None:
+        raise InputError(f"the log stores no {kind.value} for scans {ref.source.index} and {obj.source.index}",
+                         ref.source.path, field="--guess")
+    return relative(a, b), kind.value
+
+
+def stored_truth(ref: Scan, obj: Scan) -> Pose2 | None:
+    """The relative pose of the scan poses a log stores (corrected logs: the truth), or None."""
+    return relative(ref.pose, obj.pose) if ref.pose is not None and obj.pose is not None else None
+
+
+# One scan made into a pair with a known answer (paper 000 §3.1's protocol, curated scenarios).
+
+def seen_from(scan: Scan, T: Pose2, keep: np.ndarray | None = None) -> Scan:
+    """The points of ``scan`` as a sensor at pose T (in the scan's frame) sees them."""
+    pts = scan.points() if keep is None else scan.points()[keep]
+    p = T.inverse().apply(pts)
+    b = np.arctan2(p[:, 1], p[:, 0])
+    order = np.argsort(b, kind="stable")
+    b = b[order]
+    unique = np.concatenate(([True], np.diff(b) > 0))
+    return make_scan(np.hypot(*p[order].T)[unique], b[unique],
+                     source=ScanSource(f"{scan.source.path} (displaced)", scan.source.index))
+
+
+def thinned(scan: Scan, keep: np.ndarray) -> Scan:
+    """``scan`` with the valid readings where ``keep`` is False marked invalid.
+
+    The beams stay (uniform bearings, as PSM's reference needs); ``keep`` runs over the valid readings.
+    """
+    valid = scan.valid.copy()
+    valid[scan.valid_indices()[~keep]] = False
+    return make_scan(scan.ranges, scan.bearings, valid=valid, source=scan.source)
+
+
+def displaced_pair(scan: Scan, truth: Pose2, keep: np.ndarray | None, thin: Thin | str) -> tuple[Scan, Scan]:
+    """(reference, object) from one scan: the object is the scan seen from ``truth``; ``keep``
+    (over the valid readings) thins the reference or the object, as ``thin`` says."""
+    if keep is None or Thin(thin) is Thin.object:
+        return scan, seen_from(scan, truth, keep)
+    return thinned(scan, keep), seen_from(scan, truth)
+
+
+def block_mask(n: int, a: float, b: float) -> np.ndarray:
+    """Keep all of ``n`` readings but those from fraction ``a`` to ``b`` (an occlusion-like block)."""
+    keep = np.ones(n, dtype=bool)
+    keep[int(round(a * n)):int(round(b * n))] = False
+    return keep

@@ -1,0 +1,69 @@
+"""One pair, matched as ``match`` and ``compare`` do: the guess and where it came from, the result,
+how well it lays the scans on each other, and its error when the answer is known."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from mbicp_viz.core import MatchResult, Params, Pose2, Recorder, Scan, SearchParams, match, pose_error
+from mbicp_viz.core.agreement import inlier_fraction
+
+from .choices import Guess
+from .pairs import ScanPair, pair_guess, stored_truth
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Where a pair's match starts and what it is judged against."""
+
+    guess: Pose2
+    guess_source: str  # "scan poses", "odometry", "identity", "search", "given", "search around ..."
+    truth: Pose2 | None
+    truth_source: str | None
+
+
+def setup(pair: ScanPair, guess: Guess, given: Pose2 | None = None, search_around: bool = False,
+          truth: Pose2 | None = None, search: SearchParams | None = None) -> Setup:
+    """The initial guess — ``given``, else of kind ``guess`` — optionally refined by the correlative
+    search around it; the answer — ``truth``, else the log's scan poses unless the guess came from
+    them (a match started at its own answer proves nothing)."""
+    g, source = (given, "given") if given is not None else pair_guess(pair.ref, pair.obj, guess, search)
+    if search_around:
+        from mbicp_viz.core.search import correlative_search
+
+        g, source = correlative_search(pair.ref, pair.obj, g, search).pose, f"searched around {source}"
+    if truth is not None:
+        return Setup(g, source, truth, "given")
+    stored = stored_truth(pair.ref, pair.obj)
+    if stored is not None and source != "scan poses":
+        return Setup(g, source, stored, "the log's scan poses")
+    return Setup(g, source, None, None)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    result: MatchResult
+    time_ms: float
+    on_ref: float  # fraction of object points within INLIER_RADIUS_M of a reference point
+    recorder: Recorder | None
+
+
+def run(ref: Scan, obj: Scan, guess: Pose2, params: Params, record: bool = False) -> Outcome:
+    rec = Recorder() if record else None
+    t0 = time.perf_counter()
+    result = match(ref, obj, guess, params, rec)
+    ms = 1000.0 * (time.perf_counter() - t0)
+    return Outcome(result, ms, inlier_fraction(ref, obj, result.pose), rec)
+
+
+def row(indices: tuple[int, int], s: Setup, o: Outcome) -> dict:
+    """The JSON record of ``match --json`` (the keys of ``eval sequence``'s rows, and more)."""
+    from .sequence import result_row
+
+    out = result_row(*indices, o.result, o.time_ms) | o.result.as_dict() | {"on_ref": o.on_ref,
+                                                                            "guess": s.guess_source}
+    if s.truth is not None:
+        et, er = pose_error(o.result.pose, s.truth)
+        out |= {"error_xy": et, "error_theta": er, "truth": s.truth_source}
+    return out

@@ -1,0 +1,107 @@
+"""Parameter files (TOML): read with ``--params``, written by ``mbicp-viz params`` and the debugger.
+
+Keys are the parameter names of the matcher (``Bw``, ``Br``, ``L``, ...), flat or in a table
+named after the matcher (``[improved]``); the correlative search's parameters sit in a
+``[search]`` table. A field in radians may be given in degrees instead by suffixing its name with
+``_deg`` (``Bw_deg = 45``); files written here use that form, since degrees are what people type.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+from mbicp_viz.core import MATCHERS, ParamError, Params, SearchParams, field_specs
+from mbicp_viz.errors import InputError
+
+SEARCH_TABLE = "search"
+MAX_FILE_BYTES = 1_000_000  # a parameter file is a few hundred bytes
+
+
+def params_from_mapping(params_type: type, values: dict, path: str | None = None, table: str | None = None) -> Params:
+    """``params_type`` from TOML keys (``_deg`` for radians); errors name the key (``table.key``)."""
+    specs = {s.name: s for s in field_specs(params_type)}
+    kwargs = {}
+    for key, value in values.items():
+        where = f"{table}.{key}" if table else key
+        name = key[:-4] if key.endswith("_deg") and specs.get(key[:-4]) and specs[key[:-4]].unit == "rad" else key
+        if name not in specs:
+            raise InputError(f"unknown parameter; known: {', '.join(specs)}", path, field=where)
+        if name != key:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError(f"expected a number of degrees, got {value!r}", path, field=where)
+            value = math.radians(value)
+        kwargs[name] = value
+    try:
+        return params_type(**kwargs)
+    except ParamError as e:
+        raise InputError(e.message, path, field=f"{table}.{e.name}" if table else e.name) from None
+
+
+def read_toml(path: str | Path) -> dict:
+    """A TOML file as a dict; every way it can be unreadable is one InputError."""
+    p = Path(path)
+    try:
+        if p.stat().st_size > MAX_FILE_BYTES:
+            raise InputError(f"larger than {MAX_FILE_BYTES} bytes: not a parameter file", str(p))
+        return tomllib.loads(p.read_bytes().decode("utf-8"))
+    except FileNotFoundError:
+        raise InputError("no such file", str(p)) from None
+    except IsADirectoryError:
+        raise InputError("is a folder, not a file", str(p)) from None
+    except PermissionError:
+        raise InputError("permission denied", str(p)) from None
+    except UnicodeDecodeError as e:
+        raise InputError(f"not UTF-8 text ({e.reason})", str(p)) from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"invalid TOML: {e}", str(p)) from None
+    except RecursionError:
+        raise InputError("invalid TOML: nested too deeply", str(p)) from None
+
+
+def load_params(path: str | Path, algorithm: str) -> Params:
+    """Parameters for ``algorithm`` from a TOML file (flat keys, or a table named after the algorithm)."""
+    data = read_toml(path)
+    if isinstance(data.get(algorithm), dict):
+        return params_from_mapping(MATCHERS[algorithm].params_type, data[algorithm], str(path), algorithm)
+    flat = {k: v for k, v in data.items() if not isinstance(v, dict) and k != "algorithm"}
+    return params_from_mapping(MATCHERS[algorithm].params_type, flat, str(path))
+
+
+def load_search(path: str | Path | None) -> SearchParams:
+    """The correlative search's parameters: the file's ``[search]`` table, else the defaults."""
+    if path is None:
+        return SearchParams()
+    table = read_toml(path).get(SEARCH_TABLE, {})
+    if not isinstance(table, dict):
+        raise InputError("expected a table [search]", str(path), field=SEARCH_TABLE)
+    return params_from_mapping(SearchParams, table, str(path), SEARCH_TABLE)
+
+
+def make_params(algorithm: str, path: str | Path | None) -> Params:
+    """Defaults of ``algorithm``, or its parameters from a ``--params`` file."""
+    if algorithm not in MATCHERS:
+        raise InputError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(MATCHERS)}", field="--algo")
+    return load_params(path, algorithm) if path else MATCHERS[algorithm].params_type()
+
+
+def _lines(params: Params) -> list[str]:
+    lines = []
+    for s in field_specs(type(params)):
+        v, key, unit = getattr(params, s.name), s.name, s.unit
+        if s.unit == "rad":
+            key, v, unit = f"{s.name}_deg", math.degrees(v), "deg"
+        text = ("true" if v else "false") if isinstance(v, bool) else repr(v)
+        lines.append(f"{key} = {text}  # [{unit}] {s.help}")
+    return lines
+
+
+def params_to_toml(params: Params, search: SearchParams | None = None) -> str:
+    """A ``--params`` file: the matcher's parameters, then the search's ``[search]`` table."""
+    name = next(m.name for m in MATCHERS.values() if type(params) is m.params_type)
+    lines = [f"# mbicp-viz parameters for {name}; read back with --params FILE", f'algorithm = "{name}"',
+             *_lines(params)]
+    if search is not None:
+        lines += ["", f"[{SEARCH_TABLE}]  # the correlative search (--search, --guess search)", *_lines(search)]
+    return "\n".join(lines) + "\n"

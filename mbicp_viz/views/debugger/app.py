@@ -1,0 +1,86 @@
+"""The interactive debugger in the browser (viser): one server, one ``Session`` per tab.
+
+Safe by default: the server binds 127.0.0.1, and a websocket whose ``Origin`` is not the
+debugger's own page is closed before anything is sent to it or read from it (viser itself
+accepts any origin, so a page open in the same browser could otherwise drive the debugger and
+read the scans). The matchers' kernels compile while the server starts; a tab that connects
+meanwhile says so and shows its first result when they are ready.
+"""
+
+from __future__ import annotations
+
+import threading
+import traceback
+
+import viser
+
+from .session import Session
+from .state import Source, run_match
+
+
+def local_origins(host: str, port: int) -> set[str]:
+    """The origins of the debugger's own page, as browsers send them."""
+    names = {"127.0.0.1", "localhost"} if host in ("127.0.0.1", "0.0.0.0", "localhost") else {host}
+    return {f"http://{n}:{port}" for n in names}
+
+
+class App:
+    """A viser server with one Session per connected browser tab."""
+
+    def __init__(self, source: Source, host: str = "127.0.0.1", port: int = 8080,
+                 allow_origins: tuple[str, ...] = ()):
+        self.source = source
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.origins = local_origins(host, self.port) | set(allow_origins)
+        self.sessions: dict[int, Session] = {}
+        self.refused: dict[int, str] = {}  # client id -> the origin whose websocket was closed
+        self._lock = threading.Lock()
+        self.ready = threading.Event()
+        threading.Thread(target=self._warm_up, daemon=True).start()
+        # viser has no origin hook of its own: the websocket layer's connect callbacks run, in the
+        # event loop, before any message of the connection is sent or handled (viser 1.1).
+        self.server._websock_server.on_client_connect(self._check_origin)
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(self._disconnect)
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port()
+
+    def _warm_up(self) -> None:
+        """Compile (or load from numba's cache) every kernel the first match needs."""
+        try:
+            from .state import DebugState
+
+            state = DebugState(self.source)
+            for name in state.algorithms:
+                run_match(name, state.ref, state.obj, state.guess, state.params[name])
+        except Exception:  # the session's own match will show what is wrong
+            traceback.print_exc()
+        finally:
+            self.ready.set()
+
+    async def _check_origin(self, conn) -> None:
+        connection = self.server._websock_server._live_connections.get(conn.client_id)
+        origin = connection.request.headers.get("Origin") if connection is not None else None
+        if connection is not None and origin not in self.origins:
+            self.refused[conn.client_id] = str(origin)
+            await connection.close(1008, "origin not allowed")
+
+    def _connect(self, client: viser.ClientHandle) -> None:
+        if client.client_id in self.refused:  # a message that arrived before the close
+            return
+        session = Session(client, self.source, self.ready)
+        with self._lock:
+            self.sessions[client.client_id] = session
+
+    def _disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            s = self.sessions.pop(client.client_id, None)
+        if s is not None:
+            s.close()
+
+    def stop(self) -> None:
+        for s in list(self.sessions.values()):
+            s.close()
+        self.server.stop()

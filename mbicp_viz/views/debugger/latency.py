@@ -1,0 +1,53 @@
+"""``bench-gui``: the debugger's latency on a real pair, server side (a real ViserServer, no browser)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import viser
+
+from mbicp_viz.core import Pose2
+from mbicp_viz.evaluation.bench import Timing
+from mbicp_viz.readers import read_log
+
+from .session import Session
+from .state import Source
+
+
+def gui_latency(path: str, pair: tuple[int, int], steps: int = 3, changes: int = 40) -> tuple[Timing, Timing]:
+    """Iteration step -> redraw, and parameter change -> re-match -> redraw, as a user drives them."""
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    s = Session(server, Source(path, read_log(path), pair=pair, guess=Pose2()))
+    try:
+        step_ms = []
+        for _ in range(steps):
+            for k in range(s.state.max_iteration() + 1):
+                t0 = time.perf_counter()
+                s.playback.slider.value = k
+                step_ms.append(1000.0 * (time.perf_counter() - t0))
+        change_ms = []
+        for v in np.linspace(0.5, 1.5, changes):  # the radial window Br [m], a value a user types
+            t0 = time.perf_counter()
+            s.params_panel.boxes["Br"].handle.value = f"{float(v)!r}\n"  # typed, then Enter
+            change_ms.append(1000.0 * (time.perf_counter() - t0))
+        return (Timing("iteration step redraw", np.array(step_ms), "steps"),
+                Timing("parameter change", np.array(change_ms), "changes"))
+    finally:
+        s.close()
+        server.stop()
+
+
+def first_result_ms(path: str) -> float:
+    """From nothing to a tab's first result: a debugger on ``path``'s first pair, its kernels compiled
+    (or loaded from numba's cache), one session's match drawn [ms]."""
+    from .app import App
+
+    t0 = time.perf_counter()
+    app = App(Source(path, read_log(path), guess=Pose2()), "127.0.0.1", 0)
+    try:
+        s = Session(app.server, app.source, app.ready)
+        assert s.state.runs
+        return 1000.0 * (time.perf_counter() - t0)
+    finally:
+        app.stop()

@@ -1,0 +1,40 @@
+"""What ``serve`` and ``demo`` open: a log, two scan files, or a curated scenario."""
+
+from __future__ import annotations
+
+from mbicp_viz.core import Pose2
+from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.pairs import Guess
+from mbicp_viz.evaluation.scenarios import find_scenario
+from mbicp_viz.readers import ScanLog, read_log
+
+from .state import Source
+
+
+def scenario_source(name: str) -> Source:
+    s = find_scenario(name)
+    log = ScanLog(s.name, [s.ref, s.obj])
+    return Source(s.title, log, (0, 1), False, s.guess, Guess.stored, s.truth, s.params, tuple(s.params),
+                  note=s.note.strip(), teaching=s.teaching)
+
+
+def files_source(first: str | None, second: str | None, pair: tuple[int, int] | None = None,
+                 guess: Guess = Guess.stored, topic: str | None = None) -> Source:
+    """``serve REF OBJ`` (the first scan of each) or ``serve LOG [--pair I J]`` (pick any two)."""
+    if first is None:
+        raise InputError("give a log, two scan files, or --scenario NAME", field="FILE")
+    if second is not None:
+        if pair is not None:
+            raise InputError("give either two files or one log with --pair I J, not both", field="--pair")
+        log = ScanLog(f"{first} + {second}", [read_log(first, topic).scan(0), read_log(second, topic).scan(0)])
+        return Source(f"{first} -> {second}", log, guess_kind=guess)
+    log = read_log(first, topic)
+    if len(log.scans) < 2:
+        raise InputError("needs at least two usable scans (or give two files)", first)
+    i, j = pair if pair is not None else log.consecutive_pairs(1)[0]
+    log.scan(i), log.scan(j)  # an unusable or missing scan is refused here, in one line
+    return Source(first, log, (i % log.records, j % log.records), pick_pair=True, guess_kind=guess)
+
+
+def demo_source(path: str) -> Source:
+    return Source("bundled example: hand-held Hokuyo URG-04LX, scans 125 -> 130", read_log(path), guess=Pose2())

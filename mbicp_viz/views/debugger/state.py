@@ -1,0 +1,277 @@
+"""One debugger tab's model: the pair, the matchers and their parameters, the guess, the runs and
+what is shown at an iteration. No viser here: the panels and the wiring read and drive it, and
+tests drive it directly.
+
+A change (parameter, guess, pair, matcher) re-runs the match and keeps every iteration's events;
+moving through iterations reads them back without re-matching. A change that fails keeps the
+last good runs and says why.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mbicp_viz.core import (MATCHERS, FieldSpec, IterationEvent, MatchResult, ParamError, Params, Pose2, Recorder,
+                            ScanError, SearchParams, StartEvent, field_specs, match)
+from mbicp_viz.core.agreement import INLIER_RADIUS_M, inlier_fraction
+from mbicp_viz.core.params import check_value
+from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.pairs import Guess, pair_guess, stored_truth
+from mbicp_viz.readers import ScanLog
+
+from .. import scene, text
+
+
+@dataclass
+class Source:
+    """What the debugger opens: a log (any two scans can be picked) or one fixed pair, and how the
+    first match is set up (guess, matchers, parameters; a scenario's note)."""
+
+    label: str
+    log: ScanLog
+    pair: tuple[int, int] = (0, 1)
+    pick_pair: bool = False
+    guess: Pose2 | None = None  # a fixed guess; None: ``guess_kind`` of each pair
+    guess_kind: Guess = Guess.stored
+    truth: Pose2 | None = None  # None: the stored poses' relative pose, when the log has them
+    params: dict[str, Params] = field(default_factory=dict)
+    algorithms: tuple[str, ...] = ("improved",)
+    search: SearchParams = field(default_factory=SearchParams)
+    note: str = ""  # Markdown shown above the panels (a scenario's "what to look at")
+    teaching: bool = False  # iso-distance curves on from the start
+
+
+@dataclass
+class Run:
+    """One matcher's recorded match."""
+
+    name: str
+    start: StartEvent
+    iterations: list[IterationEvent]
+    result: MatchResult
+
+
+def run_match(name: str, ref, obj, guess: Pose2, params: Params) -> Run:
+    rec = Recorder()
+    result = match(ref, obj, guess, params, rec)
+    return Run(name, rec.start, rec.iterations, result)
+
+
+# What a failed match can raise that the user must read rather than a traceback.
+MATCH_ERRORS = (ScanError, ParamError, InputError, ValueError, FloatingPointError, np.linalg.LinAlgError)
+
+
+def parse_entry(spec: FieldSpec, typed: str):
+    """The value a user typed into a parameter's box, exactly, in the field's own type (degrees for
+    radian fields become radians); ParamError naming the field for anything else. Nothing is
+    rounded or clamped: a value outside the bounds is refused."""
+    s = typed.strip()
+    if spec.type is bool:
+        if s.lower() not in ("true", "false"):
+            raise ParamError(spec.name, f"expected true or false, got {typed!r}")
+        return s.lower() == "true"
+    try:
+        v = float(s)
+    except ValueError:
+        raise ParamError(spec.name, f"not a number: {typed!r}") from None
+    if not math.isfinite(v):
+        raise ParamError(spec.name, f"must be finite, got {typed!r}")
+    if spec.type is int:
+        if not v.is_integer():
+            raise ParamError(spec.name, f"expected a whole number, got {typed!r}")
+        v = int(v)
+    elif spec.unit == "rad":
+        v = math.radians(v)
+    try:
+        return check_value(spec, v)
+    except ParamError as e:
+        if spec.unit != "rad":
+            raise
+        lo, hi = (None if b is None else round(math.degrees(b), 6) for b in (spec.lo, spec.hi))
+        raise ParamError(spec.name, f"{typed} deg is outside [{lo}, {hi}] deg") from None
+
+
+def parsed(params: Params, typed: dict[str, str]) -> Params:
+    """``params`` with the fields the user typed, each exactly as typed (``parse_entry``)."""
+    specs = {s.name: s for s in field_specs(type(params))}
+    return params.replace(**{name: parse_entry(specs[name], text) for name, text in typed.items()})
+
+
+def shown_value(spec: FieldSpec, value) -> str:
+    """A parameter as its box shows it (degrees for radian fields), round-tripping ``parse_entry``."""
+    if spec.type is bool:
+        return "true" if value else "false"
+    if spec.unit == "rad":
+        return repr(round(math.degrees(value), 9))
+    return repr(value)
+
+
+def box_label(spec: FieldSpec) -> str:
+    unit = "deg" if spec.unit == "rad" else spec.unit
+    return spec.name if unit in ("1", "bool", "count") else f"{spec.name} [{unit}]"
+
+
+class DebugState:
+    """The model of one tab."""
+
+    def __init__(self, source: Source):
+        self.source = source
+        self.params: dict[str, Params] = {n: source.params.get(n, m.params_type()) for n, m in MATCHERS.items()}
+        self.search = source.search
+        self.algorithms: list[str] = list(source.algorithms)
+        self.pair = source.pair
+        self.guess, self.guess_source = self._pair_guess()
+        self.runs: list[Run] = []
+        self.iteration = 0
+        self.visible = {s.label: s.on or (source.teaching and s in (scene.ISO_METRIC, scene.ISO_EUCLID))
+                        for s in scene.STYLES}
+        self.iso_point: int | None = None
+        self.match_ms = 0.0
+        self.message = ""  # the last failure, shown to the user
+
+    # ---- the pair ---------------------------------------------------------------------------
+    @property
+    def ref(self):
+        return self.source.log.scan(self.pair[0])
+
+    @property
+    def obj(self):
+        return self.source.log.scan(self.pair[1])
+
+    def truth(self) -> Pose2 | None:
+        """The known answer: the source's, else the log's scan poses unless the guess came from them."""
+        if self.source.truth is not None:
+            return self.source.truth
+        return stored_truth(self.ref, self.obj) if self.guess_source != "scan poses" else None
+
+    def _pair_guess(self) -> tuple[Pose2, str]:
+        if self.source.guess is not None:
+            return self.source.guess, "given"
+        return pair_guess(self.ref, self.obj, self.source.guess_kind, self.search)
+
+    def set_pair(self, i: int, j: int) -> str | None:
+        """Open scans ``i`` and ``j`` (record numbers) with the source's kind of guess."""
+        n = self.source.log.records
+        if not (0 <= i < n and 0 <= j < n) or i == j:
+            return f"scan numbers must be two different numbers in 0..{n - 1}"
+        old = self.pair
+        try:
+            self.pair = (i, j)
+            self.ref, self.obj  # noqa: B018 - an unusable scan is refused here
+            self.guess, self.guess_source = self._pair_guess()
+        except InputError as e:
+            self.pair = old
+            return str(e)
+        return self.rematch()
+
+    # ---- matching ---------------------------------------------------------------------------
+    def rematch(self) -> str | None:
+        """Re-run every shown matcher; None, or why it failed (the last good runs are kept)."""
+        t0 = time.perf_counter()
+        try:
+            runs = [run_match(n, self.ref, self.obj, self.guess, self.params[n]) for n in self.algorithms]
+        except MATCH_ERRORS as e:
+            self.message = f"The match failed and the last good result is kept: {e}"
+            return self.message
+        self.match_ms = 1000.0 * (time.perf_counter() - t0)
+        self.runs = runs
+        self.iteration = self.max_iteration()  # show where the match ended
+        self.message = ""
+        return None
+
+    def max_iteration(self) -> int:
+        return max((len(r.iterations) for r in self.runs), default=0)
+
+    def set_algorithms(self, names: list[str]) -> str | None:
+        unknown = [n for n in names if n not in MATCHERS]
+        if not names or unknown:
+            return f"choose at least one of {', '.join(MATCHERS)}"
+        old, self.algorithms = self.algorithms, list(names)
+        err = self.rematch()
+        if err:
+            self.algorithms = old
+        return err
+
+    def set_params(self, matcher: str, typed: dict[str, str]) -> str | None:
+        """Apply what the user typed into a matcher's parameter boxes (re-matching once when
+        anything changed); None, or why it is refused (then nothing changes)."""
+        try:
+            new = parsed(self.params[matcher], typed)
+        except ParamError as e:
+            return str(e)
+        if new == self.params[matcher]:
+            return None
+        old, self.params[matcher] = self.params[matcher], new
+        err = self.rematch() if matcher in self.algorithms else None
+        if err:
+            self.params[matcher] = old
+        return err
+
+    def set_search(self, typed: dict[str, str]) -> str | None:
+        """The correlative search's parameters, for the next search (nothing is re-matched)."""
+        try:
+            self.search = parsed(self.search, typed)
+        except ParamError as e:
+            return str(e)
+        return None
+
+    def set_guess(self, guess: Pose2, source: str = "typed") -> str | None:
+        if not all(math.isfinite(v) for v in (guess.x, guess.y, guess.theta)):
+            return "the initial guess must be finite numbers"
+        old = self.guess, self.guess_source
+        self.guess, self.guess_source = guess, source
+        err = self.rematch()
+        if err:
+            self.guess, self.guess_source = old
+        return err
+
+    def search_guess(self) -> str | None:
+        """Replace the guess by the correlative search's best pose around it (core/search.py)."""
+        from mbicp_viz.core.search import correlative_search
+
+        found = correlative_search(self.ref, self.obj, self.guess, self.search)
+        return self.set_guess(found.pose, f"searched within {self.search.window_text()} of the last guess")
+
+    # ---- what is shown ----------------------------------------------------------------------
+    def event(self, run: Run) -> IterationEvent | None:
+        """The run's event at the current iteration (None at the initial guess)."""
+        if self.iteration == 0 or not run.iterations:
+            return None
+        return run.iterations[min(self.iteration, len(run.iterations)) - 1]
+
+    def layers(self, run: Run) -> list[scene.Layer]:
+        """The scene layers of ``run`` at the current iteration; in compare mode each run's object
+        scan takes its matcher's colour."""
+        layers = scene.layers_at(run.start, run.iterations, self.iteration, self.truth(), teaching=True,
+                                 chosen=self.iso_point)
+        if len(self.runs) > 1:
+            layers = [scene.recolor(ly, scene.run_style(run.name)) if ly.path == f"{scene.SCANS}/object" else ly
+                      for ly in layers]
+        return layers
+
+    def iteration_text(self, run: Run) -> str:
+        ev = self.event(run)
+        if ev is None:
+            return f"iteration 0: the initial guess ({self.guess_source})"
+        return text.iteration_text(ev)
+
+    def result_markdown(self) -> str:
+        """Every run's result, the agreement of its pose with the data, and the known answer's."""
+        truth, parts = self.truth(), []
+        for run in self.runs:
+            r = run.result
+            lines = [f"**{label}** {value}" for label, value in text.result_fields(r)]
+            on_ref = inlier_fraction(self.ref, self.obj, r.pose)
+            lines.append(f"**on ref** {text.agreement_line(on_ref, INLIER_RADIUS_M)}")
+            if truth is not None:
+                lines.append(f"**known answer** {text.truth_line(r.pose, truth)}")
+            parts.append("  \n".join(lines))
+        parts.append(f"initial guess {self.guess} ({self.guess_source}); match time {self.match_ms:.1f} ms")
+        return "\n\n".join(parts)
+
+    def pair_label(self) -> str:
+        return f"scans {self.pair[0]} -> {self.pair[1]}"

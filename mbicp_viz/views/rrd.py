@@ -1,0 +1,299 @@
+"""The rerun front end: events -> scene layers -> a rerun recording (stream or .rrd).
+
+rerun is imported here only, and only by the commands that record. Every run lives under its own
+entity root (``/improved``, ``/mbicp`` ...) so that several matchers sit side by side; the
+``iteration`` timeline orders the steps (0 = the initial guess).
+
+rerun's 2-D views put y down (image convention); the debugger and every plot here put y up. Each
+2-D space is therefore logged under a y-flipping transform at its root and viewed from the
+parent: the picture is the debugger's, counter-clockwise stays counter-clockwise, histograms stand
+upright, and the values a user hovers over are the logged ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from mbicp_viz.core import (Event, FinishEvent, IterationEvent, MatchResult, Observer, Params, Pose2, Scan,
+                            StartEvent, broadcast, match)
+from mbicp_viz.errors import InputError
+
+from . import scene
+
+APP_ID = "mbicp-viz"
+ABOUT = "about"
+_Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def new_stream(recording_id: str, live: bool = False) -> rr.RecordingStream:
+    """A stream with a fixed recording id and no wall-clock properties, so re-runs compare equal.
+
+    Files are batched into chunks only at the end: chunk boundaries then do not depend on timing
+    (``rerun rrd compare`` compares chunks). A live viewer gets rerun's default, timely batching.
+    """
+    batching = rr.ChunkBatcherConfig.DEFAULT() if live else rr.ChunkBatcherConfig.NEVER()
+    return rr.RecordingStream(APP_ID, recording_id=recording_id, send_properties=False, batcher_config=batching)
+
+
+# The debugger's light background: black correspondences (paper 000's colour) stay visible.
+BACKGROUND = (250, 250, 250)
+
+
+def y_up_view(space: str, name: str) -> rrb.Spatial2DView:
+    """A 2-D view of the entity ``space`` (logged under ``log_y_up``), y pointing up, on the debugger's
+    light background."""
+    parent = space.rsplit("/", 1)[0] or "/"
+    return rrb.Spatial2DView(origin=parent, contents=f"{space}/**", name=name, background=BACKGROUND)
+
+
+def log_y_up(stream: rr.RecordingStream, space: str) -> None:
+    stream.log(space, _Y_UP, static=True)
+
+
+def _spaces(root: str, teaching: bool, polar: bool) -> list[str]:
+    """The 2-D spaces of one run."""
+    out = [f"{root}/{scene.SCANS}"]
+    if teaching:
+        out.append(f"{root}/{scene.TEACH}/histogram")
+    if polar:
+        out += [f"{root}/{scene.POLAR}/cost", f"{root}/{scene.POLAR}/ranges"]
+    return out
+
+
+def blueprint(roots: list[str], teaching: bool = False, about: bool = False, polar: set[str] = frozenset()
+              ) -> rrb.Blueprint:
+    """Scans side by side, error and threshold plots, the text log; time panel on ``iteration``.
+
+    Polar matchers add their cost-per-shift and range-per-bearing plots (x in degrees)."""
+    scans = [y_up_view(f"/{r}/{scene.SCANS}", f"{r}: scans (reference frame, m)") for r in roots]
+    polar_views = [rrb.Tabs(y_up_view(f"/{r}/{scene.POLAR}/cost", f"{r}: cost [cm] per shift [deg]"),
+                            y_up_view(f"/{r}/{scene.POLAR}/ranges", f"{r}: ranges [dm] per bearing [deg]"))
+                   for r in roots if r in polar]
+    log = rrb.TextLogView(origin="/", contents=[f"/{r}/{scene.LOG}" for r in roots], name="log")
+    side = [rrb.TimeSeriesView(origin="/", contents=[f"/{r}/{scene.PLOTS}/**" for r in roots],
+                               name="error [m²] and threshold [m] per iteration"),
+            rrb.Tabs(rrb.TextDocumentView(origin=f"/{ABOUT}", name="what to look at"), log) if about else log]
+    if teaching:
+        side.insert(1, rrb.Tabs(*[y_up_view(f"/{r}/{scene.TEACH}/histogram", f"{r}: pair distances [m]")
+                                  for r in roots]))
+    main = scans[0] if len(scans) == 1 else rrb.Horizontal(*scans)
+    return rrb.Blueprint(rrb.Horizontal(main, rrb.Vertical(*polar_views, *side), column_shares=[3, 2]),
+                         rrb.TimePanel(timeline="iteration", expanded=True), collapse_panels=True)
+
+
+def _rgb(c):
+    return np.asarray(c, dtype=np.uint8)
+
+
+def log_layer(stream: rr.RecordingStream, root: str, layer: scene.Layer, static: bool = False) -> None:
+    """One layer as rerun archetypes under ``root``; a layer type it does not know is an error."""
+    path = f"{root}/{layer.path}"
+    if isinstance(layer, scene.Points):
+        colors = layer.colors if layer.colors is not None else _rgb(layer.style.color)
+        stream.log(path, rr.Points2D(layer.xy, colors=colors, radii=layer.radius, labels=layer.labels,
+                                     show_labels=False if layer.labels else None, draw_order=layer.style.order),
+                   static=static)
+    elif isinstance(layer, scene.Segments):
+        strips = np.stack((layer.starts, layer.ends), axis=1) if len(layer.starts) else np.zeros((0, 2, 2))
+        stream.log(path, rr.LineStrips2D(strips, colors=_rgb(layer.style.color), radii=layer.width,
+                                         draw_order=layer.style.order), static=static)
+    elif isinstance(layer, scene.Strips):
+        stream.log(path, rr.LineStrips2D(layer.strips, colors=_rgb(layer.style.color), radii=layer.width,
+                                         draw_order=layer.style.order), static=static)
+    elif isinstance(layer, scene.Boxes):
+        stream.log(path, rr.Boxes2D(centers=layer.centers, half_sizes=np.full((len(layer.centers), 2), layer.half_size),
+                                    colors=layer.colors, labels=layer.labels, show_labels=False, radii=0.002,
+                                    draw_order=layer.style.order), static=static)
+    elif isinstance(layer, scene.Scalar):
+        stream.log(path, rr.Scalars(layer.value), static=static)
+    elif isinstance(layer, scene.Text):
+        stream.log(path, rr.TextLog(layer.text, level=layer.level), static=static)
+    elif isinstance(layer, scene.Frame):
+        p = layer.pose
+        stream.log(path, rr.Transform3D(translation=[p.x, p.y, 0.0],
+                                        rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=p.theta)),
+                   static=static)
+        stream.log(f"{path}/heading", rr.Arrows2D(origins=[[0.0, 0.0]], vectors=[[layer.length, 0.0]],
+                                                  colors=_rgb(layer.style.color), radii=0.025 * layer.length,
+                                                  draw_order=layer.style.order), static=static)
+    else:
+        raise TypeError(f"the rerun front end cannot draw a {type(layer).__name__} layer ({layer.path})")
+
+
+class RerunObserver:
+    """An observer that writes one run under ``root`` of a rerun stream as it happens."""
+
+    def __init__(self, stream: rr.RecordingStream, root: str, teaching: bool = False, truth: Pose2 | None = None):
+        self.stream, self.root, self.teaching, self.truth = stream, root, teaching, truth
+        self.start: StartEvent | None = None
+        self.last_iteration = 0
+        self.series: set[str] = set()  # plot paths whose line style is logged
+
+    def __call__(self, ev: Event) -> None:
+        if isinstance(ev, StartEvent):
+            self.start = ev
+            self._static_styles()
+            for layer in scene.static_layers(ev, self.truth):
+                log_layer(self.stream, self.root, layer, static=True)
+            self.stream.set_time("iteration", sequence=0)
+            for layer in scene.initial_layers(ev):
+                log_layer(self.stream, self.root, layer)
+        elif isinstance(ev, IterationEvent):
+            self.last_iteration = ev.iteration
+            self.stream.set_time("iteration", sequence=ev.iteration)
+            layers = scene.iteration_layers(self.start, ev)
+            if self.teaching:
+                layers += scene.teaching_layers(self.start, ev)
+            for layer in layers:
+                if isinstance(layer, scene.Scalar) and layer.path not in self.series:
+                    self._series_style(layer)
+                log_layer(self.stream, self.root, layer)
+        elif isinstance(ev, FinishEvent):
+            self.stream.set_time("iteration", sequence=self.last_iteration)
+            for layer in scene.finish_layers(ev.result):
+                log_layer(self.stream, self.root, layer)
+
+    def _static_styles(self) -> None:
+        for space in _spaces(self.root, self.teaching, polar=True):
+            log_y_up(self.stream, space)
+
+    def _series_style(self, layer: scene.Scalar) -> None:
+        """A plot line's colour and legend name, logged with its first value."""
+        self.series.add(layer.path)
+        self.stream.log(f"{self.root}/{layer.path}", rr.SeriesLines(
+            colors=_rgb(layer.style.color), names=f"{self.root}: {layer.style.label}", widths=2.0), static=True)
+
+
+@dataclass(frozen=True)
+class Run:
+    """One matcher run to record under ``root``; ``truth`` (if known) is drawn as the object scan there."""
+
+    root: str
+    ref: Scan
+    obj: Scan
+    guess: Pose2
+    params: Params
+    truth: Pose2 | None = None
+
+
+def record(runs: list[Run], path: str | None = None, connect: str | None = None, teaching: bool = False,
+           recording_id: str = "mbicp-viz", extra_observer: Observer | None = None,
+           about: str | None = None) -> list[MatchResult]:
+    """Match every run with a rerun observer attached; write ``path`` (.rrd) and/or stream to ``connect``.
+
+    ``about`` (Markdown) is stored as a document beside the runs: what the recording shows.
+    """
+    from mbicp_viz.core import matcher_for
+
+    stream = new_stream(recording_id, live=connect is not None)
+    polar = {r.root for r in runs if matcher_for(r.params).module in ("psm", "pmwn")}
+    bp = blueprint([r.root for r in runs], teaching, about is not None, polar)
+    if path is not None:
+        stream.save(path, default_blueprint=bp)
+    if connect is not None:
+        stream.connect_grpc(connect, default_blueprint=bp)
+    if about is not None:
+        stream.log(ABOUT, rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
+    results = []
+    for r in runs:
+        obs = RerunObserver(stream, r.root, teaching, r.truth)
+        results.append(match(r.ref, r.obj, r.guess, r.params, obs if extra_observer is None
+                             else broadcast(obs, extra_observer)))
+    stream.flush()
+    stream.disconnect()
+    return results
+
+
+def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
+    """Serve ``path`` in rerun's web viewer from the wheel's own CLI, bound to ``host`` (loopback).
+
+    The web viewer listens on ``port``, its gRPC data server on ``port + 1``.
+    """
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    beside = Path(sys.executable).parent / "rerun"  # the wheel's CLI, in the same environment
+    exe = str(beside) if beside.exists() else shutil.which("rerun")
+    if exe is None:
+        raise InputError("the rerun viewer command is not installed (pip install rerun-sdk)")
+    cmd = [exe, "--serve-web", "--bind", host, "--web-viewer-port", str(port), "--port", str(port + 1), path]
+    return subprocess.call(cmd)
+
+
+def record_sequence(log, rows: list[dict], path: str, recording_id: str = "mbicp-viz/sequence") -> None:
+    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, per-pair log."""
+    from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
+
+    stream = new_stream(recording_id)
+    root = "sequence"
+    space = f"/{root}/{scene.SEQUENCE}"
+    bp = rrb.Blueprint(
+        rrb.Horizontal(y_up_view(space, "trajectory and map (first scan's frame, m)"),
+                       rrb.Vertical(rrb.TimeSeriesView(origin=f"/{root}/{scene.PLOTS}", name="iterations, time [ms]"),
+                                    rrb.TextLogView(origin=f"/{root}/{scene.LOG}", name="pairs")),
+                       column_shares=[3, 2]),
+        rrb.TimePanel(timeline="scan", expanded=True), collapse_panels=True)
+    stream.save(path, default_blueprint=bp)
+    log_y_up(stream, space)
+    poses, stored = accumulate(rows), log_poses(log, rows)
+    by_obj = {row["obj"]: row for row in rows}
+    for n, k in enumerate(scan_indices(rows)):
+        stream.set_time("scan", sequence=k)
+        traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
+        stored_traj = None if stored is None else np.array([[p.x, p.y] for p in stored[: n + 1]])
+        for layer in scene.sequence_layers(k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k)):
+            log_layer(stream, root, layer)
+    stream.flush()
+    stream.disconnect()
+
+
+def record_basin(atlas, path: str) -> None:
+    """Outcome points per matcher in the (dx, dy) plane, one ``theta_offset`` step per slice."""
+    import math
+
+    from mbicp_viz.evaluation.basin import OUTCOME_COLORS, OUTCOME_NAMES
+
+    stream = new_stream("mbicp-viz/basin")
+    names = list(atlas.outcome)
+    stream.save(path, default_blueprint=rrb.Blueprint(
+        rrb.Horizontal(*[y_up_view(f"/basin/{n}", f"{n}: outcome per initial offset (dx, dy) [m]") for n in names]),
+        rrb.TimePanel(timeline="theta_offset", expanded=True), collapse_panels=True))
+    for n in names:
+        log_y_up(stream, f"basin/{n}")
+    for t, th in enumerate(atlas.thetas):
+        stream.set_time("theta_offset", sequence=t)
+        for n in names:
+            for layer in scene.basin_layers(n, atlas.offsets_xy, atlas.outcome[n][t], OUTCOME_NAMES, OUTCOME_COLORS,
+                                            math.degrees(th)):
+                log_layer(stream, "", layer)
+    stream.flush()
+    stream.disconnect()
+
+
+def time_recordings(log, params: Params, limit: int | None, repeat: int, teaching: bool):
+    """Time for matching and writing each consecutive pair to an .rrd, and the file sizes [bytes]."""
+    import os
+    import tempfile
+    import time
+
+    from mbicp_viz.evaluation.bench import Timing
+    from mbicp_viz.evaluation.pairs import stored_guess
+
+    times, sizes = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "bench.rrd")
+        for i, j in log.consecutive_pairs(limit):
+            ref, obj = log.scan(i), log.scan(j)
+            guess, _ = stored_guess(ref, obj)
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                record([Run("bench", ref, obj, guess, params)], path, teaching=teaching)
+                times.append(1000.0 * (time.perf_counter() - t0))
+                sizes.append(os.path.getsize(path))
+    return Timing("recording to .rrd", np.array(times)), np.array(sizes)

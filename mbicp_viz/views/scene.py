@@ -1,0 +1,431 @@
+"""Events -> drawable layers: the one scene mapping both front ends (rerun, the viser debugger) draw.
+
+A layer is plain data (points, segments, strips, boxes, a pose, a scalar, a text) under a path,
+and every drawable layer carries its ``Style``: the legend entry, colour, draw order and whether
+it is shown by default. The front ends only translate layers into their own calls, and refuse a
+layer they cannot translate. Colours follow paper 000's figures where it has them (reference red,
+object blue, correspondences black); every other kind of layer has a colour of its own, so that
+the legend is unambiguous. Everything is in the reference frame (``T_ref_obj`` maps object
+points there), metres; plots use the units their axes name.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Union
+
+import numpy as np
+
+from mbicp_viz.core import IterationEvent, PairKind, PairStatus, Pose2, StartEvent
+
+RGB = tuple[int, int, int]
+
+
+@dataclass(frozen=True)
+class Style:
+    """A legend entry: what a kind of layer shows, its colour, where it sits in the draw order
+    (higher on top) and whether it is shown before the user asks."""
+
+    label: str
+    color: RGB
+    order: float = 0.0
+    on: bool = True
+
+
+# Every drawable scene layer has one of these; the legend lists them.
+REFERENCE = Style("reference scan", (220, 40, 40), 2.0)
+TRUTH = Style("object scan at the known answer", (0, 190, 190), 1.0)  # larger, under the object: seen where it differs
+INITIAL = Style("object scan at the initial guess", (165, 165, 165), 0.5)
+OBJECT = Style("object scan where the pairs were made", (40, 90, 220), 3.0)
+OBJECT_AFTER = Style("object scan after the step", (150, 180, 245), 2.5)
+HIDDEN = Style("object points hidden by the projection filter", (140, 90, 40), 3.5, on=False)
+PAIR_POINT = Style("pairs to a reference point", (20, 20, 20), 4.0)
+PAIR_INTERPOLATED = Style("pairs to an interpolated point", (0, 160, 90), 4.0)
+PAIR_REJECTED = Style("rejected pairs", (245, 160, 0), 3.8)
+GRID = Style("resampling grid (pale: thinned, blue: kept)", (110, 140, 225), -1.0)
+ISO_METRIC = Style("MbICP iso-distance ellipse", (130, 60, 200), 4.5, on=False)
+ISO_EUCLID = Style("Euclidean circle through the same target", (150, 130, 0), 4.5, on=False)
+CIRCLE = Style("PMWN projected circle and its centre", (210, 0, 130), 4.2)
+ESTIMATE = Style("estimate: object frame (x red, y green)", (40, 90, 220), 5.0)
+STYLES = (REFERENCE, TRUTH, INITIAL, OBJECT, OBJECT_AFTER, HIDDEN, PAIR_POINT, PAIR_INTERPOLATED, PAIR_REJECTED,
+          GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, ESTIMATE)
+
+# Plot series: the legend of the plots.
+ERROR = Style("mean squared residual [m²]", (90, 90, 90))
+THRESHOLD = Style("rejection threshold [m]", (245, 160, 0))
+METRIC_WEIGHT = Style("PMWN metric weight λ [m/rad]", (210, 0, 130))
+
+# Compare mode: one colour per matcher, none of them a colour of the layers above.
+RUN_COLORS: dict[str, RGB] = {"icp": (230, 159, 0), "mbicp": (0, 114, 178), "improved": (204, 80, 170),
+                              "psm": (0, 158, 115), "pmwn": (86, 180, 233), "plicp": (120, 80, 30)}
+
+
+def run_style(name: str) -> Style:
+    """The object scan of one matcher in compare mode."""
+    return Style(f"{name}: object scan", RUN_COLORS[name], OBJECT.order)
+
+
+@dataclass(frozen=True, eq=False)
+class Points:
+    path: str
+    xy: np.ndarray  # (N, 2)
+    style: Style
+    radius: float  # [m]
+    colors: np.ndarray | None = None  # (N, 3 or 4) per point, instead of the style's colour
+    labels: list[str] | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Segments:
+    path: str
+    starts: np.ndarray  # (N, 2)
+    ends: np.ndarray  # (N, 2)
+    style: Style
+    width: float  # [m]
+
+
+@dataclass(frozen=True, eq=False)
+class Strips:
+    """Closed or open polylines (iso-curves, histogram bars, trajectories)."""
+
+    path: str
+    strips: list[np.ndarray]
+    style: Style
+    width: float  # [m]
+
+
+@dataclass(frozen=True, eq=False)
+class Boxes:
+    path: str
+    centers: np.ndarray  # (N, 2)
+    half_size: float  # [m]
+    style: Style
+    colors: np.ndarray  # (N, 4) RGBA per box
+    labels: list[str]
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A pose drawn as axes: the object frame in the reference frame."""
+
+    path: str
+    pose: Pose2
+    style: Style = ESTIMATE
+    length: float = 0.4  # [m]
+
+
+@dataclass(frozen=True)
+class Scalar:
+    path: str
+    value: float
+    style: Style
+
+
+@dataclass(frozen=True)
+class Text:
+    path: str
+    text: str
+    level: str = "INFO"
+
+
+Layer = Union[Points, Segments, Strips, Boxes, Frame, Scalar, Text]
+DRAWN = (Points, Segments, Strips, Boxes, Frame)  # layers of the 2-D scene (the rest are plots and logs)
+
+# Paths, relative to a run's root; the front ends and the blueprints rely on them.
+SCANS = "scene"
+PLOTS = "plots"
+LOG = "log"
+TEACH = "teaching"
+POLAR = "polar"
+SEQUENCE = "sequence"
+
+
+def scene_scale(points: np.ndarray) -> float:
+    """How much to enlarge dots and lines so that they stay visible on a large scene: 1 for a
+    scene up to 10 m across, its extent / 10 m above."""
+    if len(points) < 2:
+        return 1.0
+    return max(1.0, float(np.ptp(points, axis=0).max()) / 10.0)
+
+
+def ratio_colors(ratio: np.ndarray) -> np.ndarray:
+    """RGBA cell colour by sampling ratio: faint grey for thinned near cells, blue for kept far ones."""
+    r = np.clip(ratio, 0.0, 1.0)[:, None]
+    rgb = (1 - r) * np.array([200, 200, 200]) + r * np.array(GRID.color)
+    alpha = 40 + 100 * r
+    return np.round(np.hstack((rgb, alpha))).astype(np.uint8)
+
+
+def static_layers(start: StartEvent, truth: Pose2 | None = None) -> list[Layer]:
+    """What every iteration shows: the reference scan, the object scan at the initial guess, the
+    resampling grid (improved MbICP), and the object scan at the known answer when there is one."""
+    s = scene_scale(start.ref_points)
+    layers: list[Layer] = [
+        Points(f"{SCANS}/reference", start.ref_points, REFERENCE, 0.02 * s),
+        Points(f"{SCANS}/object_initial", start.initial_guess.apply(start.obj_points), INITIAL, 0.01 * s),
+    ]
+    if truth is not None:
+        layers.append(Points(f"{SCANS}/truth", truth.apply(start.obj_points), TRUTH, 0.03 * s))
+    rs = start.resampling
+    if rs is not None:
+        # the grid lives in the object sensor frame: draw it where the initial guess puts it
+        centers = rs.origin + (rs.cells[:, ::-1] + 0.5) * rs.cell_size
+        layers.append(Boxes(f"{SCANS}/resampling_grid", start.initial_guess.apply(centers), rs.cell_size / 2, GRID,
+                            ratio_colors(rs.ratio),
+                            [f"eta={e:.2f} kept {k}/{n}" for e, k, n in zip(rs.ratio, rs.kept_count, rs.count)]))
+    return layers
+
+
+def initial_layers(start: StartEvent) -> list[Layer]:
+    """Iteration 0: the object scan at the initial guess, before any pairing."""
+    s = scene_scale(start.ref_points)
+    return [Points(f"{SCANS}/object", start.initial_guess.apply(start.obj_points[start.used]), OBJECT, 0.02 * s),
+            Frame(f"{SCANS}/estimate", start.initial_guess, length=0.4 * s),
+            Text(LOG, f"{start.algorithm}: initial guess {start.initial_guess}")]
+
+
+def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
+    """Layers of one iteration: where the object was, its pairs by kind and status, where it went."""
+    from .text import iteration_text
+
+    s = scene_scale(start.ref_points)
+    p = ev.pairs
+    src = p.source
+    kept = p.status == PairStatus.KEPT
+    point = kept & (p.kind == PairKind.POINT)
+    inter = kept & (p.kind == PairKind.INTERPOLATED)
+    layers: list[Layer] = [
+        Points(f"{SCANS}/object", ev.moved_points, OBJECT, 0.02 * s),
+        Points(f"{SCANS}/object_after", ev.estimate_after.apply(start.obj_points[start.used]), OBJECT_AFTER,
+               0.012 * s),
+        Points(f"{SCANS}/hidden", ev.estimate_before.apply(start.obj_points[ev.hidden]), HIDDEN, 0.015 * s),
+        Segments(f"{SCANS}/pairs/point", src[point], p.target[point], PAIR_POINT, 0.004 * s),
+        Segments(f"{SCANS}/pairs/interpolated", src[inter], p.target[inter], PAIR_INTERPOLATED, 0.004 * s),
+        Segments(f"{SCANS}/pairs/rejected", src[~kept], p.target[~kept], PAIR_REJECTED, 0.003 * s),
+        Points(f"{SCANS}/interpolated_targets", p.target[inter], PAIR_INTERPOLATED, 0.012 * s),
+        Frame(f"{SCANS}/estimate", ev.estimate_after, length=0.4 * s),
+        Scalar(f"{PLOTS}/error", ev.error, ERROR),
+        Text(LOG, iteration_text(ev)),
+    ]
+    if ev.threshold is not None:
+        layers.append(Scalar(f"{PLOTS}/threshold", ev.threshold, THRESHOLD))
+    return layers + polar_layers(ev, s)
+
+
+def finish_layers(result) -> list[Layer]:
+    from .text import result_sentence
+
+    return [Text(LOG, result_sentence(result), "INFO" if result.converged else "WARN"),
+            Frame(f"{SCANS}/estimate", result.pose)]
+
+
+def layers_at(start: StartEvent, iterations: list[IterationEvent], k: int, truth: Pose2 | None = None,
+              teaching: bool = False, chosen: int | None = None) -> list[Layer]:
+    """Every layer of a recorded run at iteration ``k`` (0: the initial guess; past the last: the last)."""
+    layers = static_layers(start, truth)
+    if k == 0 or not iterations:
+        return layers + initial_layers(start)
+    ev = iterations[min(k, len(iterations)) - 1]
+    layers += iteration_layers(start, ev)
+    return layers + teaching_layers(start, ev, chosen=chosen) if teaching else layers
+
+
+def recolor(layer: Layer, style: Style) -> Layer:
+    """The same layer in another style (a matcher's colour in compare mode)."""
+    return replace(layer, style=style)
+
+
+# Teaching layers (switchable): paper 000 Fig. 3 and Fig. 9b.
+
+def metric_isocurve(p: np.ndarray, target: np.ndarray, L: float, n: int = 72) -> np.ndarray:
+    """The iso-distance curve of MbICP's metric through ``target`` around ``p`` (paper 000 Fig. 3).
+
+    d^2 = (delta . u)^2 + (delta . v)^2 L^2 / (|c|^2 + L^2) with u along the ray through c, v
+    across it (c = target, as in the distance the matcher scores): an ellipse with semi-axes d
+    along the ray and d sqrt(|c|^2 + L^2) / L across it.
+    """
+    c = np.asarray(target, float)
+    r2 = float(c @ c)
+    u = c / np.sqrt(r2) if r2 > 0 else np.array([1.0, 0.0])
+    v = np.array([-u[1], u[0]])
+    delta = np.asarray(p, float) - c
+    d = np.sqrt((delta @ u) ** 2 + (delta @ v) ** 2 * L * L / (r2 + L * L))
+    t = np.linspace(0, 2 * np.pi, n)
+    return c + np.outer(d * np.cos(t), u) + np.outer(d * np.sqrt(r2 + L * L) / L * np.sin(t), v)
+
+
+def circle(center: np.ndarray, radius: float, n: int = 72) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, n)
+    return np.asarray(center) + radius * np.column_stack((np.cos(t), np.sin(t)))
+
+
+def teaching_layers(start: StartEvent, ev: IterationEvent, n_points: int = 6, bins: int = 30,
+                    chosen: int | None = None) -> list[Layer]:
+    """Iso-distance curves for a few object points and the histogram of pair distances.
+
+    For every chosen point the metric ellipse and the Euclidean circle pass through its target,
+    so a user sees why that target won; the histogram shows the distances with the median and
+    the rejection threshold (for improved MbICP: median + k MAD, Fig. 9b). ``chosen`` (an index
+    into ``start.obj_points``) shows that one point's curves instead of ``n_points`` spread ones.
+    """
+    layers: list[Layer] = []
+    p = ev.pairs
+    L = getattr(start.params, "L", None)
+    w = 0.004 * scene_scale(start.ref_points)
+    if L is not None and len(p.kind):
+        mine = np.flatnonzero(p.obj_index == chosen) if chosen is not None else np.empty(0, np.int64)
+        pick = mine[:1] if len(mine) else np.unique(np.linspace(0, len(p.kind) - 1, n_points).round().astype(int))
+        src, tgt = p.source[pick], p.target[pick]
+        layers.append(Strips(f"{SCANS}/{TEACH}/metric_isocurves",
+                             [metric_isocurve(s, t, L) for s, t in zip(src, tgt)], ISO_METRIC, w))
+        layers.append(Strips(f"{SCANS}/{TEACH}/euclidean_circles",
+                             [circle(t, float(np.linalg.norm(s - t))) for s, t in zip(src, tgt)], ISO_EUCLID, w))
+    if len(p.distance):
+        layers += histogram_layers(histogram(p.distance, ev.threshold, bins))
+    return layers
+
+
+@dataclass(frozen=True, eq=False)
+class Histogram:
+    """The pair distances of one iteration (paper 000 Fig. 9b): bins [m], counts, their median and the
+    rejection threshold (None when the matcher applies none beyond its radial window)."""
+
+    edges: np.ndarray  # (B + 1,) [m]
+    counts: np.ndarray  # (B,)
+    median: float
+    threshold: float | None
+
+    @property
+    def centers(self) -> np.ndarray:
+        return 0.5 * (self.edges[1:] + self.edges[:-1])
+
+
+def histogram(distance: np.ndarray, threshold: float | None, bins: int = 30) -> Histogram:
+    hi = max(float(distance.max()), threshold or 0.0) * 1.05 or 1.0
+    counts, edges = np.histogram(distance, bins=bins, range=(0.0, hi))
+    return Histogram(edges, counts, float(np.median(distance)), threshold)
+
+
+HIST_BARS = Style("pairs per distance bin", (120, 120, 120))
+MEDIAN = Style("median distance", (20, 20, 20))
+
+
+def histogram_layers(h: Histogram) -> list[Layer]:
+    """The histogram as bars in a 2-D plot (x: metres, bar heights scaled to about 0.6 of the x
+    range, so that the view is square), with median and threshold lines."""
+    hi = float(h.edges[-1])
+    heights = h.counts / max(h.counts.max(), 1) * hi * 0.6
+    bars = [np.array([[a, 0.0], [a, y], [b, y], [b, 0.0]])
+            for a, b, y in zip(h.edges[:-1], h.edges[1:], heights) if y > 0]
+    top, w = hi * 0.65, hi * 0.004
+    out: list[Layer] = [Strips(f"{TEACH}/histogram/bars", bars, HIST_BARS, w),
+                        Strips(f"{TEACH}/histogram/median", [np.array([[h.median, 0.0], [h.median, top]])], MEDIAN, w)]
+    if h.threshold is not None:
+        out.append(Strips(f"{TEACH}/histogram/threshold", [np.array([[h.threshold, 0.0], [h.threshold, top]])],
+                          THRESHOLD, w))
+    return out
+
+
+# Sequence view: one step per scan of a log (``eval sequence --rrd``).
+MAP = Style("map: scans at the matched poses", REFERENCE.color, 1.0)
+CURRENT = Style("current scan", OBJECT.color, 2.0)
+TRAJECTORY = Style("trajectory from the matches", (40, 90, 220), 3.0)
+LOG_TRAJECTORY = Style("trajectory of the log's poses", (0, 190, 190), 2.5)
+ITERATIONS = Style("iterations", (90, 90, 90))
+TIME = Style("match time [ms]", (245, 160, 0))
+
+
+def sequence_layers(k: int, pose: Pose2, points: np.ndarray, trajectory: np.ndarray,
+                    log_trajectory: np.ndarray | None, row: dict | None) -> list[Layer]:
+    """Scan ``k`` placed at the pose accumulated from the matches (world = first scan's frame)."""
+    layers: list[Layer] = [
+        Points(f"{SEQUENCE}/map/scan_{k:05d}", pose.apply(points), MAP, 0.02),
+        Points(f"{SEQUENCE}/current", pose.apply(points), CURRENT, 0.03),
+        Strips(f"{SEQUENCE}/trajectory", [trajectory], TRAJECTORY, 0.02),
+        Frame(f"{SEQUENCE}/robot", pose),
+    ]
+    if log_trajectory is not None:
+        layers.append(Strips(f"{SEQUENCE}/log_trajectory", [log_trajectory], LOG_TRAJECTORY, 0.015))
+    if row is not None:
+        layers += [Scalar(f"{PLOTS}/iterations", float(row["iterations"]), ITERATIONS),
+                   Scalar(f"{PLOTS}/time_ms", float(row["time_ms"]), TIME),
+                   Text(LOG, f"pair {row['ref']} -> {row['obj']}: ({row['x']:+.3f} m, {row['y']:+.3f} m, "
+                             f"{math.degrees(row['theta']):+.2f} deg), {row['iterations']} iterations, "
+                             f"{row['reason']}", "INFO" if row["converged"] else "WARN")]
+    return layers
+
+
+# Convergence atlas (``eval basin --rrd``): outcome per initial offset.
+def basin_layers(name: str, offsets_xy: np.ndarray, outcome: np.ndarray, names: tuple[str, ...],
+                 colors: tuple[RGB, ...], theta_deg: float) -> list[Layer]:
+    """One matcher's outcomes over the (dx, dy) grid of one theta offset, coloured by outcome."""
+    gx, gy = np.meshgrid(offsets_xy, offsets_xy)
+    o = outcome.ravel()
+    step = float(offsets_xy[1] - offsets_xy[0]) if len(offsets_xy) > 1 else 0.1
+    style = Style(f"{name}: outcome per initial offset [m]", colors[0])
+    return [Points(f"basin/{name}/outcome", np.column_stack((gx.ravel(), gy.ravel())), style, step * 0.4,
+                   colors=np.array(colors, dtype=np.uint8)[o], labels=[names[k] for k in o]),
+            Text(f"basin/{name}/note", f"dtheta {theta_deg:+.1f} deg: {np.mean(o == 0) * 100:.0f} % correct")]
+
+
+# Polar matchers (PSM, PMWN): how they think, in plot spaces of their own (x in degrees).
+RANGE_REF = Style("reference ranges [dm] per bearing [deg]", (220, 40, 40))
+RANGE_PROJ = Style("projected object ranges [dm] per bearing [deg]", (40, 90, 220))
+COST = Style("cost [cm] per shift [deg]", (120, 120, 120))
+FIT = Style("fit through the three least costs", (0, 160, 90))
+MINIMUM = Style("chosen rotation", (245, 160, 0))
+
+
+def fitted_curve(polar, shift_deg: float, n: int = 21) -> np.ndarray | None:
+    """The V (PMWN) or parabola (PSM) through the three cost samples around the minimum."""
+    if polar.fit_abc is None or polar.best_shift is None:
+        return None
+    a, b, c = polar.fit_abc
+    k0 = round(polar.best_shift) if abs(polar.best_shift - round(polar.best_shift)) <= 0.5 else polar.best_shift
+    x = np.linspace(-1.0, 1.0, n)
+    if polar.fit == "V":
+        m = max(a, c) - b
+        x0 = (a - c) / (2 * m) if m > 0 else 0.0
+        y = m * np.abs(x - x0) + (b - m * abs(x0))
+    else:
+        y = 0.5 * (a - 2 * b + c) * x * x + 0.5 * (c - a) * x + b
+    return np.column_stack(((k0 + x) * shift_deg, y))
+
+
+# Plot scales, so that both axes of a 2-D plot space span similar numbers.
+COST_SCALE = 100.0  # cost plot: x shift [deg], y cost [cm]
+RANGE_SCALE = 10.0  # range plot: x bearing [deg], y range [dm]
+
+
+def polar_step_deg(polar) -> float:
+    return math.degrees(float(np.median(np.diff(polar.bearings))))
+
+
+def polar_layers(ev: IterationEvent, scale: float = 1.0) -> list[Layer]:
+    """Cost per shift with the chosen minimum and its fit; ranges vs bearing; PMWN's projected circle."""
+    P = ev.polar
+    if P is None:
+        return []
+    step_deg = polar_step_deg(P)
+    layers: list[Layer] = []
+    ok = np.isfinite(P.cost)
+    if ok.any():
+        layers.append(Strips(f"{POLAR}/cost/curve",
+                             [np.column_stack((P.shifts[ok] * step_deg, P.cost[ok] * COST_SCALE))], COST, 0.1))
+        fit = fitted_curve(P, step_deg)
+        if fit is not None:
+            fit = fit * [1.0, COST_SCALE]
+            layers.append(Strips(f"{POLAR}/cost/fit", [fit], FIT, 0.12))
+            layers.append(Points(f"{POLAR}/cost/minimum", np.array([[P.best_shift * step_deg, fit[:, 1].min()]]),
+                                 MINIMUM, 0.4))
+    deg = np.degrees(P.bearings)
+    for name, r, style in (("reference", P.ref_ranges, RANGE_REF), ("projected", P.projected_ranges, RANGE_PROJ)):
+        pts = np.column_stack((deg, r * RANGE_SCALE))
+        layers.append(Points(f"{POLAR}/ranges/{name}", pts[np.isfinite(r)], style, 0.3))
+    if P.metric_weight is not None:
+        layers.append(Scalar(f"{PLOTS}/metric_weight", P.metric_weight, METRIC_WEIGHT))
+    if P.circle_points is not None:
+        layers.append(Points(f"{SCANS}/{POLAR}/circle_points", P.circle_points, CIRCLE, 0.01 * scale))
+        layers.append(Points(f"{SCANS}/{POLAR}/circle_centre", P.circle_centre[None, :], CIRCLE, 0.03 * scale))
+    return layers

@@ -1,0 +1,93 @@
+"""The viser front end's drawing: scene layers -> viser scene nodes (the same layers rerun draws).
+
+Layers under the scan plane (``scene.SCANS``) become nodes at heights that follow their draw
+order (the camera looks straight down); the plot-space layers (histogram, polar cost and ranges)
+and the scalars and texts are the panels' business. Any other layer is an error: nothing is
+dropped without a word.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import scene
+
+# Layers whose data the debugger shows in its plot panels rather than in the scan plane.
+PLOT_SPACES = (f"{scene.TEACH}/histogram/", f"{scene.POLAR}/cost/", f"{scene.POLAR}/ranges/")
+Z_PER_ORDER = 0.002  # [m] height per unit of draw order: higher draws on top
+
+
+def in_scan_plane(layer: scene.Layer) -> bool:
+    """True for a layer the scan plane draws, False for one a panel shows; an error for anything else."""
+    if isinstance(layer, (scene.Scalar, scene.Text)) or layer.path.startswith(PLOT_SPACES):
+        return False
+    if layer.path.startswith(f"{scene.SCANS}/") and isinstance(layer, scene.DRAWN):
+        return True
+    raise TypeError(f"the debugger has no place for the {type(layer).__name__} layer {layer.path!r}")
+
+
+def _xyz(xy: np.ndarray, z: float = 0.0) -> np.ndarray:
+    xy = np.asarray(xy, dtype=np.float32).reshape(-1, 2)
+    return np.column_stack((xy, np.full(len(xy), z, dtype=np.float32)))
+
+
+def _segments(starts: np.ndarray, ends: np.ndarray, z: float) -> np.ndarray:
+    return np.stack((_xyz(starts, z), _xyz(ends, z)), axis=1)
+
+
+def _strip_segments(strips: list[np.ndarray], z: float) -> np.ndarray:
+    segs = [_segments(s[:-1], s[1:], z) for s in strips if len(s) > 1]
+    return np.concatenate(segs) if segs else np.zeros((0, 2, 3), np.float32)
+
+
+def _box_segments(centers: np.ndarray, h: float, z: float) -> np.ndarray:
+    corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+    c = centers[:, None, :] + corners[None]  # (N, 4, 2)
+    return np.concatenate([_segments(c[:, k], c[:, (k + 1) % 4], z) for k in range(4)])
+
+
+def _line_geometry(layer, z: float):
+    """(segments (N, 2, 3), colours (N, 2, 3), width) of a line-like layer."""
+    color = np.asarray(layer.style.color, np.uint8)
+    if isinstance(layer, scene.Segments):
+        segs = _segments(layer.starts, layer.ends, z)
+    elif isinstance(layer, scene.Strips):
+        segs = _strip_segments(layer.strips, z)
+    else:  # Boxes: each box's own colour on its four sides
+        segs = _box_segments(layer.centers, layer.half_size, z) if len(layer.centers) else np.zeros((0, 2, 3))
+        per_box = np.tile(layer.colors[:, :3], (4, 1))
+        return segs, np.repeat(per_box[:, None, :], 2, axis=1).astype(np.uint8), 0.004
+    width = layer.width
+    return segs, np.broadcast_to(color, (len(segs), 2, 3)), width
+
+
+def draw(scene_api, name: str, layer: scene.Layer, visible: bool = True):
+    """Add (or replace) the node ``name`` for one scan-plane layer."""
+    z = layer.style.order * Z_PER_ORDER
+    if isinstance(layer, scene.Points):
+        pts = _xyz(layer.xy, z)
+        c = layer.colors[:, :3] if layer.colors is not None else np.broadcast_to(
+            np.asarray(layer.style.color, np.uint8), (len(pts), 3))
+        return scene_api.add_point_cloud(name, pts, np.asarray(c, np.uint8), point_size=2.0 * layer.radius,
+                                         point_shape="circle", precision="float32", visible=visible)
+    if isinstance(layer, (scene.Segments, scene.Strips, scene.Boxes)):
+        segs, colors, width = _line_geometry(layer, z)
+        if len(segs) == 0:  # an empty node keeps the name (and its visibility)
+            segs, colors = np.zeros((1, 2, 3), np.float32), np.zeros((1, 2, 3), np.uint8)
+        return scene_api.add_line_segments(name, segs, colors, thickness=max(width, 0.004) * 1.5, visible=visible)
+    if isinstance(layer, scene.Frame):
+        p = layer.pose
+        return scene_api.add_frame(name, axes_length=layer.length, axes_radius=0.04 * layer.length,
+                                   position=(p.x, p.y, z), wxyz=yaw_to_wxyz(p.theta), visible=visible)
+    raise TypeError(f"the debugger cannot draw a {type(layer).__name__} layer ({layer.path})")
+
+
+def yaw_to_wxyz(theta: float) -> tuple[float, float, float, float]:
+    return (math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2))
+
+
+def wxyz_to_yaw(wxyz) -> float:
+    w, x, y, z = (float(v) for v in wxyz)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

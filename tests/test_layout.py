@@ -1,0 +1,52 @@
+"""The house: the matchers under the project's own import name, every package shipped, and a
+command line that loads nothing heavy before a command runs."""
+
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import mbicp_viz
+
+ROOT = Path(__file__).parent.parent
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+
+
+def test_core_is_mbicp_viz_core_and_never_a_top_level_core(tmp_path):
+    # from the checkout's top level, where a folder named core/ sits on sys.path
+    res = subprocess.run([sys.executable, "-c", "import core"], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode != 0 and "mbicp_viz.core" in res.stderr
+    # from anywhere else: there is no top-level core at all
+    res = subprocess.run([sys.executable, "-c", "import core"], cwd=tmp_path, capture_output=True, text=True)
+    assert res.returncode != 0 and "No module named 'core'" in res.stderr
+    res = subprocess.run([sys.executable, "-c", "import mbicp_viz.core as c; print(c.Pose2.__module__)"],
+                         cwd=tmp_path, capture_output=True, text=True)
+    assert res.returncode == 0 and res.stdout.strip() == "mbicp_viz.core.se2", res.stderr
+
+
+def test_every_package_is_shipped_and_the_checkout_maps_them_alike():
+    on_disk = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "mbicp_viz").rglob("__init__.py")}
+    on_disk |= {"mbicp_viz.core"}
+    assert on_disk <= set(PYPROJECT["packages"]), on_disk - set(PYPROJECT["packages"])
+    mapped = {k: v for k, v in PYPROJECT["package-dir"].items() if (ROOT / v / "__init__.py").exists()}
+    assert mapped == mbicp_viz.CHECKOUT_PACKAGES
+
+
+def test_the_command_line_loads_nothing_heavy_before_a_command_runs(tmp_path):
+    heavy = ("numpy", "scipy", "numba", "rerun", "viser", "matplotlib", "rosbags")
+    code = f"import sys, mbicp_viz.cli; print([m for m in {heavy!r} if m in sys.modules])"
+    res = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    assert res.returncode == 0 and res.stdout.strip() == "[]", res.stdout + res.stderr
+
+
+def test_every_command_answers_help(tmp_path):
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app
+    from mbicp_viz.cli.bench import command_names
+
+    names = command_names(app)
+    assert {"match", "serve", "eval sequence", "bench startup", "params"} <= set(names)
+    for name in names:
+        res = CliRunner().invoke(app, [*name.split(), "--help"])
+        assert res.exit_code == 0 and "Usage" in res.output and "<bool>" not in res.output, (name, res.output)
