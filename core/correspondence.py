@@ -62,6 +62,21 @@ def polar(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1])
 
 
+@njit(cache=True)
+def _first_at_least(eb, a: float, strict: bool) -> int:
+    """``np.searchsorted(eb, a, "right" if strict else "left")``: the first index whose bearing is
+    above (``strict``) or at least ``a``. Written out: numba's searchsorted costs half a second of
+    compilation on a first match, this loop a few milliseconds."""
+    lo, hi = 0, len(eb)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if eb[mid] < a or (strict and eb[mid] == a):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 @njit(cache=True, inline="always")
 def _window_min(px: float, py: float, ex, ey, ek, lo: int, hi: int):
     """Metric-nearest of the reference points ext[lo, hi) to (px, py): (ext index, d^2); (-1, inf) if
@@ -79,29 +94,31 @@ def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, ext_map, n_ref: int, Bw: floa
                     max_factor: float, max_step: float):
     """The loop of ``nearest`` over the moved points (compiled: a handful of candidates per point,
     where numpy paid a call per step for all points at once)."""
-    idx = np.full(len(alpha), -1)
-    out = np.full(len(alpha), np.inf)
+    idx = np.empty(len(alpha), dtype=np.int64)
+    out = np.empty(len(alpha))
     clip_to_bw = Bw < _NEAR_K * max_step  # the 2K beams may reach beyond +/-Bw: clip them
     for i in range(len(alpha)):
         a, r, px, py = alpha[i], rng[i], p[i, 0], p[i, 1]
-        pos = np.searchsorted(eb, a)
+        pos = _first_at_least(eb, a, False)
         lo, hi = pos - _NEAR_K, pos + _NEAR_K
         if clip_to_bw:
-            lo = max(lo, np.searchsorted(eb, a - Bw))
-            hi = max(min(hi, np.searchsorted(eb, a + Bw, "right")), lo)
+            lo = max(lo, _first_at_least(eb, a - Bw, False))
+            hi = max(min(hi, _first_at_least(eb, a + Bw, True)), lo)
         best, d2 = _window_min(px, py, ex, ey, ek, lo, min(hi, len(eb)))
         # the window that can hold anything closer (see ``nearest``), never wider than +/-Bw
         d0 = np.sqrt(min(max(d2, 0.0), Br * Br))
         rho = d0 * min((r + L) / max(L - d0, 1e-12), max_factor)
         half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw) + 1e-12
-        wlo = np.searchsorted(eb, a - half)
-        whi = min(np.searchsorted(eb, a + half, "right"), wlo + n_ref)  # a point once
+        wlo = _first_at_least(eb, a - half, False)
+        whi = min(_first_at_least(eb, a + half, True), wlo + n_ref)  # a point once
         if wlo < lo or whi > hi:
             b, d = _window_min(px, py, ex, ey, ek, wlo, min(whi, len(eb)))
             if d < d2:
                 best, d2 = b, d
         if d2 < np.inf:
             idx[i], out[i] = ext_map[best], max(d2, 0.0)
+        else:
+            idx[i], out[i] = -1, np.inf
     return idx, out
 
 
@@ -202,14 +219,17 @@ def _share_targets(p, best, d2, points, sq_norm_L2, neighbours, L: float, max_le
     ``sq_norm_L2[j]`` = |q_j|^2 + L^2 for reference point j (ReferenceIndex.ext_sq_norm_L2).
     """
     n = len(best)
-    winner = np.full(len(points), -1)  # per reference point: the closest object point, first of ties
+    winner = np.empty(len(points), dtype=np.int64)  # per reference point: the closest object point, first of ties
+    winner[:] = -1
     for i in range(n):
         w = winner[best[i]]
         if w < 0 or d2[i] < d2[w]:
             winner[best[i]] = i
     target = points[best]
-    kind = np.full(n, PairKind.POINT, dtype=np.int8)
-    second = np.full(n, -1)
+    kind = np.empty(n, dtype=np.int8)
+    kind[:] = PairKind.POINT
+    second = np.empty(n, dtype=np.int64)  # (np.full costs a quarter second of compilation)
+    second[:] = -1
     d2 = d2.copy()
     for i in range(n):
         j = best[i]

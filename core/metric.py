@@ -23,10 +23,11 @@ def metric_distance_sq(p: np.ndarray, q: np.ndarray, L: float) -> np.ndarray:
     return metric_sq(px, py, qx, qy, qx * qx + qy * qy + L * L)
 
 
-@vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
+@vectorize(cache=True)
 def metric_sq(px, py, qx, qy, k):
     """``metric_distance_sq`` by component, k = |q|^2 + L^2: a ufunc (it broadcasts) that the
-    compiled correspondence search calls too, so both round alike."""
+    compiled correspondence search calls too, so both round alike. Compiled for the types of its
+    first call, not at import (a matcher that never calls it from numpy pays nothing)."""
     dx, dy = px - qx, py - qy
     c = px * qy - py * qx
     return dx * dx + dy * dy - c * c / k

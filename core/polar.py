@@ -57,7 +57,8 @@ def segment(r: np.ndarray, valid: np.ndarray, max_jump: float) -> np.ndarray:
 def _segment_kernel(r, valid, max_jump: float):
     """The loop of ``segment``: number the runs of valid readings, then drop the one-reading runs
     (their numbers stay unused)."""
-    seg = np.full(len(r), -1, dtype=np.int64)
+    seg = np.empty(len(r), dtype=np.int64)  # (np.full in compiled code costs a quarter second to compile)
+    seg[:] = -1
     beam = np.empty(len(r), dtype=np.int64)
     run = np.empty(len(r), dtype=np.int64)
     m, current, previous = 0, -1, -1
@@ -168,8 +169,10 @@ def _project_kernel(xy, edges, tx: float, ty: float, c: float, s: float, b0: flo
         x, y = c * xy[k, 0] - s * xy[k, 1] + tx, s * xy[k, 0] + c * xy[k, 1] + ty
         a[k] = b0 + np.mod(np.arctan2(y, x) - b0, 2 * np.pi)  # in [b0, b0 + 2pi)
         r[k] = np.hypot(x, y)
-    out = np.full(size, np.inf)  # closest surface per bin
-    front = np.full(size, np.inf)  # closest surface facing the reference viewpoint
+    out = np.empty(size)  # closest surface per bin
+    out[:] = np.inf
+    front = np.empty(size)  # closest surface facing the reference viewpoint
+    front[:] = np.inf
     for k in edges:
         a1, a2, r1, r2 = a[k], a[k + 1], r[k], r[k + 1]
         span = a2 - a1
@@ -295,6 +298,23 @@ def translation_residuals(ref: PolarScan, proj_r: np.ndarray, max_error: float, 
 
 
 @njit(cache=True)
+def _kth_smallest(a, k: int) -> float:
+    """``np.sort(a)[k - 1]`` by keeping the k smallest in order (numba's sort costs most of a second
+    to compile; k is a few dozen)."""
+    buf = np.empty(k)
+    n = 0
+    for v in a:
+        if n < k or v < buf[n - 1]:
+            j = min(n, k - 1)
+            while j > 0 and buf[j - 1] > v:
+                buf[j] = buf[j - 1]
+                j -= 1
+            buf[j] = v
+            n = min(n + 1, k)
+    return buf[k - 1]
+
+
+@njit(cache=True)
 def _residuals_kernel(ref_r, valid, proj_r, max_error: float, C: float, min_pairs: int):
     """``translation_residuals`` as one loop (min_pairs 0: no relaxed cut)."""
     i = np.empty(len(ref_r), dtype=np.int64)
@@ -307,7 +327,7 @@ def _residuals_kernel(ref_r, valid, proj_r, max_error: float, C: float, min_pair
     e = ref_r[i] - proj_r[i]
     a = np.abs(e)
     if 0 < min_pairs <= m:
-        max_error = max(max_error, np.sort(a)[min_pairs - 1])
+        max_error = max(max_error, _kth_smallest(a, min_pairs))
     w = C / (C + e * e)
     used = a <= max_error
     return i, e, w, used, i[used], e[used], w[used]

@@ -71,13 +71,13 @@ def test_previous_next_and_play(session):
     import time
 
     session.playback.slider.value = 3
-    session.step(+1)
+    session.playback.step(+1)
     assert session.state.iteration == 4
-    session.step(-1)
-    session.step(-1)
+    session.playback.step(-1)
+    session.playback.step(-1)
     assert session.state.iteration == 2
-    session.fps = 30.0
-    session.playing = True
+    session.playback.fps = 30.0
+    session.playback.playing = True
     deadline = time.monotonic() + 10
     while session.state.iteration == 2 and time.monotonic() < deadline:
         time.sleep(0.01)
@@ -102,15 +102,15 @@ def test_pairs_by_kind_match_the_events(session):
 def test_layer_toggles_hide_nodes_and_the_legend_lists_what_is_shown(session):
     label = scene.PAIR_REJECTED.label
     assert label in session.h_legend.content
-    session.layer_boxes[label].value = False
+    session.layers.boxes[label].value = False
     assert session.nodes["/improved/scene/pairs/rejected"].visible is False and label not in session.h_legend.content
-    session.layer_boxes[label].value = True
+    session.layers.boxes[label].value = True
     assert session.nodes["/improved/scene/pairs/rejected"].visible is True and label in session.h_legend.content
     assert scene.HIDDEN.label not in session.h_legend.content  # off by default
 
 
 def test_typed_parameters_reach_the_matcher_exactly(session):
-    panel = session.params_panel
+    panel = session.matchers.params
     submit(panel, errx_out="1e-5", MaxIter="1e2", Bw="12.5")
     p = session.state.params["improved"]
     assert p.errx_out == 1e-5 and p.MaxIter == 100 and p.Bw == pytest.approx(math.radians(12.5))
@@ -123,11 +123,11 @@ def test_typed_parameters_reach_the_matcher_exactly(session):
     ("L", "nan", "finite"), ("L", "1e", "not a number"), ("resample", "yes", "true or false")])
 def test_refused_entries_say_why_and_keep_the_last_result(session, name, typed, why):
     before = (session.h_result.content, session.state.params["improved"])
-    submit(session.params_panel, **{name: typed})
-    assert why in session.params_panel.message.content and name in session.params_panel.message.content
+    submit(session.matchers.params, **{name: typed})
+    assert why in session.matchers.params.message.content and name in session.matchers.params.message.content
     assert (session.h_result.content, session.state.params["improved"]) == before
     spec = next(s for s in field_specs(MATCHERS["improved"].params_type) if s.name == name)
-    assert session.params_panel.boxes[name].handle.value == st.shown_value(spec, getattr(before[1], name))
+    assert session.matchers.params.boxes[name].handle.value == st.shown_value(spec, getattr(before[1], name))
 
 
 def test_an_exception_inside_a_match_is_shown_and_the_server_keeps_serving(session, monkeypatch):
@@ -137,23 +137,23 @@ def test_an_exception_inside_a_match_is_shown_and_the_server_keeps_serving(sessi
         raise ValueError("boom")
 
     monkeypatch.setattr(st, "run_match", broken)
-    submit(session.params_panel, Br="0.8")
+    submit(session.matchers.params, Br="0.8")
     assert "boom" in session.h_status.content and session.h_result.content == good
     assert session.state.params["improved"].Br != 0.8  # the failed change is not kept
     monkeypatch.undo()
-    submit(session.params_panel, Br="0.8")
+    submit(session.matchers.params, Br="0.8")
     assert session.state.params["improved"].Br == 0.8 and session.h_status.content == ""
 
 
 def test_parameter_form_stays_in_place_and_follows_the_matcher(session):
-    order = session.params_panel.folder.order
-    session.h_edit.value = "icp"
-    assert "Parameters: icp" in session.params_panel.folder.label and session.params_panel.folder.order == order
-    assert set(session.params_panel.boxes) == {s.name for s in field_specs(MATCHERS["icp"].params_type)}
+    order = session.matchers.params.folder.order
+    session.matchers.edit.value = "icp"
+    assert "Parameters: icp" in session.matchers.params.folder.label and session.matchers.params.folder.order == order
+    assert set(session.matchers.params.boxes) == {s.name for s in field_specs(MATCHERS["icp"].params_type)}
 
 
 def test_compare_chosen_matchers_each_in_its_colour(session):
-    session.h_matchers["icp"].value = True
+    session.matchers.boxes["icp"].value = True
     assert [r.name for r in session.state.runs] == ["icp", "improved"]
     legend = session.h_legend.content
     for name in ("icp", "improved"):
@@ -161,20 +161,20 @@ def test_compare_chosen_matchers_each_in_its_colour(session):
         colors = np.asarray(session.nodes[f"/{name}/scene/object"].colors)
         assert (colors == np.array(scene.RUN_COLORS[name])).all()
     assert "**icp**" in session.playback.text.content and "**improved**" in session.playback.text.content
-    session.h_matchers["improved"].value = False
-    session.h_matchers["icp"].value = False  # none: refused, the last choice stays
+    session.matchers.boxes["improved"].value = False
+    session.matchers.boxes["icp"].value = False  # none: refused, the last choice stays
     assert [r.name for r in session.state.runs] == ["icp"] and "choose at least one" in session.h_status.content
 
 
 def test_initial_guess_by_numbers_and_by_gizmo(session):
-    session.h_guess["theta"].handle.value = "-10\n"
-    session.h_guess["x"].handle.value = "1e-3\n"
+    session.guess.boxes["theta"].handle.value = "-10\n"
+    session.guess.boxes["x"].handle.value = "1e-3\n"
     assert session.state.guess.theta == pytest.approx(math.radians(-10.0)) and session.state.guess.x == 1e-3
     assert session.state.runs[0].start.initial_guess == session.state.guess
-    session.gizmo.position = (0.3, -0.2, 0.0)
-    session._on_gizmo()
+    session.guess.gizmo.position = (0.3, -0.2, 0.0)
+    session.guess._dragged()
     assert (session.state.guess.x, session.state.guess.y) == pytest.approx((0.3, -0.2))
-    assert float(session.h_guess["x"].text) == pytest.approx(0.3) and "dragged" in session.h_guess_info.content
+    assert float(session.guess.boxes["x"].text) == pytest.approx(0.3) and "dragged" in session.guess.info.content
 
 
 def test_export_writes_a_readable_rrd_and_params(session, tmp_path):
@@ -186,7 +186,7 @@ def test_export_writes_a_readable_rrd_and_params(session, tmp_path):
     p.write_bytes(session.export_rrd())
     paths = {c.entity_path for c in RrdReader(str(p)).stream().to_chunks()}
     assert "/improved/scene/pairs/point" in paths
-    submit(session.search_panel, window_xy="0.75")
+    submit(session.guess.search, window_xy="0.75")
     f = tmp_path / "p.toml"
     f.write_text(session.export_params())
     assert load_params(str(f), "improved") == session.state.params["improved"]
@@ -196,12 +196,12 @@ def test_export_writes_a_readable_rrd_and_params(session, tmp_path):
 def test_log_source_picks_any_pair(server):
     s = Session(server, files_source(str(LASERAZOS), None))
     assert s.state.pair == (0, 1)
-    s.h_consecutive.value = False
-    s.h_ref.handle.value = "3\n"
-    s.h_obj.handle.value = "7\n"
+    s.scans.consecutive.value = False
+    s.scans.ref.handle.value = "3\n"
+    s.scans.obj.handle.value = "7\n"
     assert s.state.pair == (3, 7) and s.state.runs[0].start.ref_points.shape[0] == s.state.ref.n_valid
-    s.h_obj.handle.value = "999\n"
-    assert "⚠" in s.h_status.content and s.state.pair == (3, 7) and s.h_obj.text == "7"
+    s.scans.obj.handle.value = "999\n"
+    assert "⚠" in s.h_status.content and s.state.pair == (3, 7) and s.scans.obj.text == "7"
     s.close()
 
 
@@ -220,7 +220,7 @@ def test_clicking_a_point_shows_its_iso_distance_curves(session):
     ev = run.iterations[1]
     j = 40
     target = ev.moved_points[j]
-    chosen = session.click((target[0], target[1], 10.0), (0.0, 0.0, -1.0))  # a ray straight down onto it
+    chosen = session.layers.click((target[0], target[1], 10.0), (0.0, 0.0, -1.0))  # a ray straight down onto it
     assert chosen == int(run.start.used[j])
     node = session.nodes["/improved/scene/teaching/metric_isocurves"]
     assert session.state.visible[scene.ISO_METRIC.label] and node.visible
@@ -230,14 +230,14 @@ def test_clicking_a_point_shows_its_iso_distance_curves(session):
 
 
 def test_polar_cost_plot_follows_the_iteration(session):
-    session.h_matchers["pmwn"].value = True
-    session.h_matchers["improved"].value = False
+    session.matchers.boxes["pmwn"].value = True
+    session.matchers.boxes["improved"].value = False
     session.playback.slider.value = 1
     x, cost, fit = session.plots.cost.data
     np.testing.assert_allclose(cost, session.state.runs[0].iterations[0].polar.cost)
     assert np.isfinite(fit).sum() >= 2 and session.plots.cost.visible  # the V drawn at the minimum
-    session.h_matchers["mbicp"].value = True
-    session.h_matchers["pmwn"].value = False
+    session.matchers.boxes["mbicp"].value = True
+    session.matchers.boxes["pmwn"].value = False
     assert not session.plots.cost.visible  # no cost curve for the MbICP family
 
 
@@ -247,11 +247,11 @@ def test_search_button_finds_the_guess_a_corridor_needs(server):
     s = Session(server, Source("intel", read_log(INTEL), pair=(12, 13), pick_pair=True, guess=Pose2()))
     truth = s.state.truth()
     assert pose_error(s.state.runs[0].result.pose, truth)[0] > 0.5  # the failed match a user opens
-    s._on_search()
+    s.after_match(s.state.search_guess())
     found = s.state.guess
-    assert pose_error(found, truth)[0] < 0.15 and "searched" in s.h_guess_info.content
-    assert (float(s.h_guess["x"].text), float(s.h_guess["y"].text)) == pytest.approx((found.x, found.y))
-    assert tuple(s.gizmo.position[:2]) == pytest.approx((found.x, found.y))
+    assert pose_error(found, truth)[0] < 0.15 and "searched" in s.guess.info.content
+    assert (float(s.guess.boxes["x"].text), float(s.guess.boxes["y"].text)) == pytest.approx((found.x, found.y))
+    assert tuple(s.guess.gizmo.position[:2]) == pytest.approx((found.x, found.y))
     et, er = pose_error(s.state.runs[0].result.pose, truth)
     assert et < 0.05 and er < math.radians(1.0)
     s.close()
@@ -259,10 +259,10 @@ def test_search_button_finds_the_guess_a_corridor_needs(server):
 
 def test_picking_a_pair_puts_its_guess_in_the_fields(server):
     s = Session(server, Source("intel", read_log(INTEL), pick_pair=True))
-    s.h_ref.handle.value = "12\n"  # consecutive: object 13; the guess comes from the stored poses
+    s.scans.ref.handle.value = "12\n"  # consecutive: object 13; the guess comes from the stored poses
     assert s.state.pair == (12, 13) and s.state.guess_source == "scan poses"
-    assert float(s.h_guess["x"].text) == pytest.approx(s.state.guess.x)
-    assert float(s.h_guess["theta"].text) == pytest.approx(math.degrees(s.state.guess.theta))
+    assert float(s.guess.boxes["x"].text) == pytest.approx(s.state.guess.x)
+    assert float(s.guess.boxes["theta"].text) == pytest.approx(math.degrees(s.state.guess.theta))
     s.close()
 
 
@@ -340,3 +340,17 @@ def test_a_foreign_origin_is_refused():
         assert asyncio.run(attempt(f"http://127.0.0.1:{app.port}")) == "data"  # the debugger's own page
     finally:
         app.stop()
+
+
+def test_a_tab_says_it_waits_for_the_kernels_then_shows_its_result(server):
+    import threading
+
+    from mbicp_viz.views.debugger.session import COMPILING
+
+    ready = threading.Event()
+    s = Session(server, Source("hokuyo pair", read_log(PAIR), guess=Pose2()), ready=ready)
+    assert COMPILING in s.h_status.content and not s.state.runs  # built, waiting
+    ready.set()
+    s.first_match(ready)
+    assert s.state.runs and s.h_status.content == "" and "converged" in s.h_result.content
+    s.close()

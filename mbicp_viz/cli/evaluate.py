@@ -48,9 +48,7 @@ def sequence(log: LogArg,
              = False,
              workers: WorkersOpt = None, topic: TopicOpt = None):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
-    from mbicp_viz.core.agreement import INLIER_RADIUS_M
-    from mbicp_viz.evaluation.criteria import CONSECUTIVE
-    from mbicp_viz.evaluation.sequence import match_sequence, truth_doubted
+    from mbicp_viz.evaluation.sequence import match_sequence, truth_summary
     from mbicp_viz.readers.params_toml import load_search, make_params
 
     if truth not in (None, "pose"):
@@ -68,12 +66,7 @@ def sequence(log: LogArg,
     cut = "" if len(rows) == total else f" (interrupted after {len(rows)} of {total}: the rows so far are kept)"
     typer.echo(f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}{cut}")
     if truth:
-        ok = sum(r["success"] for r in rows)
-        typer.echo(f"against the scan poses: {ok}/{len(rows)} within {CONSECUTIVE.text()} "
-                   f"({100.0 * ok / len(rows):.1f} %)")
-        doubted = sum(truth_doubted(r) for r in rows)
-        typer.echo(f"failures where more object points lie within {100 * INLIER_RADIUS_M:.0f} cm of the reference "
-                   f"at the matched pose than at the scan poses: {doubted} of {len(rows) - ok}")
+        typer.echo("\n".join(truth_summary(rows)))
     if png or tum or tum_ref or kalman:
         _trajectories(lg, rows, png, tum, tum_ref, kalman)
     if rrd:
@@ -169,9 +162,7 @@ def overlap(logs: Annotated[list[str], typer.Argument(help="scan logs; scenes ar
 def ceiling(log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
             algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, limit: LimitOpt = None, workers: WorkersOpt = None):
     """How well any guess could do on a log: each matcher started at the truth, and the search alone."""
-    from mbicp_viz.core.agreement import INLIER_RADIUS_M
-    from mbicp_viz.evaluation.criteria import CONSECUTIVE
-    from mbicp_viz.evaluation.sequence import ceiling as ceiling_of
+    from mbicp_viz.evaluation.sequence import ceiling as ceiling_of, ceiling_summary
 
     by_name = params_for(algos, params)
     lg = _read(log)
@@ -179,12 +170,7 @@ def ceiling(log: Annotated[str, typer.Argument(help="scan log whose scan poses a
         found, kept, doubted, n = ceiling_of(lg, list(by_name.values()), limit, workers, on_row=lambda _: bar.update(1))
     if n == 0:
         raise InputError("interrupted before the first pair was matched", log)
-    within = CONSECUTIVE.text()
-    typer.echo(f"correlative search alone: {found}/{n} within {within} ({100 * found / n:.1f} %)")
-    for name, k, d in zip(by_name, kept, doubted):
-        typer.echo(f"{name} started at the scan poses: {k}/{n} stay within {within} ({100 * k / n:.1f} %); "
-                   f"of the {n - k} it leaves, {d} lay more object points within {100 * INLIER_RADIUS_M:.0f} cm of the "
-                   "reference")
+    typer.echo("\n".join(ceiling_summary(list(by_name), found, kept, doubted, n)))
 
 
 def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps")],

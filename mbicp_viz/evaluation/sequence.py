@@ -30,6 +30,17 @@ def scored(ref: Scan, obj: Scan, pose, truth) -> dict:
     return row
 
 
+def truth_summary(rows: list[dict]) -> list[str]:
+    """How many scored rows succeeded, and of the failures how many the points side with."""
+    from mbicp_viz.core.agreement import INLIER_RADIUS_M
+
+    ok = sum(r["success"] for r in rows)
+    doubted = sum(truth_doubted(r) for r in rows)
+    return [f"against the scan poses: {ok}/{len(rows)} within {CONSECUTIVE.text()} ({100.0 * ok / len(rows):.1f} %)",
+            f"failures where more object points lie within {100 * INLIER_RADIUS_M:.0f} cm of the reference at the "
+            f"matched pose than at the scan poses: {doubted} of {len(rows) - ok}"]
+
+
 def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
     """The stable JSON record of one match (``match --json``, ``eval sequence``): scripts rely on these keys."""
     return {"ref": ref, "obj": obj, "x": r.pose.x, "y": r.pose.y, "theta": r.pose.theta,
@@ -76,6 +87,19 @@ def _ceiling_row(job) -> tuple[bool, list[tuple[bool, bool]]]:
     rows = [scored(ref, obj, match(ref, obj, truth, p).pose, truth) for p in params]
     found = CONSECUTIVE.judge(correlative_search(ref, obj).pose, truth)
     return found, [(r["success"], truth_doubted(r)) for r in rows]
+
+
+def ceiling_summary(names: list[str], found: int, kept: list[int], doubted: list[int], n: int) -> list[str]:
+    """``ceiling``'s figures in words: the search alone, then each matcher started at the truth."""
+    from mbicp_viz.core.agreement import INLIER_RADIUS_M
+
+    within = CONSECUTIVE.text()
+    lines = [f"correlative search alone: {found}/{n} within {within} ({100 * found / n:.1f} %)"]
+    for name, k, d in zip(names, kept, doubted):
+        lines.append(f"{name} started at the scan poses: {k}/{n} stay within {within} ({100 * k / n:.1f} %); of the "
+                     f"{n - k} it leaves, {d} lay more object points within {100 * INLIER_RADIUS_M:.0f} cm of the "
+                     "reference")
+    return lines
 
 
 def ceiling(log: ScanLog, params: list[Params], limit: int | None = None, workers: int | None = None,

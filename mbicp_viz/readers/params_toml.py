@@ -15,6 +15,8 @@ from pathlib import Path
 from mbicp_viz.core import MATCHERS, ParamError, Params, SearchParams, field_specs
 from mbicp_viz.errors import InputError
 
+from .text import opening
+
 SEARCH_TABLE = "search"
 MAX_FILE_BYTES = 1_000_000  # a parameter file is a few hundred bytes
 
@@ -42,16 +44,12 @@ def params_from_mapping(params_type: type, values: dict, path: str | None = None
 def read_toml(path: str | Path) -> dict:
     """A TOML file as a dict; every way it can be unreadable is one InputError."""
     p = Path(path)
-    try:
+    with opening(p):
         if p.stat().st_size > MAX_FILE_BYTES:
             raise InputError(f"larger than {MAX_FILE_BYTES} bytes: not a parameter file", str(p))
-        return tomllib.loads(p.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise InputError("no such file", str(p)) from None
-    except IsADirectoryError:
-        raise InputError("is a folder, not a file", str(p)) from None
-    except PermissionError:
-        raise InputError("permission denied", str(p)) from None
+        data = p.read_bytes()
+    try:
+        return tomllib.loads(data.decode("utf-8"))
     except UnicodeDecodeError as e:
         raise InputError(f"not UTF-8 text ({e.reason})", str(p)) from None
     except tomllib.TOMLDecodeError as e:

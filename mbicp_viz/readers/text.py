@@ -30,19 +30,26 @@ _CORRUPT = (OSError, EOFError, zlib.error, lzma.LZMAError)
 
 
 @contextmanager
-def open_binary(path: str):
-    """A file's bytes, decompressed when it starts with a gzip, bzip2 or xz header."""
+def opening(path):
+    """The ways a file cannot be opened, each as one InputError naming it."""
     try:
-        with open(path, "rb") as raw:
-            magic = raw.read(6)
-        opener = next((op for m, op in _MAGIC if magic.startswith(m)), open)
-        stream = opener(path, "rb")
+        yield
     except FileNotFoundError:
         raise InputError("no such file", str(path)) from None
     except IsADirectoryError:
         raise InputError("is a folder, not a file", str(path)) from None
     except PermissionError:
         raise InputError("permission denied", str(path)) from None
+
+
+@contextmanager
+def open_binary(path: str):
+    """A file's bytes, decompressed when it starts with a gzip, bzip2 or xz header."""
+    with opening(path):
+        with open(path, "rb") as raw:
+            magic = raw.read(6)
+        opener = next((op for m, op in _MAGIC if magic.startswith(m)), open)
+        stream = opener(path, "rb")
     with stream:
         try:
             yield stream

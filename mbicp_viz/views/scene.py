@@ -231,6 +231,14 @@ def layers_at(start: StartEvent, iterations: list[IterationEvent], k: int, truth
     return layers + teaching_layers(start, ev, chosen=chosen) if teaching else layers
 
 
+def has_content(layer: Layer) -> bool:
+    """Whether a drawable layer draws anything (an empty one gets no legend entry)."""
+    for field in ("xy", "starts", "strips", "centers"):
+        if hasattr(layer, field):
+            return len(getattr(layer, field)) > 0
+    return True
+
+
 def recolor(layer: Layer, style: Style) -> Layer:
     """The same layer in another style (a matcher's colour in compare mode)."""
     return replace(layer, style=style)

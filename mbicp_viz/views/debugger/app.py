@@ -73,6 +73,7 @@ class App:
         session = Session(client, self.source, self.ready)
         with self._lock:
             self.sessions[client.client_id] = session
+        session.first_match(self.ready)
 
     def _disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:

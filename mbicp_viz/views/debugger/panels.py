@@ -90,27 +90,6 @@ def param_panel(gui, title: str, params: Params, order: float, on_commit) -> Par
 
 
 @dataclass
-class Playback:
-    slider: viser.GuiSliderHandle
-    previous: viser.GuiButtonHandle
-    next: viser.GuiButtonHandle
-    play: viser.GuiCheckboxHandle
-    speed: viser.GuiSliderHandle
-    text: viser.GuiMarkdownHandle
-
-
-def playback(gui, order: float) -> Playback:
-    with gui.add_folder("Playback", order=order):
-        slider = gui.add_slider("iteration", min=0, max=1, step=1, initial_value=0,
-                                hint="0: the initial guess; the last: where the match ended")
-        prev_b, next_b = gui.add_button("previous"), gui.add_button("next")
-        play = gui.add_checkbox("play", False)
-        speed = gui.add_slider("speed (iterations/s)", min=0.5, max=30.0, step=0.5, initial_value=4.0)
-        info = gui.add_markdown("")
-    return Playback(slider, prev_b, next_b, play, speed, info)
-
-
-@dataclass
 class Plots:
     error: viser.GuiUplotHandle
     histogram: viser.GuiUplotHandle

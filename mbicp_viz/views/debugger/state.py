@@ -275,3 +275,26 @@ class DebugState:
 
     def pair_label(self) -> str:
         return f"scans {self.pair[0]} -> {self.pair[1]}"
+
+    def nearest_object_point(self, xy) -> int:
+        """The object point (index into the start event's points) nearest to ``xy`` where the first
+        run shows it at the current iteration."""
+        run = self.runs[0]
+        ev = self.event(run)
+        moved = ev.moved_points if ev is not None else run.start.initial_guess.apply(run.start.obj_points[run.start.used])
+        return int(run.start.used[int(np.argmin(np.hypot(*(moved - np.asarray(xy)).T)))])
+
+    def session_rrd(self) -> bytes:
+        """The session (data, parameters, all iterations of every shown matcher) as an .rrd."""
+        import tempfile
+        from pathlib import Path
+
+        from ..rrd import Run, record
+
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "session.rrd"
+            runs = [Run(n, self.ref, self.obj, self.guess, self.params[n], self.truth()) for n in self.algorithms]
+            record(runs, str(path), teaching=True, recording_id="mbicp-viz/session",
+                   about=f"# mbicp-viz session\n\n{self.source.label}: {self.pair_label()}; initial guess "
+                         f"{self.guess} ({self.guess_source})\n")
+            return path.read_bytes()

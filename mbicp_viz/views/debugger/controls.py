@@ -1,0 +1,241 @@
+"""The debugger's controls, one per panel: each builds its panel and handles its callbacks,
+driving the model (``session.state``) and asking the session to show the outcome.
+
+Every callback runs through ``Session.guarded`` (one lock per tab; a bug is shown in the page and
+the server keeps serving).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+
+from mbicp_viz.core import MATCHERS, Pose2
+
+from .. import scene, viser_draw
+from . import panels
+
+
+class Playback:
+    """The iteration slider, previous/next and the player (a thread per tab)."""
+
+    def __init__(self, session, gui, order: float):
+        self.s = session
+        self.fps, self.playing = 4.0, False
+        with gui.add_folder("Playback", order=order):
+            self.slider = gui.add_slider("iteration", min=0, max=1, step=1, initial_value=0,
+                                         hint="0: the initial guess; the last: where the match ended")
+            prev_b, next_b = gui.add_button("previous"), gui.add_button("next")
+            play = gui.add_checkbox("play", False)
+            speed = gui.add_slider("speed (iterations/s)", min=0.5, max=30.0, step=0.5, initial_value=self.fps)
+            self.text = gui.add_markdown("")
+        self.slider.on_update(lambda _: session.guarded(self._moved))
+        prev_b.on_click(lambda _: session.guarded(lambda: self.step(-1)))
+        next_b.on_click(lambda _: session.guarded(lambda: self.step(+1)))
+        play.on_update(lambda _: setattr(self, "playing", play.value))
+        speed.on_update(lambda _: setattr(self, "fps", speed.value))
+        self.closed = threading.Event()
+        threading.Thread(target=self._play, daemon=True).start()
+
+    def show(self, n: int) -> None:
+        """A new match of ``n`` iterations, shown at its end."""
+        self.slider.max = max(n, 1)
+        self.slider.value = n  # the model is there already: no second redraw
+
+    def _moved(self) -> None:
+        k = int(self.slider.value)
+        if k != self.s.state.iteration:
+            self.s.state.iteration = k
+            self.s.redraw()
+
+    def step(self, delta: int) -> None:
+        self.slider.value = int(np.clip(self.s.state.iteration + delta, 0, self.s.state.max_iteration()))
+
+    def _play(self) -> None:
+        while not self.closed.wait(1.0 / max(self.fps, 0.5)):
+            if self.playing and self.s.state.runs:
+                with self.s.lock:
+                    if self.closed.is_set():  # closed while this frame waited for the lock
+                        break
+                    n = self.s.state.max_iteration()
+                    self.slider.value = 0 if self.s.state.iteration >= n else self.s.state.iteration + 1
+
+
+class Matchers:
+    """Which matchers run (one, or several compared), and the parameters of one of them."""
+
+    def __init__(self, session, gui, order: float):
+        self.s, self.gui, self.order = session, gui, order
+        state = session.state
+        self.edited = state.algorithms[0]
+        with gui.add_folder("Matchers", order=order):
+            self.boxes = {name: gui.add_checkbox(name, name in state.algorithms, hint=m.title)
+                          for name, m in MATCHERS.items()}
+            self.edit = gui.add_dropdown("parameters of", list(MATCHERS), initial_value=self.edited)
+        for box in self.boxes.values():
+            box.on_update(lambda _: session.guarded(self._chosen))
+        self.edit.on_update(lambda _: session.guarded(self._edit))
+        self.params: panels.ParamPanel | None = None
+        self._build_params()
+
+    def _build_params(self) -> None:
+        if self.params is not None:
+            self.params.folder.remove()
+        self.params = panels.param_panel(self.gui, f"Parameters: {self.edited}", self.s.state.params[self.edited],
+                                         self.order + 1, lambda name, text: self.s.guarded(lambda: self._typed(name, text)))
+
+    def _chosen(self) -> None:
+        error = self.s.state.set_algorithms([n for n, box in self.boxes.items() if box.value])
+        if error:
+            for n, box in self.boxes.items():
+                box.value = n in self.s.state.algorithms
+        self.s.clear_scene()
+        self.s.after_match(error)
+
+    def _edit(self) -> None:
+        self.edited = self.edit.value
+        self._build_params()
+
+    def _typed(self, name: str, text: str) -> None:
+        """Apply one parameter as typed, or say why not; the boxes then show what the matcher uses."""
+        state = self.s.state
+        error = state.set_params(self.edited, {name: text})
+        refused = error is not None and error != state.message  # a value, not the match, is wrong
+        self.params.message.content = f"⚠ {error} — the last good value is kept" if refused else ""
+        self.params.show(state.params[self.edited])
+        if not refused:
+            self.s.after_match(error)
+
+
+class Guess:
+    """The initial guess: typed, dragged in the view, or searched; and the search's parameters."""
+
+    FIELDS = (("x", "x [m]"), ("y", "y [m]"), ("theta", "theta [deg]"))
+
+    def __init__(self, session, gui, order: float):
+        self.s = session
+        self.gizmo = session.client.scene.add_transform_controls(
+            "/guess", scale=0.8, disable_sliders=True, active_axes=(True, True, False),
+            rotation_limits=((0.0, 0.0), (0.0, 0.0), (-1000.0, 1000.0)))
+        self.gizmo.on_update(lambda _: session.guarded(self._dragged))
+        with gui.add_folder("Initial guess (object frame in the reference frame)", order=order):
+            self.info = gui.add_markdown("")
+            self.boxes = {key: panels.CommitBox(gui, label, "", "a number",
+                                                lambda text, key=key: session.guarded(lambda: self._typed(key, text)))
+                          for key, label in self.FIELDS}
+            drag = gui.add_checkbox("drag the guess in the view", True)
+            drag.on_update(lambda _: setattr(self.gizmo, "visible", drag.value))
+            gui.add_button("search the guess", hint="correlative search around the current guess (search "
+                                                    "parameters below); the match restarts from its best pose"
+                           ).on_click(lambda _: session.guarded(lambda: session.after_match(session.state.search_guess())))
+        self.search = panels.param_panel(gui, "Search parameters", session.state.search, order + 1,
+                                         lambda name, text: session.guarded(lambda: self._search_typed(name, text)))
+
+    def show(self) -> None:
+        g, state = self.s.state.guess, self.s.state
+        for key, value in (("x", g.x), ("y", g.y), ("theta", math.degrees(g.theta))):
+            self.boxes[key].show(repr(round(value, 9)))
+        self.info.content = f"from: {state.guess_source}"
+        self.gizmo.position, self.gizmo.wxyz = (g.x, g.y, 0.0), viser_draw.yaw_to_wxyz(g.theta)
+
+    def _typed(self, key: str, text: str) -> None:
+        try:
+            value = float(text)
+        except ValueError:
+            self.s.say(f"initial guess {key}: not a number: {text!r}")
+            self.show()
+            return
+        g = self.s.state.guess
+        x, y, theta = (value if key == k else v for k, v in (("x", g.x), ("y", g.y), ("theta", math.degrees(g.theta))))
+        self.s.after_match(self.s.state.set_guess(Pose2(x, y, math.radians(theta))))
+
+    def _dragged(self) -> None:
+        x, y, _ = (float(v) for v in self.gizmo.position)
+        self.s.after_match(self.s.state.set_guess(Pose2(x, y, viser_draw.wxyz_to_yaw(self.gizmo.wxyz)), "dragged"))
+
+    def _search_typed(self, name: str, text: str) -> None:
+        error = self.s.state.set_search({name: text})
+        self.search.message.content = f"⚠ {error} — the last good value is kept" if error else ""
+        self.search.show(self.s.state.search)
+
+
+class Scans:
+    """Which two scans of a log are matched."""
+
+    def __init__(self, session, gui, order: float):
+        self.s = session
+        state = session.state
+        with gui.add_folder(f"Scans (0 .. {state.source.log.records - 1})", order=order):
+            self.consecutive = gui.add_checkbox("consecutive (object = reference + 1)", True)
+            self.ref = panels.CommitBox(gui, "reference scan", str(state.pair[0]), "a scan number",
+                                        lambda text: session.guarded(lambda: self._typed(ref=text)))
+            self.obj = panels.CommitBox(gui, "object scan", str(state.pair[1]), "a scan number",
+                                        lambda text: session.guarded(lambda: self._typed(obj=text)))
+
+    def _typed(self, ref: str | None = None, obj: str | None = None) -> None:
+        pair = self.s.state.pair
+        try:
+            i = int(ref) if ref is not None else pair[0]
+            j = i + 1 if self.consecutive.value else (int(obj) if obj is not None else pair[1])
+        except ValueError:
+            error = "scan numbers must be whole numbers"
+        else:
+            error = self.s.state.set_pair(i, j)
+        self.open(error)
+
+    def open(self, error: str | None) -> None:
+        """Show the pair the model holds (a new one, or the last good one with why not)."""
+        if not error:
+            self.s.clear_scene()
+        self.ref.show(str(self.s.state.pair[0]))
+        self.obj.show(str(self.s.state.pair[1]))
+        self.s.after_match(error)
+        self.s.fit_view()
+
+
+class Layers:
+    """A checkbox per kind of layer, and the iso-distance curves of a chosen object point."""
+
+    def __init__(self, session, gui, order: float):
+        self.s = session
+        with gui.add_folder("Layers", order=order):
+            self.boxes = {}
+            for style in scene.STYLES:
+                box = gui.add_checkbox(style.label, session.state.visible[style.label])
+                box.on_update(lambda ev, label=style.label: session.guarded(lambda: self._toggled(label, ev.target.value)))
+                self.boxes[style.label] = box
+            self.iso = panels.CommitBox(gui, "iso-curves of object point", "",
+                                        "click a blue point in the view, or type its index (empty: a few spread)",
+                                        lambda text: session.guarded(lambda: self._iso_typed(text)))
+        session.client.scene.on_click()(lambda ev: session.guarded(lambda: self.click(ev.ray_origin,
+                                                                                      ev.ray_direction)))
+
+    def _toggled(self, label: str, value: bool) -> None:
+        self.s.state.visible[label] = bool(value)
+        self.s.redraw()
+
+    def _iso_typed(self, text: str) -> None:
+        if text and not text.isdigit():
+            self.s.say(f"iso-curves: an object point index, got {text!r}")
+            return
+        self.s.state.iso_point = int(text) if text else None
+        self._show_teaching()
+
+    def click(self, origin, direction) -> int | None:
+        """Choose the object point nearest to where a view ray meets the scan plane (z = 0)."""
+        o, d = np.asarray(origin, float), np.asarray(direction, float)
+        if abs(d[2]) < 1e-9 or not self.s.state.runs:
+            return None
+        self.s.state.iso_point = self.s.state.nearest_object_point((o - o[2] / d[2] * d)[:2])
+        self.iso.show(str(self.s.state.iso_point))
+        self._show_teaching()
+        return self.s.state.iso_point
+
+    def _show_teaching(self) -> None:
+        if self.s.state.iso_point is not None:
+            for style in (scene.ISO_METRIC, scene.ISO_EUCLID):
+                self.s.state.visible[style.label] = True
+                self.boxes[style.label].value = True
+        self.s.redraw()
