@@ -20,7 +20,31 @@ class Matcher:
     module: str  # the module of this package whose ``match`` runs it
 
     def run(self, ref, obj, initial_guess, params, observer=None):
+        check_inputs(ref, obj, initial_guess)
         return importlib.import_module(f".{self.module}", __package__).match(ref, obj, initial_guess, params, observer)
+
+
+# A guess farther than this from the reference frame's origin is a damaged number, not a pose.
+MAX_GUESS_M = 1e6
+
+
+def check_inputs(ref, obj, guess) -> None:
+    """Refuse, with a ValueError that says why, what no matcher can answer sensibly: a guess that is
+    not a finite pose, or a scan whose valid readings are not finite points."""
+    import math
+
+    import numpy as np
+
+    values = (guess.x, guess.y, guess.theta)
+    if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
+        raise ValueError(f"the initial guess must be finite numbers, got {guess}")
+    if max(abs(guess.x), abs(guess.y)) > MAX_GUESS_M:
+        raise ValueError(f"the initial guess lies {max(abs(guess.x), abs(guess.y)):.3g} m away: more than "
+                         f"{MAX_GUESS_M:g} m is no pose between two scans")
+    for name, scan in (("reference", ref), ("object", obj)):
+        pts = scan.points()
+        if len(pts) == 0 or not np.all(np.isfinite(pts)):
+            raise ValueError(f"the {name} scan ({scan.source}) has no finite valid points")
 
 
 MATCHERS: dict[str, Matcher] = {

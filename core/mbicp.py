@@ -25,6 +25,15 @@ from .uncertainty import FinalSystem, build_result
 PROJECTION_MARGIN_M = 0.2
 
 
+def projection_bin_width(bearings: np.ndarray) -> float:
+    """The projection filter's bearing bin: two beam steps, but never finer than a quarter of the
+    beam count spread over the circle, so that its z-buffer is bounded by the beams, not by
+    1/step (a damaged scan's bearings can be nanoradians apart)."""
+    if len(bearings) < 2:
+        return 2.0 * np.pi
+    return max(2.0 * float(np.median(np.diff(bearings))), 2.0 * np.pi / (4 * len(bearings)))
+
+
 def rejection_floor(params: ImprovedParams, iteration: int) -> float:
     """The distance below which MAD never rejects a pair at this (1-based) iteration [m].
 
@@ -51,7 +60,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     used = (resampling.kept if resampling is not None else np.arange(len(obj_pts)))[:: params.laserStep]
     P = obj_pts[used]
     pair_fn = point_line_pairs if improved and params.point_line else mbicp_pairs
-    bin_width = 2.0 * float(np.median(np.diff(R.bearings))) if len(R.bearings) > 1 else 0.01
+    bin_width = projection_bin_width(R.bearings)
     min_pairs = max(3, int(np.ceil(params.AsocError * len(P))))
     if observer is not None:
         observer(StartEvent(name, params, R.points, obj_pts, used, initial_guess, resampling))

@@ -180,7 +180,10 @@ def _project_kernel(xy, edges, tx: float, ty: float, c: float, s: float, b0: flo
             continue
         lo, hi = min(a1, a2), max(a1, a2)
         slope = (r2 - r1) / (span if abs(span) > 1e-12 else np.inf)  # range per radian along the edge
-        for i in range(int(np.ceil((lo - b0) / step - 1e-9)), int(np.floor((hi - b0) / step + 1e-9)) + 1):
+        i0, i1 = int(np.ceil((lo - b0) / step - 1e-9)), int(np.floor((hi - b0) / step + 1e-9))
+        if not full:  # only the bins of the grid: time bounded by the beams, not by the edge's span / step
+            i0, i1 = max(i0, -pad), min(i1, n + pad - 1)
+        for i in range(i0, i1 + 1):
             rr = r1 + (b0 + i * step - a1) * slope
             j = i % n if full else i + pad
             if 0 <= j < size:
@@ -440,7 +443,7 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
     ref_point_of = np.cumsum(R.valid) - 1
     normals = beam_normals(R) if params.surface_jacobian else None
     ref_r = np.where(R.valid, R.ranges, np.nan)
-    K = int(round(params.search_window / grid.step))
+    K = min(int(round(params.search_window / grid.step)), grid.n)  # no shift beyond the scan's own beams
     shifts = np.arange(-K, K + 1)
     no_cost = np.full(len(shifts), np.nan)  # the cost curve of an iteration without orientation step
     if observer is not None:

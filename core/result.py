@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from dataclasses import dataclass
 
@@ -37,6 +38,7 @@ class Degeneracy:
     condition_number: float
     weakest_direction: tuple[float, float, float]  # unit vector in (x, y, L*theta)
     eigenvalues: tuple[float, float, float]  # ascending
+    length: float = 1.0  # L [m], the length that scales rotation in these coordinates
 
     @property
     def weakest_heading_deg(self) -> float:
@@ -60,6 +62,23 @@ class MatchResult:
     pairs_rejected: int
     covariance: np.ndarray | None  # (3, 3) in (x [m], y [m], theta [rad]), sigma^2 * A^-1 of the final system
     degeneracy: Degeneracy | None
+
+    def conjugated(self, mount: Pose2) -> "MatchResult":
+        """The same match seen as the motion of the frame the laser is mounted on (``mount`` =
+        T_base_laser): pose ``mount @ pose @ mount^-1``; covariance and weakest direction carried
+        by the mount's adjoint (the condition number stays that of the laser's constraints)."""
+        if mount == Pose2():
+            return self
+        Ad = mount.adjoint()
+        cov = Ad @ self.covariance @ Ad.T if self.covariance is not None else None
+        deg = self.degeneracy
+        if deg is not None:
+            L = deg.length
+            d = Ad @ (np.array(deg.weakest_direction) / [1.0, 1.0, L])
+            d = d * [1.0, 1.0, L]
+            deg = Degeneracy(deg.condition_number, tuple(float(v) for v in d / np.linalg.norm(d)), deg.eigenvalues,
+                             L)
+        return dataclasses.replace(self, pose=mount.conjugate(self.pose), covariance=cov, degeneracy=deg)
 
     def as_dict(self) -> dict:
         """Plain-JSON fields; the names are stable (scripts rely on them)."""

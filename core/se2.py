@@ -59,6 +59,17 @@ class Pose2:
         c, s = math.cos(self.theta), math.sin(self.theta)
         return points @ np.array([[c, s], [-s, c]]) + np.array([self.x, self.y])
 
+    def adjoint(self) -> np.ndarray:
+        """3x3 matrix taking a small motion (dx, dy, dtheta) applied on the left in this pose's child
+        frame to the same motion seen from its parent frame: ``self @ exp(d) @ self^-1 = exp(Ad d)``."""
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return np.array([[c, -s, self.y], [s, c, -self.x], [0.0, 0.0, 1.0]])
+
+    def conjugate(self, motion: "Pose2") -> "Pose2":
+        """``self @ motion @ self^-1``: a motion of the child frame as the motion of the parent frame
+        (a laser's motion as its robot's, with ``self`` the laser's mount T_base_laser)."""
+        return self @ motion @ self.inverse()
+
     def translation_norm(self) -> float:
         return float(np.hypot(self.x, self.y))
 

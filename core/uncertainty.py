@@ -64,7 +64,7 @@ def degeneracy(targets: np.ndarray, tangents: np.ndarray, L: float) -> Degenerac
     w = np.maximum(w, 0.0)
     cond = float(w[-1] / w[0]) if w[0] > 1e-12 * max(w[-1], 1e-300) else float("inf")
     v = V[:, 0] * (1 if V[np.argmax(np.abs(V[:, 0])), 0] >= 0 else -1)
-    return Degeneracy(cond, tuple(float(c) for c in v), tuple(float(c) for c in w))
+    return Degeneracy(cond, tuple(float(c) for c in v), tuple(float(c) for c in w), L)
 
 
 @dataclass(frozen=True, eq=False)

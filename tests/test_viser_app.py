@@ -50,7 +50,7 @@ def test_opens_on_the_final_iteration_with_a_result(session):
     assert "improved" in content and "converged" in content and "condition number" in content
     on_ref = re.search(r"([0-9.]+) % of the object points lie within 5 cm", content)
     assert on_ref and 90.0 < float(on_ref.group(1)) <= 100.0  # the hand-held pair, matched
-    assert "(object frame in the reference frame)" in content  # the frame the pose is in
+    assert "(motion of the laser frame" in content  # the frame the pose is in (no mount known here)
 
 
 def test_iteration_slider_redraws_without_rematching(session, monkeypatch):

@@ -13,22 +13,24 @@ import typer
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.choices import Removal, Thin
 
-from .options import (ALL_ALGOS, Progress, DEFAULT_ALGO, SEARCH, AlgoOpt, AlgosOpt, FirstArg, Guess, GuessOpt, PairOpt,
-                      ParamsOpt, RrdOpt, SecondArg, TopicOpt, WorkersOpt, finite, number_list, params_for,
-                      pose_from_deg, say, user_errors)
+from .options import (ALL_ALGOS, DEFAULT_ALGO, SEARCH, AlgoOpt, AlgosOpt, FirstArg, Frame, FrameOpt, Guess, GuessOpt,
+                      MountOpt, PairOpt, ParamsOpt, Progress, RrdOpt, SecondArg, TopicOpt, TypestoreOpt,
+                      UpsideDownOpt, WorkersOpt, finite, number_list, params_for, pose_from_deg, read_options, say,
+                      user_errors)
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[Optional[int], typer.Option("--limit", min=1, help="only the first N pairs")]
 SeedOpt = Annotated[int, typer.Option("--seed", min=0, help="random seed")]
 
 
-def _read(log: str, topic: str | None = None):
-    """A log, with a line for the scans skipped as unusable."""
+def _read(log: str, reading=None):
+    """A log, with a line for each warning and for the scans skipped as unusable."""
     from mbicp_viz.readers import read_log
 
-    lg = read_log(log, topic)
-    if (skipped := lg.unusable_summary()) is not None:
-        say(skipped)
+    lg = read_log(log, reading)
+    for note in lg.notes + [lg.unusable_summary()]:
+        if note:
+            say(note)
     return lg
 
 
@@ -46,19 +48,20 @@ def sequence(log: LogArg,
              kalman: Annotated[bool, typer.Option("--kalman", help="fuse the matches with the log's odometry (EKF, "
                                                   "paper 003 §5.3); the TUM file and map then use the fused track")]
              = False,
-             workers: WorkersOpt = None, topic: TopicOpt = None):
+             workers: WorkersOpt = None, frame: FrameOpt = Frame.base, topic: TopicOpt = None,
+             typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
-    from mbicp_viz.evaluation.sequence import match_sequence, truth_summary
+    from mbicp_viz.evaluation.sequence import match_sequence, odometry_summary, truth_summary
     from mbicp_viz.readers.params_toml import load_search, make_params
 
     if truth not in (None, "pose"):
         raise InputError("the only truth a log carries is 'pose'", field="--truth")
     p = make_params(algo.value, params)
-    lg = _read(log, topic)
+    lg = _read(log, read_options(topic, typestore, mount, upside_down))
     total = len(lg.consecutive_pairs(limit))
     with Progress(total) as bar:
         rows = match_sequence(lg, p, limit, guess, truth, on_row=lambda _: bar.update(1), workers=workers,
-                              search=load_search(params))
+                              search=load_search(params), base=frame is Frame.base)
     if not rows:
         raise InputError("interrupted before the first pair was matched", log)
     out.write_text(json.dumps(rows, indent=1) + "\n")
@@ -67,6 +70,9 @@ def sequence(log: LogArg,
     typer.echo(f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}{cut}")
     if truth:
         typer.echo("\n".join(truth_summary(rows)))
+    if odometry := odometry_summary(rows):
+        typer.echo(odometry)
+    say(f"poses: motions of {lg.frames.frame_text(frame is Frame.base)}")
     if png or tum or tum_ref or kalman:
         _trajectories(lg, rows, png, tum, tum_ref, kalman)
     if rrd:
@@ -209,14 +215,15 @@ def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
           steps: Annotated[int, typer.Option("--steps", min=2, max=201, help="grid points per axis")] = 11,
           thetas_deg: Annotated[str, typer.Option("--thetas-deg", help="theta offsets [deg]")] = "-30,-15,0,15,30",
           png: Annotated[Optional[Path], typer.Option("--png", help="write the atlas as a PNG")] = None,
-          rrd: RrdOpt = None, workers: WorkersOpt = None, topic: TopicOpt = None):
+          rrd: RrdOpt = None, workers: WorkersOpt = None, topic: TopicOpt = None,
+          typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False):
     """A convergence atlas: every matcher from a grid of initial offsets, coloured by outcome."""
     from mbicp_viz.evaluation.basin import basin as atlas_of, plot_png, summary
     from mbicp_viz.evaluation.pairs import load_pair, stored_truth
 
     thetas = [math.radians(v) for v in number_list(thetas_deg, "--thetas-deg", "-15,0,15")]
     ps = params_for(algos, params)
-    sp = load_pair(first, second, pair, topic)
+    sp = load_pair(first, second, pair, read_options(topic, typestore, mount, upside_down))
     answer = pose_from_deg(truth, "--truth") or stored_truth(sp.ref, sp.obj)
     t0 = time.perf_counter()
     atlas = atlas_of(sp.ref, sp.obj, ps, answer, range_xy, steps, thetas, workers)

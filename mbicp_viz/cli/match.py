@@ -8,40 +8,50 @@ from typing import Annotated
 
 import typer
 
-from .options import (ALL_ALGOS, DEFAULT_ALGO, AlgoOpt, Guess, AlgosOpt, ConnectOpt, FirstArg, GuessOpt, InitOpt, PairOpt, ParamsOpt,
-                      PortOpt, RrdOpt, SearchFlag, SecondArg, ServeOpt, TeachOpt, TopicOpt, TruthOpt, pose_from_deg,
-                      say, user_errors)
+from .options import (ALL_ALGOS, DEFAULT_ALGO, AlgoOpt, AlgosOpt, ConnectOpt, FirstArg, Frame, FrameOpt, Guess,
+                      GuessOpt, InitOpt, MountOpt, PairOpt, ParamsOpt, PortOpt, RrdOpt, SearchFlag, SecondArg,
+                      ServeOpt, TeachOpt, TopicOpt, TruthOpt, TypestoreOpt, UpsideDownOpt, pose_from_deg,
+                      read_options, say, user_errors)
 
 JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object with the result fields")]
 
 
-def _pair_and_setup(first, second, pair, topic, guess, init, search, truth, params):
+def _pair_and_setup(first, second, pair, reading, guess, init, search, truth, params):
     from mbicp_viz.evaluation.pairs import load_pair
     from mbicp_viz.evaluation.single import setup
     from mbicp_viz.readers.params_toml import load_search
 
-    sp = load_pair(first, second, pair, topic)
+    sp = load_pair(first, second, pair, reading)
+    for note in sp.log.notes:
+        say(note)
     return sp, setup(sp, guess, pose_from_deg(init, "--init"), search, pose_from_deg(truth, "--truth"),
                      load_search(params))
 
 
 def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, algo: AlgoOpt = DEFAULT_ALGO,
               guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
-              params: ParamsOpt = None, as_json: JsonOpt = False, rrd: RrdOpt = None, teach: TeachOpt = False,
-              connect: ConnectOpt = None, serve: ServeOpt = False, port: PortOpt = 9090, topic: TopicOpt = None):
+              params: ParamsOpt = None, as_json: JsonOpt = False, frame: FrameOpt = Frame.base, rrd: RrdOpt = None,
+              teach: TeachOpt = False, connect: ConnectOpt = None, serve: ServeOpt = False, port: PortOpt = 9090,
+              topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None,
+              upside_down: UpsideDownOpt = False):
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from mbicp_viz.evaluation import single
     from mbicp_viz.readers.params_toml import make_params
     from mbicp_viz.views.text import match_report
 
     p = make_params(algo.value, params)
-    sp, s = _pair_and_setup(first, second, pair, topic, guess, init, search, truth, params)
+    sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down), guess, init,
+                            search, truth, params)
     outcome = single.run(sp.ref, sp.obj, s.guess, p, record=not as_json)
+    base = frame is Frame.base
     if as_json:
-        indices = (0, 0) if second else (pair or (0, 1))  # scan numbers within each file
-        typer.echo(json.dumps(single.row(indices, s, outcome)))
+        indices = (0, 0) if second else (pair or sp.log.consecutive_pairs(1)[0])  # scan numbers within each file
+        typer.echo(json.dumps(single.row(indices, s, outcome, sp.log.frames, base)))
     else:
-        typer.echo("\n".join(match_report(sp.label, s, outcome)))
+        frames = sp.log.frames
+        truth_pose = frames.reported(s.truth, base) if s.truth is not None else None
+        typer.echo("\n".join(match_report(sp.label, s, outcome, single.reported(outcome.result, frames, base),
+                                           frames.frame_text(base), truth_pose)))
     if rrd or connect or serve:
         from mbicp_viz.views.rrd import Run
 
@@ -51,7 +61,8 @@ def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, a
 def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, algos: AlgosOpt = ALL_ALGOS,
                 guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
                 params: ParamsOpt = None, rrd: RrdOpt = None, teach: TeachOpt = False, connect: ConnectOpt = None,
-                serve: ServeOpt = False, port: PortOpt = 9090, topic: TopicOpt = None):
+                serve: ServeOpt = False, port: PortOpt = 9090, topic: TopicOpt = None,
+                typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False):
     """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
     from mbicp_viz.evaluation.compare import compare_table
     from mbicp_viz.views.rrd import Run
@@ -59,8 +70,9 @@ def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
     from .options import params_for
 
     ps = params_for(algos, params)
-    sp, s = _pair_and_setup(first, second, pair, topic, guess, init, search, truth, params)
-    typer.echo(f"{sp.label}\ninitial guess {s.guess} (from: {s.guess_source})")
+    sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down), guess, init,
+                            search, truth, params)
+    typer.echo(f"{sp.label}\ninitial guess {s.guess} (from: {s.guess_source}); poses: the laser frame")
     typer.echo(f"errors against: {s.truth_source or 'nothing (no known answer; give --truth X Y THETA_DEG)'}\n")
     typer.echo(compare_table(sp.ref, sp.obj, s.guess, ps, s.truth))
     if rrd or connect or serve:

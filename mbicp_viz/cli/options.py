@@ -19,6 +19,14 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.choices import Guess
 
 Algo = enum.Enum("Algo", {name: name for name in MATCHERS}, type=str)
+
+
+class Frame(str, enum.Enum):
+    """The frame a match's pose is reported in (``--frame``)."""
+
+    base = "base"
+    laser = "laser"
+
 DEFAULT_ALGO = Algo["improved"]
 ALL_ALGOS = ",".join(MATCHERS)
 SEARCH = SearchParams().window_text()
@@ -42,6 +50,15 @@ TruthOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
                     "taken from them)")]
 TopicOpt = Annotated[Optional[str], typer.Option("--topic", help="a bag's LaserScan topic (needed when it has "
                                                                  "several)")]
+TypestoreOpt = Annotated[str, typer.Option("--typestore", help="the ROS distro whose message types decode a ROS 2 "
+                                                               "bag recorded without them (e.g. ROS2_HUMBLE, "
+                                                               "ROS2_FOXY, ROS1_NOETIC)")]
+MountOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
+    "--mount", help="the laser's pose on the robot X Y THETA_DEG (base frame; m, m, deg), for files without tf")]
+UpsideDownOpt = Annotated[bool, typer.Option("--upside-down", help="the laser is mounted upside down (its z axis "
+                                                                    "points down), for files without tf")]
+FrameOpt = Annotated[Frame, typer.Option("--frame", help="report motions of the robot's base (its mount from tf, "
+                                                           "--mount or the log), or of the laser")]
 RrdOpt = Annotated[Optional[Path], typer.Option("--rrd", help="write the run to this rerun .rrd file")]
 TeachOpt = Annotated[bool, typer.Option("--teach", help="add teaching layers: iso-distance curves, distance "
                                                         "histogram")]
@@ -164,3 +181,10 @@ class Progress:
     def __exit__(self, *exc):
         if self.bar is not None:
             self.bar.__exit__(*exc)
+
+
+def read_options(topic: str | None, typestore: str, mount, upside_down: bool):
+    """How to read the files a command names (``--topic``, ``--typestore``, ``--mount``, ``--upside-down``)."""
+    from mbicp_viz.readers import ReadOptions
+
+    return ReadOptions(topic, typestore, pose_from_deg(mount, "--mount"), upside_down)

@@ -8,7 +8,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from .options import GuessOpt, Guess, PairOpt, TopicOpt, user_errors
+from .options import (Guess, GuessOpt, MountOpt, PairOpt, TopicOpt, TypestoreOpt, UpsideDownOpt, read_options,
+                      user_errors)
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 DEMO_PAIR = EXAMPLES / "hokuyo-125-130.npz"
@@ -24,13 +25,15 @@ def serve(first: Annotated[Optional[str], typer.Argument(help="a scan log, or th
           second: Annotated[Optional[str], typer.Argument(help="the object scan file")] = None,
           scenario: Annotated[Optional[str], typer.Option("--scenario", help="a curated scenario (see `mbicp-viz "
                                                                              "record --list`)")] = None,
-          pair: PairOpt = None, guess: GuessOpt = Guess.stored, topic: TopicOpt = None,
-          host: HostOpt = "127.0.0.1", port: ServePortOpt = 8080, allow_origin: OriginOpt = None,
-          for_seconds: ForOpt = None):
+          pair: PairOpt = None, guess: GuessOpt = Guess.stored, host: HostOpt = "127.0.0.1",
+          port: ServePortOpt = 8080, allow_origin: OriginOpt = None, for_seconds: ForOpt = None,
+          topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None,
+          upside_down: UpsideDownOpt = False):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
     from mbicp_viz.views.debugger.sources import files_source, scenario_source
 
-    source = scenario_source(scenario) if scenario is not None else files_source(first, second, pair, guess, topic)
+    reading = read_options(topic, typestore, mount, upside_down)
+    source = scenario_source(scenario) if scenario is not None else files_source(first, second, pair, guess, reading)
     _serve(source, host, port, tuple(allow_origin or ()), for_seconds)
 
 

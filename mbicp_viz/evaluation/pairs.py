@@ -6,12 +6,13 @@ Every pose maps object-frame points into the reference frame (``T_ref_obj``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from mbicp_viz.core import Pose2, Scan, ScanSource, SearchParams, make_scan, relative
 from mbicp_viz.errors import InputError
-from mbicp_viz.readers import read_log
+from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 
 from .choices import Guess, Thin
 
@@ -21,17 +22,24 @@ class ScanPair:
     ref: Scan
     obj: Scan
     label: str
+    log: ScanLog  # the file the reference came from: its frames
 
 
-def load_pair(first: str, second: str | None, pair: tuple[int, int] | None, topic: str | None = None) -> ScanPair:
-    """``REF OBJ`` (the first scan of each file) or ``LOG --pair I J``."""
+def load_pair(first: str, second: str | None, pair: tuple[int, int] | None,
+              options: ReadOptions | None = None) -> ScanPair:
+    """``REF OBJ`` (the first scan of each file) or ``LOG --pair I J``; the log of the reference holds
+    the frames (mount, base frame)."""
     if second is not None and pair is not None:
         raise InputError("give either two files or one log with --pair I J, not both", field="--pair")
     if second is not None:
-        return ScanPair(read_log(first, topic).scan(0), read_log(second, topic).scan(0), f"{first} -> {second}")
-    log = read_log(first, topic)
-    i, j = pair if pair is not None else (0, 1)
-    return ScanPair(log.scan(i), log.scan(j), f"{first} scans {i} -> {j}")
+        if second.lower() in ("true", "false") and not Path(second).exists():
+            raise InputError(f"{second!r} is no file: flags take no value (write --json, not --json {second})",
+                             field="SECOND")
+        log = read_log(first, options)
+        return ScanPair(log.scan(0), read_log(second, options).scan(0), f"{first} -> {second}", log)
+    log = read_log(first, options)
+    i, j = pair if pair is not None else log.consecutive_pairs(1)[0]
+    return ScanPair(log.scan(i), log.scan(j), f"{first} scans {i % log.records} -> {j % log.records}", log)
 
 
 def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import math
 import time
 
-from mbicp_viz.core import MatchResult, Params, Scan, SearchParams, match, pose_error
+import numpy as np
+
+from mbicp_viz.core import MatchResult, Params, Scan, SearchParams, match, pose_error, relative
 from mbicp_viz.core.agreement import inlier_fraction
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
 
-from .criteria import CONSECUTIVE
+from .criteria import CONSECUTIVE, Criteria
 from .pairs import Guess, pair_guess, stored_truth
 from .pool import ordered_map
 
@@ -49,34 +52,58 @@ def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
 
 def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess: Guess | str = Guess.stored,
                    truth: str | None = None, on_row=None, workers: int | None = None,
-                   search: SearchParams | None = None) -> list[dict]:
-    """One row per consecutive pair of usable scans, in order; with ``truth="pose"`` also the error
-    against the log's scan poses. Pairs are spread over ``workers`` processes (default: every
-    core); ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
+                   search: SearchParams | None = None, base: bool = True) -> list[dict]:
+    """One row per consecutive pair of usable scans, in order: the match's motion (of the robot's
+    base when ``base`` and the log knows the laser's mount), how well it lays the scans on each
+    other, its distance from the log's odometry when the log has some, and with ``truth="pose"``
+    its error against the log's scan poses. Pairs are spread over ``workers`` processes (default:
+    every core); ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
     guess = Guess(guess)
     if truth == "pose" and guess in (Guess.pose, Guess.stored):
         raise InputError("the scan poses cannot be both the truth and the guess: use --guess identity or odometry",
                          field="--truth")
-    jobs = [(log.path, i, j, log.scan(i), log.scan(j), params, guess, truth, search)
+    jobs = [(log.path, i, j, log.scan(i), log.scan(j), params, guess, truth, search, log.frames, base)
             for i, j in log.consecutive_pairs(limit)]
     return ordered_map(_match_row, jobs, workers, on_row)
 
 
 def _match_row(job) -> dict:
-    path, i, j, ref, obj, params, guess, truth, search = job
+    from .single import Setup, reported, run
+
+    path, i, j, ref, obj, params, guess, truth, search, frames, base = job
     t0 = time.perf_counter()
     g, source = pair_guess(ref, obj, guess, search)
-    t1 = time.perf_counter()
-    r = match(ref, obj, g, params)
-    row = result_row(i, j, r, 1000.0 * (time.perf_counter() - t1)) | {"guess": source}
+    guess_ms = 1000.0 * (time.perf_counter() - t0)
+    o = run(ref, obj, g, params)
+    r = reported(o.result, frames, base)
+    row = result_row(i, j, r, o.time_ms) | {"guess": source, "on_ref": o.on_ref, "frame": frames.frame_name(base)}
     if guess is Guess.search:
-        row["guess_ms"] = 1000.0 * (t1 - t0)
+        row["guess_ms"] = guess_ms
+    if ref.odometry is not None and obj.odometry is not None:  # how far the match is from the odometry
+        et, er = pose_error(r.pose, frames.reported(relative(ref.odometry, obj.odometry), base))
+        row |= {"odometry_xy": et, "odometry_theta": er}
     if truth == "pose":
         answer = stored_truth(ref, obj)
         if answer is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
-        row |= scored(ref, obj, r.pose, answer)
+        row |= scored(ref, obj, o.result.pose, answer)
     return row
+
+
+# Agreement with odometry: paper-independent, a wheel encoder's few centimetres over a scan pair.
+ODOMETRY_AGREEMENT = Criteria("odometry agreement", 0.05, math.radians(1.0))
+
+
+def odometry_summary(rows: list[dict]) -> str | None:
+    """How far the matches are from the log's odometry, when it has some."""
+    near = [r for r in rows if "odometry_xy" in r]
+    if not near:
+        return None
+    ok = sum(ODOMETRY_AGREEMENT.correct(r["odometry_xy"], r["odometry_theta"]) for r in near)
+    med_xy = float(np.median([r["odometry_xy"] for r in near]))
+    med_th = math.degrees(float(np.median([r["odometry_theta"] for r in near])))
+    return (f"against the odometry: {ok}/{len(near)} within {ODOMETRY_AGREEMENT.text()} "
+            f"({100.0 * ok / len(near):.1f} %); median difference {1000 * med_xy:.1f} mm, {med_th:.3f} deg")
 
 
 def _ceiling_row(job) -> tuple[bool, list[tuple[bool, bool]]]:

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 from mbicp_viz.core import MatchResult, Params, Pose2, Recorder, Scan, SearchParams, match, pose_error
 from mbicp_viz.core.agreement import inlier_fraction
 
+from mbicp_viz.readers.log import Frames
+
 from .choices import Guess
 from .pairs import ScanPair, pair_guess, stored_truth
 
@@ -57,13 +59,20 @@ def run(ref: Scan, obj: Scan, guess: Pose2, params: Params, record: bool = False
     return Outcome(result, ms, inlier_fraction(ref, obj, result.pose), rec)
 
 
-def row(indices: tuple[int, int], s: Setup, o: Outcome) -> dict:
+def reported(result: MatchResult, frames: Frames, base: bool) -> MatchResult:
+    """The result in the frame it is reported in: the robot base's motion when ``base`` and the
+    laser's mount is known, else the laser's."""
+    return result.conjugated(frames.mount) if frames.reports_base(base) else result
+
+
+def row(indices: tuple[int, int], s: Setup, o: Outcome, frames: Frames, base: bool = True) -> dict:
     """The JSON record of ``match --json`` (the keys of ``eval sequence``'s rows, and more)."""
     from .sequence import result_row
 
-    out = result_row(*indices, o.result, o.time_ms) | o.result.as_dict() | {"on_ref": o.on_ref,
-                                                                            "guess": s.guess_source}
+    r = reported(o.result, frames, base)
+    out = result_row(*indices, r, o.time_ms) | r.as_dict() | {"on_ref": o.on_ref, "guess": s.guess_source,
+                                                              "frame": frames.frame_name(base)}
     if s.truth is not None:
-        et, er = pose_error(o.result.pose, s.truth)
+        et, er = pose_error(r.pose, frames.reported(s.truth, base))
         out |= {"error_xy": et, "error_theta": er, "truth": s.truth_source}
     return out

@@ -14,11 +14,13 @@ a compression suffix is looked through to the format's own (``intel.clf.bz2``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from pathlib import Path
 
+from mbicp_viz.core import Pose2
 from mbicp_viz.errors import InputError
 
-from .log import ScanLog
+from .log import ScanLog, mirrored
 
 _READERS = {
     ".log": "carmen:read_carmen", ".clf": "carmen:read_carmen",
@@ -43,11 +45,23 @@ def format_suffix(path: Path) -> str:
     return suffixes[-1] if suffixes else ""
 
 
-def read_log(path: str | Path, topic: str | None = None) -> ScanLog:
-    """All scans of a file, with the reader chosen by its name (a folder: a rosbag2 bag); ``topic``
-    picks a bag's scan topic."""
+@dataclass(frozen=True)
+class ReadOptions:
+    """How to read a file beyond its name: a bag's scan topic and ROS distro, and the laser's mount
+    for files that do not store it (T_base_laser; ``upside_down``: the laser's z axis points down,
+    its bearings run clockwise seen from above)."""
+
+    topic: str | None = None
+    typestore: str = "ROS2_HUMBLE"
+    mount: Pose2 | None = None
+    upside_down: bool = False
+
+
+def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
+    """All scans of a file, with the reader chosen by its name (a folder: a rosbag2 bag)."""
     import importlib
 
+    o = options or ReadOptions()
     p = Path(path)
     suffix = ".bag" if p.is_dir() else format_suffix(p)
     reader = _READERS.get(suffix)
@@ -56,9 +70,13 @@ def read_log(path: str | Path, topic: str | None = None) -> ScanLog:
         raise InputError(f"unknown file type {''.join(p.suffixes)[-20:]!r}; known: {known}", str(p))
     module, name = reader.split(":")
     fn = getattr(importlib.import_module(f".{module}", __name__), name)
-    if topic is not None and module != "rosbag":
+    if o.topic is not None and module != "rosbag":
         raise InputError("only ROS bags have topics", str(p), field="--topic")
-    log = fn(str(p), topic) if module == "rosbag" else fn(str(p))
+    log = fn(str(p), o.topic, o.typestore) if module == "rosbag" else fn(str(p))
+    if o.mount is not None:
+        log.frames = replace(log.frames, mount=o.mount, mount_source="--mount")
+    if o.upside_down:
+        log = mirrored(log)
     if not log.scans:
         first = log.unusable[min(log.unusable)]
         raise InputError(f"no usable scan: all {log.records} are unusable (scan {min(log.unusable)}: {first.reason})",
@@ -66,4 +84,4 @@ def read_log(path: str | Path, topic: str | None = None) -> ScanLog:
     return log
 
 
-__all__ = ["ScanLog", "read_log", "FORMATS"]
+__all__ = ["ScanLog", "ReadOptions", "read_log", "FORMATS"]

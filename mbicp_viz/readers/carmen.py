@@ -14,7 +14,7 @@ import re
 from mbicp_viz.core import Pose2, ScanSource, uniform_bearings
 from mbicp_viz.errors import InputError
 
-from .log import ScanLog, scan_or_reason
+from .log import Frames, ScanLog, scan_or_reason
 from .text import Fields, token_lines
 
 # No-return / max-range codes of real logs, masked, never points (see shared/data/README.md):
@@ -40,6 +40,7 @@ def read_carmen(path: str) -> ScanLog:
             if fields.left >= 2 and fields.t[1] == "robot_frontlaser_offset":
                 fields.i = 2
                 laser_offset = fields.take("robot_frontlaser_offset")
+                log.frames = Frames(Pose2(laser_offset, 0.0, 0.0), "PARAM robot_frontlaser_offset")
         elif kind == "ODOM":
             pose = _pose(fields, "odom")
             for name in ("tv", "rv", "accel"):

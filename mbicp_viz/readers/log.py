@@ -1,9 +1,13 @@
-"""What every reader returns: the scans of a file, and the odometry it stores.
+"""What every reader returns: the scans of a file, the odometry it stores, and the frames.
 
 Scans are numbered by their record in the file (0 = the first scan message). A record that
 cannot be matched — no beams, no valid reading — is kept as a reason, not as a scan: a long log
 is not refused for one empty scan, the scans after it keep their numbers, and only asking for
 that scan by its number is an error.
+
+Frames: every scan is in its laser's (upright) frame, and its ``pose`` and ``odometry`` are poses
+of that laser frame. ``frames.mount`` (T_base_laser) says where the laser sits on the robot, so
+that a match (the laser's motion T) is the base's motion ``mount @ T @ mount.inverse()``.
 """
 
 from __future__ import annotations
@@ -20,6 +24,35 @@ from mbicp_viz.errors import InputError
 MIN_BEARING_STEP_RAD = 1e-4
 
 
+@dataclass(frozen=True)
+class Frames:
+    """The frames of a log's matches: the laser's mount on the robot (T_base_laser), where it came
+    from (None: unknown, the laser frame stands for the base), and the frames' names."""
+
+    mount: Pose2 = field(default_factory=Pose2)
+    mount_source: str | None = None
+    base_frame: str = "base"
+    frame_id: str = ""  # the scans' frame, as the file names it
+
+    def reports_base(self, base: bool) -> bool:
+        """Whether matches are reported as the base's motion (asked for, and a mount is known)."""
+        return base and self.mount_source is not None
+
+    def frame_name(self, base: bool) -> str:
+        return self.base_frame if self.reports_base(base) else "laser"
+
+    def frame_text(self, base: bool = True) -> str:
+        """Which frame a match's pose is given in, and why."""
+        laser = f"the laser frame{f' {self.frame_id!r}' if self.frame_id else ''}"
+        if not self.reports_base(base):
+            return laser if not base else f"{laser} (no mount known: give --mount X Y THETA_DEG for the base's motion)"
+        return f"the robot's {self.base_frame} (the laser's mount from {self.mount_source}: {self.mount})"
+
+    def reported(self, motion: Pose2, base: bool) -> Pose2:
+        """A motion of the laser as reported: the base's motion when ``base`` and the mount is known."""
+        return self.mount.conjugate(motion) if self.reports_base(base) else motion
+
+
 @dataclass
 class ScanLog:
     path: str
@@ -27,6 +60,10 @@ class ScanLog:
     odometry: list[tuple[float, Pose2]] = field(default_factory=list)  # (stamp [s], pose) from ODOM lines
     skipped: dict[str, int] = field(default_factory=dict)  # message type -> records read past
     unusable: dict[int, UnusableScan] = field(default_factory=dict)  # scan record -> why it cannot be matched
+    frames: Frames = field(default_factory=Frames)
+    topic: str | None = None  # a bag's scan topic
+    odometry_source: str | None = None
+    notes: list[str] = field(default_factory=list)  # warnings for the user (a bag cut short ...)
 
     def __len__(self) -> int:
         return len(self.scans)
@@ -91,3 +128,12 @@ def scan_or_reason(ranges, bearings, path: str, line: int | None, field: str, **
         return e
     except ScanError as e:
         raise InputError(e.reason, path, line, field) from None
+
+
+def mirrored(log: ScanLog) -> ScanLog:
+    """The log of a laser mounted upside down, its scans turned upright (every bearing negated)."""
+    from dataclasses import replace
+
+    scans = [replace(s, ranges=s.ranges[::-1], bearings=-s.bearings[::-1], valid=s.valid[::-1]) for s in log.scans]
+    source = f"{log.frames.mount_source or 'no mount given'}, the laser upside down"
+    return replace(log, scans=scans, frames=replace(log.frames, mount_source=source))

@@ -1,75 +1,105 @@
-"""ROS 1 and ROS 2 bags holding ``sensor_msgs/LaserScan``, decoded by rosbags.
+"""ROS 1 and ROS 2 bags (sqlite3 or MCAP) holding ``sensor_msgs/LaserScan``, decoded by rosbags.
+
+What a robotics engineer's bag holds, read as the robot recorded it:
+
+- **One scan topic**, chosen automatically when there is one; with several and none named, an
+  error lists them (message count, frame id). Topics are never merged.
+- **ROS 2 bags of any distro**: bags written without message definitions (``ros2 bag record`` up
+  to Humble) are decoded with the named distro's types (``typestore``, default Humble).
+- **The laser's mount** from ``/tf_static`` (or ``/tf``, as older robots publish it): base frame ->
+  the scans' ``frame_id``; a laser mounted upside down is turned upright. Scans stay in the
+  (upright) laser frame; ``ScanLog.frames.mount`` turns matches into the base's motion.
+- **Odometry**, from a ``nav_msgs/Odometry`` topic or ``/tf`` (odom -> base), interpolated at each
+  scan's stamp and given as each scan's ``odometry``: the pose of the laser in the odom frame.
+- **Damage** is never a traceback: a bag cut short keeps the scans of its intact chunks with a
+  warning naming what was lost, or is one error when none survive.
 
 rosbags' reader refuses ROS 1 bags whose index records are damaged (``demo.bag`` of the Hokuyo
-data: its index data records announce 20 bytes per entry where the format has 12). The chunks
-themselves are intact, so such a bag is recovered by walking its records from the start
-(ROS bag format 2.0) and handing each message to rosbags' own deserializer.
+data: its index data records announce 20 bytes per entry where the format has 12) or missing (a
+recording that was never closed). The chunks themselves are intact, so such a bag is read by
+walking its records from the start (ROS bag format 2.0) and decoding each message with rosbags.
 """
 
 from __future__ import annotations
 
 import bz2
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from mbicp_viz.core import ScanSource
-
+from mbicp_viz.core import Pose2, ScanSource
 from mbicp_viz.errors import InputError
 
-from .log import ScanLog, scan_or_reason
+from .log import Frames, ScanLog, scan_or_reason
+from .tf import Mount, TfTree, interpolate
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
+ODOMETRY = "nav_msgs/msg/Odometry"
+TF = "tf2_msgs/msg/TFMessage"
+TF_TOPICS = {"/tf": False, "/tf_static": True, "tf": False, "tf_static": True}
+DEFAULT_TYPESTORE = "ROS2_HUMBLE"
 _MAGIC = b"#ROSBAG V2.0\n"
-_OP_MSG, _OP_INDEX, _OP_CHUNK, _OP_CONN = 2, 4, 5, 7
+_OP_MSG, _OP_HEADER, _OP_INDEX, _OP_CHUNK, _OP_CONN = 2, 3, 4, 5, 7
+MAX_CHUNK_BYTES = 256 * 1024 * 1024  # a chunk unpacking to more is damaged (or hostile)
 
 
-def read_rosbag(path: str, topic: str | None = None) -> ScanLog:
+@dataclass(frozen=True)
+class Message:
+    topic: str
+    msgtype: str
+    stamp: float  # [s] when it was recorded
+    msg: object
+
+
+def read_rosbag(path: str, topic: str | None = None, typestore: str = DEFAULT_TYPESTORE) -> ScanLog:
     p = Path(path)
     if not p.exists():
-        raise InputError("no such file or directory", str(path))
-    try:
-        messages = list(_read_with_rosbags(p, topic))
-    except InputError:
-        raise
-    except Exception:  # rosbags rejects the bag: recover ROS 1 bags by walking their chunks
-        if not (p.is_file() and p.read_bytes()[: len(_MAGIC)] == _MAGIC):
-            raise InputError("not a readable ROS 1 or ROS 2 bag", str(path)) from None
-        messages = list(_walk_ros1(p, topic))
-    return _to_log(str(path), messages)
+        raise InputError("no such file or folder", str(path))
+    notes: list[str] = []
+    messages = _messages(p, typestore, notes)
+    return _to_log(str(path), messages, topic, notes)
 
 
-def _typestore(ros1: bool):
+def _typestore(name: str):
     from rosbags.typesys import Stores, get_typestore
 
-    return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    try:
+        return get_typestore(Stores[name])
+    except KeyError:
+        known = ", ".join(s.name for s in Stores if s.name.startswith("ROS"))
+        raise InputError(f"unknown ROS distro {name!r}; known: {known}", field="--typestore") from None
 
 
-def _pick_topic(available: dict[str, str], topic: str | None, path) -> set[str]:
-    """Topics to read: the requested one (which must carry LaserScan), else every LaserScan topic."""
-    if topic is not None:
-        if topic not in available:
-            raise InputError(f"no topic {topic!r}; the bag has {sorted(available)}", str(path), field="topic")
-        if available[topic] != LASER_SCAN:
-            raise InputError(f"unknown message type {available[topic]!r} on {topic} (expected {LASER_SCAN})",
-                             str(path), field="topic")
-        return {topic}
-    scans = {t for t, ty in available.items() if ty == LASER_SCAN}
-    if not scans:
-        raise InputError(f"no {LASER_SCAN} messages; topics: {available}", str(path))
-    return scans
+def _messages(p: Path, typestore: str, notes: list[str]) -> list[Message]:
+    """Every message of the topics this reader uses, decoded, in recording order."""
+    from rosbags.highlevel import AnyReader, AnyReaderError
+
+    store = _typestore(typestore)
+    try:
+        with AnyReader([p], default_typestore=store) as reader:
+            wanted = [c for c in reader.connections if _normalise(c.msgtype) in (LASER_SCAN, ODOMETRY, TF)]
+            return [Message(conn.topic, _normalise(conn.msgtype), t * 1e-9, _decode(reader.deserialize, raw,
+                                                                                       conn.msgtype, p, n))
+                    for n, (conn, t, raw) in enumerate(reader.messages(connections=wanted))]
+    except AnyReaderError as e:
+        reason = " ".join(str(a) for a in e.args) or type(e).__name__
+    except InputError:
+        raise
+    except Exception as e:  # rosbags found the bag damaged while reading it
+        reason = f"{type(e).__name__}: {e}"
+    if p.is_file() and p.read_bytes()[: len(_MAGIC)] == _MAGIC:
+        return _walk_ros1(p, notes, reason)
+    raise InputError(f"not a readable ROS 1 or ROS 2 bag: {reason[:300]}", str(p))
 
 
-def _read_with_rosbags(p: Path, topic):
-    from rosbags.highlevel import AnyReader
-
-    with AnyReader([p]) as reader:
-        available = {c.topic: _normalise(c.msgtype) for c in reader.connections}
-        wanted = _pick_topic(available, topic, p)
-        conns = [c for c in reader.connections if c.topic in wanted]
-        for conn, _, raw in reader.messages(connections=conns):
-            yield reader.deserialize(raw, conn.msgtype)
+def _decode(deserialize, raw, msgtype: str, p: Path, n: int):
+    try:
+        return deserialize(raw, msgtype)
+    except Exception as e:  # rosbags' serde errors: damaged message data
+        raise InputError(f"message {n} ({msgtype}) cannot be decoded: {type(e).__name__}: {str(e)[:200]}",
+                         str(p)) from None
 
 
 def _normalise(msgtype: str) -> str:
@@ -77,6 +107,8 @@ def _normalise(msgtype: str) -> str:
     pkg, _, name = msgtype.rpartition("/")
     return msgtype if pkg.endswith("/msg") else f"{pkg}/msg/{name}"
 
+
+# ---- ROS 1 bags, walked record by record (rosbags refuses a damaged or missing index) ------------
 
 def _header(buf: bytes, path) -> dict[str, bytes]:
     fields, i = {}, 0
@@ -92,13 +124,21 @@ def _header(buf: bytes, path) -> dict[str, bytes]:
     return fields
 
 
+class _CutShort(Exception):
+    """A record runs past the end of the data: the bag was cut short there. ``header`` and ``data``
+    are what the cut record holds so far (its data cut short)."""
+
+    def __init__(self, at: int, header: dict | None = None, data: bytes = b""):
+        self.at, self.header, self.data = at, header, data
+
+
 def _records(buf: bytes, start: int, path):
-    """(header, data) of each record in ``buf`` from ``start`` (ROS bag 2.0 record layout)."""
+    """(op, header, data) of each record in ``buf`` from ``start`` (ROS bag 2.0 layout)."""
     pos = start
     while pos + 4 <= len(buf):
         (hlen,) = struct.unpack_from("<I", buf, pos)
         if pos + 8 + hlen > len(buf):
-            raise InputError(f"record at byte {pos} runs past the end of the data", str(path))
+            raise _CutShort(pos)
         h = _header(buf[pos + 4:pos + 4 + hlen], path)
         (dlen,) = struct.unpack_from("<I", buf, pos + 4 + hlen)
         data_at = pos + 8 + hlen
@@ -106,58 +146,176 @@ def _records(buf: bytes, start: int, path):
         if op == _OP_INDEX and "count" in h:
             # The length field of damaged index records is wrong; the count is not (12 bytes/entry).
             dlen = 12 * struct.unpack("<I", h["count"])[0]
+        if data_at + dlen > len(buf):
+            raise _CutShort(pos, h, buf[data_at:])
         yield op, h, buf[data_at:data_at + dlen]
         pos = data_at + dlen
 
 
-def _decompress(kind: bytes, data: bytes, path) -> bytes:
-    if kind == b"none":
-        return data
-    if kind == b"bz2":
-        return bz2.decompress(data)
-    if kind == b"lz4":
-        import lz4.frame
+def _decompress(kind: bytes, data: bytes, size: int, path) -> bytes:
+    if size > MAX_CHUNK_BYTES:
+        raise InputError(f"a chunk announces {size} bytes unpacked: damaged", str(path))
+    try:
+        if kind == b"none":
+            return data
+        if kind == b"bz2":
+            return bz2.BZ2Decompressor().decompress(data, max_length=size)
+        if kind == b"lz4":
+            import lz4.frame
 
-        return lz4.frame.decompress(data)
-    raise InputError(f"unknown chunk compression {kind!r}", str(path))
+            return lz4.frame.decompress(data)[:size]
+    except ImportError:
+        raise InputError("the bag's chunks are lz4-compressed: pip install lz4", str(path)) from None
+    except (OSError, ValueError, EOFError, RuntimeError) as e:
+        raise InputError(f"a damaged compressed chunk ({type(e).__name__}: {e})", str(path)) from None
+    raise InputError(f"unknown chunk compression {kind[:20]!r}", str(path))
 
 
-def _walk_ros1(p: Path, topic):
+def _register(store, definition: bytes, msgtype: str, p: Path) -> None:
+    """The types a ROS 1 connection defines (its message definition travels with it)."""
+    from rosbags.typesys import get_types_from_msg
+
+    if not definition or msgtype in store.types:
+        return
+    try:
+        store.register(get_types_from_msg(definition.decode("utf-8"), msgtype))
+    except Exception as e:  # a damaged definition
+        raise InputError(f"the definition of {msgtype} cannot be read ({type(e).__name__}: {str(e)[:120]})",
+                         str(p)) from None
+
+
+def _walk_ros1(p: Path, notes: list[str], why: str):
+    """Messages of a ROS 1 bag read chunk by chunk; a bag cut short keeps the messages before the
+    cut (an uncompressed chunk cut in two keeps its first part) and says what was lost."""
+    from rosbags.typesys import Stores, get_typestore
+
     buf = p.read_bytes()
-    store = _typestore(ros1=True)
+    store = get_typestore(Stores.ROS1_NOETIC)
     conns: dict[int, tuple[str, str]] = {}
-    wanted = None
-    for op, h, data in _records(buf, len(_MAGIC), p):
-        if op != _OP_CHUNK:
-            continue
-        for op2, h2, d2 in _records(_decompress(h.get("compression", b"none"), data, p), 0, p):
-            if op2 == _OP_CONN:
-                conn_id = struct.unpack("<I", h2["conn"])[0]
-                msgtype = _normalise(_header(d2, p)["type"].decode())
-                conns[conn_id] = (h2["topic"].decode(), msgtype)
-                wanted = None
-            elif op2 == _OP_MSG:
-                conn_id = struct.unpack("<I", h2["conn"])[0]
-                if conn_id not in conns:
-                    raise InputError(f"message for unknown connection {conn_id}", str(p))
-                if wanted is None:
-                    wanted = _pick_topic(dict(conns.values()), topic, p)
-                t, msgtype = conns[conn_id]
-                if t in wanted:
-                    yield store.deserialize_ros1(d2, msgtype)
+    out: list[Message] = []
+    try:
+        for op, h, data in _records(buf, len(_MAGIC), p):
+            if op == _OP_HEADER and "index_pos" in h:
+                index_pos = struct.unpack("<Q", h["index_pos"])[0]
+                if index_pos == 0 or index_pos > len(buf):
+                    notes.append(f"{p}: the bag's index is missing (a recording never closed, or a file cut short); "
+                                 "its chunks were read one by one")
+            elif op == _OP_CHUNK:
+                size = struct.unpack("<I", h["size"])[0] if "size" in h else MAX_CHUNK_BYTES
+                _chunk(_decompress(h.get("compression", b"none"), data, size, p), p, store, conns, out)
+    except _CutShort as cut:
+        if cut.header is not None and cut.header.get("op", b"\0")[0] == _OP_CHUNK and \
+                cut.header.get("compression", b"none") == b"none":
+            try:
+                _chunk(cut.data, p, store, conns, out)
+            except _CutShort:
+                pass
+        notes.append(f"{p}: the bag ends inside a record at byte {cut.at} of {len(buf)} (cut short?): the {len(out)} "
+                     "messages before the cut were read, the rest is lost")
+    except struct.error as e:
+        raise InputError(f"a damaged record ({e}); rosbags: {why[:200]}", str(p)) from None
+    return out
 
 
-def _to_log(path: str, messages) -> ScanLog:
-    log = ScanLog(path, [])
-    for k, m in enumerate(messages):
-        ranges = np.asarray(m.ranges, dtype=float)
-        inc = float(m.angle_increment)
-        bearings = float(m.angle_min) + inc * np.arange(len(ranges))
-        if inc < 0:  # clockwise scanners: store bearings increasing
-            ranges, bearings = ranges[::-1], bearings[::-1]
-        stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
-        log.add(scan_or_reason(ranges, bearings, path, None, f"message {k}", range_min=float(m.range_min),
-                               range_max=float(m.range_max), stamp=stamp, source=ScanSource(path, k)))
-    if not log.records:
-        raise InputError("no LaserScan messages", path)
+def _chunk(data: bytes, p: Path, store, conns: dict, out: list) -> None:
+    """The messages of one chunk's records (connections registered as they come)."""
+    for op, h, d in _records(data, 0, p):
+        if op == _OP_CONN:
+            conn = _header(d, p)
+            msgtype = _normalise(conn["type"].decode("utf-8", "replace"))
+            conns[struct.unpack("<I", h["conn"])[0]] = (h["topic"].decode("utf-8", "replace"), msgtype)
+            _register(store, conn.get("message_definition", b""), msgtype, p)
+        elif op == _OP_MSG:
+            conn_id = struct.unpack("<I", h["conn"])[0]
+            if conn_id not in conns:
+                raise InputError(f"message for unknown connection {conn_id}", str(p))
+            topic, msgtype = conns[conn_id]
+            if msgtype in (LASER_SCAN, ODOMETRY, TF):
+                sec, nsec = struct.unpack("<II", h["time"]) if "time" in h else (0, 0)
+                out.append(Message(topic, msgtype, sec + 1e-9 * nsec, _decode(store.deserialize_ros1, d, msgtype, p,
+                                                                              len(out))))
+
+
+# ---- scans, topics, frames and odometry ---------------------------------------------------------
+
+def _scan_topic(messages: list[Message], topic: str | None, path: str) -> str:
+    """The one scan topic to read: the one named, else the only one; several: an error listing them."""
+    counts: dict[str, tuple[int, str]] = {}
+    for m in messages:
+        if m.msgtype == LASER_SCAN:
+            n, frame = counts.get(m.topic, (0, m.msg.header.frame_id))
+            counts[m.topic] = (n + 1, frame)
+    listing = "; ".join(f"{t} ({n} messages, frame_id {f!r})" for t, (n, f) in sorted(counts.items()))
+    if topic is not None:
+        if topic not in counts:
+            raise InputError(f"no LaserScan topic {topic!r}; the bag has: {listing or 'none'}", path, field="--topic")
+        return topic
+    if not counts:
+        others = sorted({m.topic for m in messages})
+        raise InputError(f"no {LASER_SCAN} messages (topics read: {', '.join(others) or 'none'})", path)
+    if len(counts) > 1:
+        raise InputError(f"{len(counts)} LaserScan topics, choose one with --topic: {listing}", path, field="--topic")
+    return next(iter(counts))
+
+
+def _odometry(messages: list[Message], tf: TfTree, mount: Mount | None):
+    """(source, stamps, base poses) from an Odometry topic (``/odom`` first), else from /tf."""
+    topics = sorted({m.topic for m in messages if m.msgtype == ODOMETRY}, key=lambda t: (t != "/odom", t))
+    if topics:
+        msgs = [m.msg for m in messages if m.topic == topics[0]]
+        stamps = np.array([o.header.stamp.sec + 1e-9 * o.header.stamp.nanosec for o in msgs])
+        poses = np.array([_planar(o.pose.pose) for o in msgs])
+        order = np.argsort(stamps, kind="stable")
+        return f"{topics[0]} (nav_msgs/Odometry)", stamps[order], poses[order]
+    return tf.odometry_track(mount.base_frame) if mount is not None else None
+
+
+def _planar(pose) -> tuple[float, float, float]:
+    q = pose.orientation
+    return pose.position.x, pose.position.y, float(np.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z)))
+
+
+def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[str]) -> ScanLog:
+    try:
+        chosen = _scan_topic(messages, topic, path)
+    except InputError as e:
+        if not notes:
+            raise
+        raise InputError(f"{e.message}: {notes[-1].split(': ', 1)[-1]}", path, field=e.field) from None
+    tf = TfTree()
+    for m in messages:
+        if m.msgtype == TF and m.topic.lstrip("/") in ("tf", "tf_static"):
+            tf.add(m.msg, m.stamp, m.topic.lstrip("/") == "tf_static")
+    scans = [m for m in messages if m.topic == chosen]
+    frame_id = scans[0].msg.header.frame_id.lstrip("/")
+    mount = tf.mount(frame_id, path) if frame_id else None
+    odometry = _odometry(messages, tf, mount)
+    frames = Frames(mount.pose, mount.source, mount.base_frame, frame_id) if mount else Frames(frame_id=frame_id)
+    log = ScanLog(path, [], frames=frames, topic=chosen, notes=notes)
+    if odometry is not None:
+        log.odometry_source = odometry[0]
+    for k, m in enumerate(scans):
+        log.add(_scan(m.msg, path, k, mount is not None and mount.upside_down, odometry, frames.mount))
     return log
+
+
+def _scan(m, path: str, k: int, upside_down: bool, odometry, mount: Pose2):
+    """One LaserScan as a scan in the (upright) laser frame, bearings increasing; its odometry is the
+    pose of the laser in the odom frame at the scan's stamp."""
+    with np.errstate(invalid="ignore", over="ignore"):  # damaged numbers become invalid readings, silently
+        ranges = np.asarray(m.ranges, dtype=float)
+    inc = float(m.angle_increment)
+    bearings = float(m.angle_min) + inc * np.arange(len(ranges))
+    if upside_down:  # the laser's z axis points down: seen upright, every bearing is mirrored
+        bearings = -bearings
+    if len(bearings) > 1 and bearings[1] < bearings[0]:  # clockwise in the upright frame: store increasing
+        ranges, bearings = ranges[::-1], bearings[::-1]
+    stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
+    odom = None
+    if odometry is not None:
+        base = interpolate(odometry[1], odometry[2], stamp)
+        odom = base @ mount if base is not None else None
+    range_max = float(m.range_max) if np.isfinite(m.range_max) and m.range_max > 0 else np.inf
+    range_min = float(m.range_min) if np.isfinite(m.range_min) else 0.0
+    return scan_or_reason(ranges, bearings, path, None, f"message {k}", range_min=range_min, range_max=range_max,
+                          stamp=stamp, odometry=odom, source=ScanSource(path, k))

@@ -8,11 +8,12 @@ import math
 from mbicp_viz.core import IterationEvent, MatchResult, PairKind, PairStatus, Pose2, pose_error
 
 
-def result_fields(r: MatchResult) -> list[tuple[str, str]]:
-    """(label, value) of everything a result says, in the order a debugging user asks."""
+def result_fields(r: MatchResult, frame: str = "the laser frame") -> list[tuple[str, str]]:
+    """(label, value) of everything a result says, in the order a debugging user asks; ``frame``
+    names the frame whose motion the pose is."""
     fields = [
         ("algorithm", r.algorithm),
-        ("pose", f"{r.pose}   (object frame in the reference frame)"),
+        ("pose", f"{r.pose}   (motion of {frame}: its pose at the object scan, in its frame at the reference scan)"),
         ("status", f"{'converged' if r.converged else 'NOT converged: ' + r.reason.value} after {r.iterations} "
                    "iterations"),
         ("error", f"{r.error:.3e} m^2 mean squared residual; pairs kept {r.pairs_kept}, rejected {r.pairs_rejected}"),
@@ -29,9 +30,9 @@ def result_fields(r: MatchResult) -> list[tuple[str, str]]:
     return fields
 
 
-def result_lines(r: MatchResult) -> list[str]:
+def result_lines(r: MatchResult, frame: str = "the laser frame") -> list[str]:
     """The result as the terminal prints it: one labelled line per field."""
-    return [f"{label:<11} {value}" for label, value in result_fields(r)]
+    return [f"{label:<11} {value}" for label, value in result_fields(r, frame)]
 
 
 def result_sentence(r: MatchResult) -> str:
@@ -80,16 +81,16 @@ def iteration_text(ev: IterationEvent) -> str:
             f"step ({ev.increment.x:+.4f} m, {ev.increment.y:+.4f} m, {math.degrees(ev.increment.theta):+.3f} deg)")
 
 
-def match_report(label: str, setup, outcome) -> list[str]:
-    """``match``'s report: the pair, the guess and where it came from, one line per iteration, the
-    result, the agreement with the data and, when known, the error against the answer."""
+def match_report(label: str, setup, outcome, result: MatchResult, frame: str, truth: Pose2 | None) -> list[str]:
+    """``match``'s report: the pair, the guess (laser frame, as the iterations) and where it came
+    from, one line per iteration, the result as reported (``result`` in ``frame``), the agreement
+    with the data and, when known, the error against the answer (``truth``, in the same frame)."""
     from mbicp_viz.core.agreement import INLIER_RADIUS_M
 
-    lines = [label, f"initial guess {setup.guess} (from: {setup.guess_source})", "", ITERATION_HEADER]
+    lines = [label, f"initial guess {setup.guess} (laser frame; from: {setup.guess_source})", "", ITERATION_HEADER]
     lines += [iteration_line(e) for e in outcome.recorder.iterations]
-    lines += ["", *result_lines(outcome.result),
-              f"{'on ref':<11} {agreement_line(outcome.on_ref, INLIER_RADIUS_M)}"]
-    if setup.truth is not None:
-        lines.append(f"{'truth':<11} {truth_line(outcome.result.pose, setup.truth)} ({setup.truth_source})")
+    lines += ["", *result_lines(result, frame), f"{'on ref':<11} {agreement_line(outcome.on_ref, INLIER_RADIUS_M)}"]
+    if truth is not None:
+        lines.append(f"{'truth':<11} {truth_line(result.pose, truth)} ({setup.truth_source})")
     lines.append(f"{'time':<11} {outcome.time_ms:.1f} ms (with the recording observer)")
     return lines

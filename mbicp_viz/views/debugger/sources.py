@@ -6,7 +6,7 @@ from mbicp_viz.core import Pose2
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess
 from mbicp_viz.evaluation.scenarios import find_scenario
-from mbicp_viz.readers import ScanLog, read_log
+from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 
 from .state import Source
 
@@ -19,16 +19,16 @@ def scenario_source(name: str) -> Source:
 
 
 def files_source(first: str | None, second: str | None, pair: tuple[int, int] | None = None,
-                 guess: Guess = Guess.stored, topic: str | None = None) -> Source:
+                 guess: Guess = Guess.stored, options: ReadOptions | None = None) -> Source:
     """``serve REF OBJ`` (the first scan of each) or ``serve LOG [--pair I J]`` (pick any two)."""
     if first is None:
         raise InputError("give a log, two scan files, or --scenario NAME", field="FILE")
     if second is not None:
         if pair is not None:
             raise InputError("give either two files or one log with --pair I J, not both", field="--pair")
-        log = ScanLog(f"{first} + {second}", [read_log(first, topic).scan(0), read_log(second, topic).scan(0)])
+        log = ScanLog(f"{first} + {second}", [read_log(first, options).scan(0), read_log(second, options).scan(0)])
         return Source(f"{first} -> {second}", log, guess_kind=guess)
-    log = read_log(first, topic)
+    log = read_log(first, options)
     if len(log.scans) < 2:
         raise InputError("needs at least two usable scans (or give two files)", first)
     i, j = pair if pair is not None else log.consecutive_pairs(1)[0]

@@ -260,17 +260,20 @@ class DebugState:
         return text.iteration_text(ev)
 
     def result_markdown(self) -> str:
-        """Every run's result, the agreement of its pose with the data, and the known answer's."""
-        truth, parts = self.truth(), []
+        """Every run's result (the robot base's motion when the laser's mount is known), the
+        agreement of its pose with the data, and the known answer's."""
+        from mbicp_viz.evaluation.single import reported
+
+        frames, truth, parts = self.source.log.frames, self.truth(), []
         for run in self.runs:
-            r = run.result
-            lines = [f"**{label}** {value}" for label, value in text.result_fields(r)]
-            on_ref = inlier_fraction(self.ref, self.obj, r.pose)
+            r = reported(run.result, frames, True)
+            lines = [f"**{label}** {value}" for label, value in text.result_fields(r, frames.frame_text())]
+            on_ref = inlier_fraction(self.ref, self.obj, run.result.pose)
             lines.append(f"**on ref** {text.agreement_line(on_ref, INLIER_RADIUS_M)}")
             if truth is not None:
-                lines.append(f"**known answer** {text.truth_line(r.pose, truth)}")
+                lines.append(f"**known answer** {text.truth_line(r.pose, frames.reported(truth, True))}")
             parts.append("  \n".join(lines))
-        parts.append(f"initial guess {self.guess} ({self.guess_source}); match time {self.match_ms:.1f} ms")
+        parts.append(f"initial guess {self.guess} (laser frame; {self.guess_source}); match time {self.match_ms:.1f} ms")
         return "\n\n".join(parts)
 
     def pair_label(self) -> str:

@@ -1,0 +1,168 @@
+"""ROS bags as robots record them, written with rosbags' writers from real Intel and CSM scans:
+ROS 1, ROS 2 as Humble's recorder writes it (no message definitions), MCAP; the laser's mount in
+/tf_static (rotated, upside down); odometry on /odom and on /tf; several scanners; 360-degree
+lidars; beam counts that vary; an empty scan."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from mbicp_viz.cli import app
+from mbicp_viz.core import Pose2, make_scan, pose_error, relative
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers import ReadOptions, read_log
+
+from .bags import Robot, Topic, intel_robot, write
+from .conftest import DATA
+
+MOUNT = Pose2(0.25, -0.1, math.pi)  # a laser looking backwards, like a Neato's
+
+
+def same_scan(a, b) -> bool:
+    return (np.allclose(a.bearings, b.bearings, atol=1e-6) and np.array_equal(a.valid, b.valid)
+            and np.allclose(a.ranges[a.valid], b.ranges[b.valid], atol=1e-5))
+
+
+@pytest.mark.parametrize("kind", ["ros1", "humble", "mcap"])
+@pytest.mark.parametrize("upside_down", [False, True])
+def test_bags_of_every_kind_read_their_scans_mount_and_odometry(tmp_path, intel, kind, upside_down):
+    path = write(tmp_path / ("r.bag" if kind == "ros1" else "r"), intel_robot(intel, 10, 6, MOUNT, upside_down), kind)
+    log = read_log(path)
+    assert len(log.scans) == 6 and log.topic == "/scan" and log.frames.frame_id == "laser"
+    for k, s in enumerate(log.scans):  # the scans the robot's laser saw, upright
+        assert same_scan(s, intel.scan(10 + k))
+        assert pose_error(s.odometry, intel.scan(10 + k).pose)[0] < 1e-9  # the laser's pose in odom
+    m = log.frames.mount
+    assert (m.x, m.y, m.theta) == pytest.approx((MOUNT.x, MOUNT.y, MOUNT.theta), abs=1e-9)
+    assert log.frames.mount_source == "tf base_link -> laser" and log.frames.base_frame == "base_link"
+
+
+def test_a_humble_bag_needs_a_typestore_and_a_wrong_one_is_named(tmp_path, intel):
+    path = write(tmp_path / "h", intel_robot(intel, 10, 3, None), "humble")
+    assert len(read_log(path, ReadOptions(typestore="ROS2_FOXY")).scans) == 3
+    with pytest.raises(InputError, match="unknown ROS distro 'ROS2_NOPE'"):
+        read_log(path, ReadOptions(typestore="ROS2_NOPE"))
+
+
+def test_matches_answer_in_the_base_frame_and_agree_with_the_odometry(tmp_path, intel):
+    path = write(tmp_path / "r.bag", intel_robot(intel, 10, 8, MOUNT), "ros1")
+    out = tmp_path / "rows.json"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(path), "--guess", "odometry", "--out", str(out),
+                                   "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(out.read_text())
+    assert all(r["frame"] == "base_link" for r in rows)
+    assert "against the odometry: 7/7 within 5 cm and 1 deg" in res.output
+    assert "motions of the robot's base_link" in res.output
+    for r in rows:  # the base's motion: the laser's (the log's poses) seen through the mount
+        laser = relative(intel.scan(10 + r["ref"]).pose, intel.scan(10 + r["obj"]).pose)
+        base = MOUNT.conjugate(laser)
+        assert pose_error(Pose2(r["x"], r["y"], r["theta"]), base)[0] < 0.05
+    laser_rows = tmp_path / "laser.json"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(path), "--guess", "odometry", "--out", str(laser_rows),
+                                   "--frame", "laser", "--workers", "1", "--limit", "1"])
+    first = json.loads(laser_rows.read_text())[0]
+    assert first["frame"] == "laser"
+    assert pose_error(MOUNT.conjugate(Pose2(first["x"], first["y"], first["theta"])),
+                      Pose2(rows[0]["x"], rows[0]["y"], rows[0]["theta"]))[0] < 1e-9
+
+
+def test_odometry_on_tf_and_a_mount_published_on_tf(tmp_path, intel):
+    robot = intel_robot(intel, 20, 5, Pose2(0.1, 0.05, 0.3), odometry_on="/tf", mount_on="/tf")
+    log = read_log(write(tmp_path / "tf", robot, "mcap"))
+    assert log.odometry_source == "tf odom -> base_link" and log.frames.mount_source == "tf base_link -> laser"
+    assert all(pose_error(s.odometry, intel.scan(20 + k).pose)[0] < 1e-9 for k, s in enumerate(log.scans))
+
+
+def test_two_scanners_are_never_merged(tmp_path, intel, laserazos):
+    robot = Robot([Topic("/front/scan", "front_laser", [intel.scan(k) for k in range(4)]),
+                   Topic("/rear/scan", "rear_laser", [laserazos.scan(k) for k in range(4)])], [1.0, 1.2, 1.4, 1.6])
+    path = write(tmp_path / "two.bag", robot, "ros1")
+    with pytest.raises(InputError) as e:
+        read_log(path)
+    assert "2 LaserScan topics" in str(e.value) and "--topic" in str(e.value)
+    assert "/front/scan (4 messages, frame_id 'front_laser')" in str(e.value)
+    assert "/rear/scan (4 messages, frame_id 'rear_laser')" in str(e.value)
+    rear = read_log(path, ReadOptions(topic="/rear/scan"))
+    assert rear.frames.frame_id == "rear_laser" and all(same_scan(s, laserazos.scan(k)) for k, s in enumerate(rear.scans))
+    res = CliRunner().invoke(app, ["match", str(path), "--pair", "0", "1", "--topic", "/nope"])
+    assert res.exit_code == 2 and "no LaserScan topic '/nope'" in res.output
+
+
+def stallo(k: int):
+    return read_log(DATA / "stallo2.jsonl").scan(k)
+
+
+def test_a_360_degree_lidar_whose_span_rounds_past_a_full_turn(tmp_path):
+    """1147 beams over 360.0003 degrees (a real 360-degree scan resampled): the closing beam repeats
+    the first and is dropped; the scan matches its neighbour."""
+    scans = []
+    for k in (0, 1):
+        s = stallo(k)
+        b = -math.pi + np.arange(1147) * math.radians(360.0003) / 1146
+        r = np.interp(b, s.bearings[s.valid] - 2 * math.pi * (s.bearings[s.valid] > math.pi),
+                      s.ranges[s.valid], period=2 * math.pi)
+        scans.append(make_scan(r, b))
+    robot = Robot([Topic("/scan", "laser", scans, increments=[math.radians(360.0003) / 1146] * 2)], [1.0, 1.1])
+    log = read_log(write(tmp_path / "l360.bag", robot, "ros1"))
+    assert [len(s.bearings) for s in log.scans] == [1146, 1146]
+    assert log.scans[0].is_full_circle() and log.scans[0].angular_span() < 2 * math.pi
+    res = CliRunner().invoke(app, ["match", str(tmp_path / "l360.bag"), "--pair", "0", "1", "--json", "--algo", "psm"])
+    assert res.exit_code == 0 and json.loads(res.output)["converged"], res.output
+
+
+def test_beam_counts_that_vary_keep_their_own_bearings(tmp_path):
+    """An RPLidar-like log: every scan has its own number of beams over 360 degrees."""
+    base = [stallo(0), stallo(1), stallo(0)]
+    keep = [slice(None), slice(0, None, 2), slice(1, None, 3)]
+    scans = [make_scan(s.ranges[k], s.bearings[k]) for s, k in zip(base, keep)]
+    incs = [float(np.median(np.diff(s.bearings))) for s in scans]
+    log = read_log(write(tmp_path / "rp.bag", Robot([Topic("/scan", "laser", scans, increments=incs)], [1, 2, 3]),
+                         "ros1"))
+    assert [len(s.bearings) for s in log.scans] == [len(s.bearings) for s in scans] == [1024, 512, 341]
+    for name in ("improved", "psm"):  # a coarse reference or a coarse object: every matcher copes
+        res = CliRunner().invoke(app, ["match", str(tmp_path / "rp.bag"), "--pair", "0", "2", "--algo", name,
+                                       "--json"])
+        assert res.exit_code == 0 and json.loads(res.output)["converged"], (name, res.output)
+
+
+def test_an_empty_scan_is_skipped_counted_and_refused_only_when_asked_for(tmp_path, intel):
+    scans = [intel.scan(k) for k in range(5)]
+    empty = make_scan(np.full(180, 81.9), scans[2].bearings, valid=np.ones(180, bool), invalid_values=())
+    scans[2] = empty  # every reading a no-return code: written as 81.9 m, beyond range_max
+    path = write(tmp_path / "e.bag", Robot([Topic("/scan", "laser", scans)], [1, 2, 3, 4, 5]), "ros1")
+    log = read_log(path)
+    assert len(log.scans) == 4 and list(log.unusable) == [2] and log.records == 5
+    assert log.consecutive_pairs() == [(0, 1), (1, 3), (3, 4)]
+    assert "skipped 1 unusable scan(s) of 5 (first: scan 2" in log.unusable_summary()
+    res = CliRunner().invoke(app, ["match", str(path), "--pair", "2", "3"])
+    assert res.exit_code == 2 and "scan 2 cannot be matched: no valid reading" in res.output
+
+
+def test_mount_for_files_without_tf(tmp_path, intel):
+    path = write(tmp_path / "plain.bag", intel_robot(intel, 10, 3, None, upside_down=True), "ros1")
+    as_written = read_log(path)
+    assert as_written.frames.mount_source is None and not same_scan(as_written.scans[0], intel.scan(10))
+    log = read_log(path, ReadOptions(mount=MOUNT, upside_down=True))  # the user says how the laser sits
+    assert same_scan(log.scans[0], intel.scan(10)) and log.frames.mount == MOUNT
+    res = CliRunner().invoke(app, ["match", str(path), "--pair", "0", "1", "--mount", "0.25", "-0.1", "180",
+                                   "--upside-down", "--init", "0.6", "0", "6"])
+    assert res.exit_code == 0 and "motion of the robot's base (the laser's mount from --mount" in res.output
+
+
+def test_a_bag_cut_short_keeps_its_intact_chunks_and_says_what_was_lost(tmp_path, intel):
+    path = write(tmp_path / "r.bag", intel_robot(intel, 10, 30, None), "ros1")
+    data = path.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    log = read_log(cut)
+    assert 0 < len(log.scans) < 30 and all(same_scan(s, intel.scan(10 + k)) for k, s in enumerate(log.scans))
+    assert any("cut short" in n and "the rest is lost" in n for n in log.notes)
+    res = CliRunner().invoke(app, ["eval", "sequence", str(cut), "--out", str(tmp_path / "o.json")])
+    assert res.exit_code == 0 and "cut short" in res.output
+    cut.write_bytes(data[:2000])  # nothing left to read: an error, not an empty log
+    with pytest.raises(InputError):
+        read_log(cut)
