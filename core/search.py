@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from .params import SearchParams
+from .params import ParamError, SearchParams
 from .scan import Scan
 from .se2 import Pose2, wrap_angle
 
@@ -30,6 +30,12 @@ class SearchResult:
     score: float  # the coarse best's summed weighted likelihood
     best_per_angle: np.ndarray  # (A,) best coarse score at each candidate rotation (the search's profile)
     angles: np.ndarray  # (A,) candidate rotations of the coarse pass [rad], relative to the guess
+
+
+# Bounds on what a search may cost whatever its parameters: point placements scored (time), and
+# window elements held at once (memory; the defaults stay in one batch, so their sums are unchanged).
+MAX_WORK = 5e8
+WINDOW_ELEMENTS = 4_000_000
 
 
 def likelihood_field(points: np.ndarray, origin: np.ndarray, shape: tuple[int, int], cell: float,
@@ -79,6 +85,12 @@ def _grid_pass(R: np.ndarray, O: np.ndarray, w: np.ndarray, guess: Pose2, g: Sea
     just outside, so a fine field stays small."""
     n = int(round(g.window_xy / g.cell))
     k = int(round(g.window_theta / g.angle_step))
+    work = (2 * k + 1) * len(O) * (2 * n + 1) ** 2
+    if work > MAX_WORK:
+        raise ParamError("window_xy", f"a search of +/-{g.window_xy:g} m in {g.cell:g} m cells and +/-"
+                                      f"{np.degrees(g.window_theta):g} deg in {np.degrees(g.angle_step):g} deg steps "
+                                      f"scores {work:.2g} point placements (at most {MAX_WORK:.0e}): narrow the "
+                                      "window or coarsen the grid")
     angles = np.arange(-k, k + 1) * g.angle_step
     moved = [Pose2(guess.x, guess.y, guess.theta + dth).apply(O) for dth in angles]
     landing = np.concatenate(moved)
@@ -88,11 +100,13 @@ def _grid_pass(R: np.ndarray, O: np.ndarray, w: np.ndarray, guess: Pose2, g: Sea
     field = likelihood_field(R, origin, shape, g.cell, g.sigma)
     # every (2n+1)^2 window of the field, as a view: a point at cell u scores window u - n
     windows = np.lib.stride_tricks.sliding_window_view(field, (2 * n + 1, 2 * n + 1))
+    chunk = max(1, WINDOW_ELEMENTS // (2 * n + 1) ** 2)  # points scored at once: memory bounded by the grid
     best_per_angle = np.empty(len(angles))
     best, best_pose = -1.0, guess
     for a, dth in enumerate(angles):
         u = np.round((moved[a] - origin) / g.cell).astype(np.int64) - n
-        score = np.einsum("p,pij->ij", w, windows[u[:, 0], u[:, 1]])
+        score = sum(np.einsum("p,pij->ij", w[k:k + chunk], windows[u[k:k + chunk, 0], u[k:k + chunk, 1]])
+                    for k in range(0, len(u), chunk))
         ij = np.unravel_index(int(np.argmax(score)), score.shape)
         best_per_angle[a] = score[ij]
         if score[ij] > best:

@@ -7,6 +7,7 @@ class InputError(Exception):
     """Bad input, reported as one line ``file:line: field: message`` and exit code 2."""
 
     def __init__(self, message: str, path: str | None = None, line: int | None = None, field: str | None = None):
+        message = " ".join(message.split("\n"))  # one line, whatever a library's text it quotes holds
         self.path, self.line, self.field, self.message = path, line, field, message
         where = ":".join(str(p) for p in (path, line) if p is not None)
         text = f"{field}: {message}" if field else message

@@ -150,7 +150,7 @@ def test_mount_for_files_without_tf(tmp_path, intel):
     assert same_scan(log.scans[0], intel.scan(10)) and log.frames.mount == MOUNT
     res = CliRunner().invoke(app, ["match", str(path), "--pair", "0", "1", "--mount", "0.25", "-0.1", "180",
                                    "--upside-down", "--init", "0.6", "0", "6"])
-    assert res.exit_code == 0 and "motion of the robot's base (the laser's mount from --mount" in res.output
+    assert res.exit_code == 0 and "motion of the robot's base (laser mount (0.25 m, -0.1 m, 180 deg) from --mount" in res.output, res.output
 
 
 def test_a_bag_cut_short_keeps_its_intact_chunks_and_says_what_was_lost(tmp_path, intel):

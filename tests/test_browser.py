@@ -14,7 +14,7 @@ from mbicp_viz.views.debugger.app import App
 from mbicp_viz.views.debugger.state import Source
 from mbicp_viz.views.scene import OBJECT, REFERENCE
 
-from .conftest import EXAMPLES
+from .conftest import DATA, EXAMPLES
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--disable-background-networking",
@@ -134,3 +134,108 @@ def test_two_tabs_keep_their_own_state(browser, app):
     assert s1.state.iteration == s1.state.max_iteration()
     p1.close()
     p2.close()
+
+
+def test_plots_read_numbers_not_dates(browser, app):
+    """uPlot's x axis is a time axis unless told otherwise: hovering a plot must show a distance."""
+    from playwright.sync_api import Error
+
+    page, session = open_tab(browser, app)
+    legend = page.locator(".u-legend").nth(1)
+
+    def hovered() -> bool:  # a plot's element is replaced when its data change: find it afresh
+        try:
+            plot = page.locator(".u-over").nth(1)  # the pair-distance histogram
+            plot.scroll_into_view_if_needed(timeout=2000)
+            box = plot.bounding_box()
+            page.mouse.move(box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.5)
+            return legend.locator(".u-value").first.inner_text(timeout=2000).strip() not in ("", "--")
+        except Error:
+            return False
+
+    assert wait_for(hovered)
+    shown = legend.locator(".u-value").first.inner_text().strip()
+    hi = float(np.max(session.state.runs[0].iterations[-1].pairs.distance)) * 1.05
+    assert 0.0 <= float(shown) <= hi, shown  # a distance in metres, not "1970-01-01 12:00am"
+    labels = " ".join(page.locator(".u-legend").first.inner_text().split())
+    assert "mean squared residual [m²]" in labels and "MAD threshold" in labels
+    page.close()
+
+
+def test_arrow_keys_on_the_slider_leave_the_view_top_down(browser, app):
+    from mbicp_viz.views.debugger.camera import TopDownCamera
+
+    page, session = open_tab(browser, app)
+    slider = page.get_by_role("slider").first
+    slider.focus()
+    for _ in range(35):  # each press also turns viser's camera: it is put back top-down
+        slider.press("ArrowLeft")
+    page.keyboard.down("ArrowUp")  # held keys tilt it continuously
+    assert wait_for(lambda: not TopDownCamera.is_top_down(session.client.camera.position,
+                                                          session.client.camera.look_at,
+                                                          session.client.camera.up_direction), 5)
+    page.keyboard.up("ArrowUp")
+    cam = session.client.camera
+    assert wait_for(lambda: TopDownCamera.is_top_down(cam.position, cam.look_at, cam.up_direction), 20)
+    assert session.state.iteration == 1  # the keys moved the slider too: 35 steps down to 0, one up
+    page.close()
+
+
+def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, tmp_path):
+    from PIL import Image
+
+    from mbicp_viz.views.scene import RUN_COLORS, run_style
+
+    page, session = open_tab(browser, app)
+    page.locator("xpath=//label[normalize-space(.)='icp']/ancestor::div[contains(@class, 'mantine-Flex-root')][1]"
+                 "//input").first.check()
+    assert wait_for(lambda: [r.name for r in session.state.runs] == ["icp", "improved"])
+    legend = page.locator(".mbicp-legend")
+    assert wait_for(lambda: run_style("icp").label in legend.inner_text())
+    assert run_style("improved").label in legend.inner_text()
+    page.get_by_text("icp: iteration").first.wait_for(timeout=10000)  # each run its own text
+    page.get_by_text("improved: iteration").first.wait_for(timeout=10000)
+    shot = tmp_path / "compare.png"
+
+    def both_drawn() -> bool:  # the view draws the new nodes on its next frames
+        page.screenshot(path=str(shot))
+        img = np.asarray(Image.open(shot).convert("RGB")).astype(int)[:, :1000]  # the view, not the panel
+        near = lambda rgb: int(np.count_nonzero(np.abs(img - np.array(rgb)).max(axis=2) < 30))  # noqa: E731
+        return near(RUN_COLORS["icp"]) > 100 and near(RUN_COLORS["improved"]) > 100
+
+    assert wait_for(both_drawn)
+    page.close()
+
+
+def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
+    """serve LOG --rows: the failures listed worst first with their reason; choosing one opens it
+    with the evaluation's own matcher, parameters and guess, and the page says it reproduces."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+    from mbicp_viz.evaluation.failures import failure_label
+    from mbicp_viz.views.debugger.sources import files_source
+
+    log, rows = DATA / "intel-relations.log", tmp_path / "rows.json"
+    res = CliRunner().invoke(cli, ["eval", "sequence", str(log), "--guess", "identity", "--truth", "pose",
+                                   "--out", str(rows), "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    src = files_source(str(log), None, rows=str(rows))
+    assert len(src.failures) >= 2
+    application = App(src, "127.0.0.1", 0)
+    try:
+        page, session = open_tab(browser, application)
+        page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
+        assert f"line {src.failures[0].line}" in page.inner_text("body")
+        page.get_by_role("combobox", name="open").click()
+        options = page.get_by_role("option").all_inner_texts()
+        assert options == [failure_label(k + 1, r) for k, r in enumerate(src.failures)]
+        page.get_by_role("option").nth(1).click()
+        second = src.failures[1]
+        page.get_by_text(f"line {second.line}").first.wait_for(timeout=30000)
+        page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
+        assert session.state.pair == (second.ref, second.obj) and session.state.guess == second.guess
+        assert box(page, "reference scan").input_value() == str(second.ref)
+        page.close()
+    finally:
+        application.stop()

@@ -216,3 +216,33 @@ def _saved_paths(path) -> set[str]:
             return {c.entity_path for c in RrdReader(str(path)).stream().to_chunks()}
     except Exception:  # not written yet, or a chunk half written
         return set()
+
+
+def test_rerun_viewer_shows_scenes_y_up_as_the_debugger(tmp_path, intel):
+    """rerun's 2-D views put y down; a recording's views must not. A real scan split by the sign of
+    y — the half ahead-left (y > 0) red, the other blue — rendered by rerun's own headless viewer:
+    red above blue, as in the debugger."""
+    import rerun.blueprint as rrb
+    from PIL import Image
+
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.rrd import log_layer, log_y_up, new_stream, y_up_view
+
+    pts = intel.scan(5).points()
+    path, shot = tmp_path / "yup.rrd", tmp_path / "yup.png"
+    stream = new_stream("mbicp-viz/y-up")
+    stream.save(str(path), default_blueprint=rrb.Blueprint(y_up_view("/run/scene", "scans"), collapse_panels=True))
+    log_y_up(stream, "run/scene")
+    log_layer(stream, "run", scene.Points("scene/left", pts[pts[:, 1] > 0.5], scene.REFERENCE, 0.15), static=True)
+    log_layer(stream, "run", scene.Points("scene/right", pts[pts[:, 1] < -0.5], scene.OBJECT, 0.15), static=True)
+    stream.flush()
+    stream.disconnect()
+    res = subprocess.run([RERUN, str(path), "--headless", "--window-size", "900x700", "--screenshot-to", str(shot)],
+                         capture_output=True, text=True, timeout=180)
+    assert res.returncode == 0 and shot.exists(), res.stderr[-2000:]
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    img = img[:, : img.shape[1] // 2]  # the left half: away from the viewer's notifications
+    rows = {name: np.flatnonzero(np.abs(img - np.array(s.color)).max(axis=2).min(axis=1) < 40)
+            for name, s in (("red", scene.REFERENCE), ("blue", scene.OBJECT))}
+    assert len(rows["red"]) > 5 and len(rows["blue"]) > 5
+    assert rows["red"].mean() < rows["blue"].mean()  # image rows grow downwards: red is drawn above

@@ -79,8 +79,12 @@ def sequence(log: LogArg,
         from mbicp_viz.views.rrd import record_sequence
 
         record_sequence(lg, rows, str(rrd))
-        say(f"sequence recording written to {rrd}; open a failed pair as it failed with: "
-            f"mbicp-viz serve {log} --rows {out}")
+        say(f"sequence recording written to {rrd}")
+    from mbicp_viz.evaluation.failures import failure_summary
+    from mbicp_viz.readers.rows import read_rows
+
+    for line in failure_summary(read_rows(out), str(out)):  # read back: what `serve --rows` will open
+        typer.echo(line.replace("LOG", str(log)))
 
 
 def _trajectories(lg, rows, png, tum, tum_ref, fuse) -> None:

@@ -8,6 +8,8 @@ from typing import Annotated, Optional
 
 import typer
 
+from mbicp_viz.errors import InputError
+
 from .options import (Guess, GuessOpt, MountOpt, PairOpt, TopicOpt, TypestoreOpt, UpsideDownOpt, read_options,
                       user_errors)
 
@@ -28,12 +30,16 @@ def serve(first: Annotated[Optional[str], typer.Argument(help="a scan log, or th
           pair: PairOpt = None, guess: GuessOpt = Guess.stored, host: HostOpt = "127.0.0.1",
           port: ServePortOpt = 8080, allow_origin: OriginOpt = None, for_seconds: ForOpt = None,
           topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None,
-          upside_down: UpsideDownOpt = False):
+          upside_down: UpsideDownOpt = False,
+          rows: Annotated[Optional[str], typer.Option("--rows", help="an evaluation's rows (`eval sequence --out`): "
+                                                      "its failures listed worst first, each opened as it ran")] = None):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
     from mbicp_viz.views.debugger.sources import files_source, scenario_source
 
+    if scenario is not None and (first is not None or rows is not None):
+        raise InputError("a scenario brings its own scans: give --scenario alone", field="--scenario")
     reading = read_options(topic, typestore, mount, upside_down)
-    source = scenario_source(scenario) if scenario is not None else files_source(first, second, pair, guess, reading)
+    source = scenario_source(scenario) if scenario is not None else files_source(first, second, pair, guess, reading, rows)
     _serve(source, host, port, tuple(allow_origin or ()), for_seconds)
 
 

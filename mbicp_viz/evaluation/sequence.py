@@ -76,7 +76,9 @@ def _match_row(job) -> dict:
     guess_ms = 1000.0 * (time.perf_counter() - t0)
     o = run(ref, obj, g, params)
     r = reported(o.result, frames, base)
-    row = result_row(i, j, r, o.time_ms) | {"guess": source, "on_ref": o.on_ref, "frame": frames.frame_name(base)}
+    row = result_row(i, j, r, o.time_ms) | r.as_dict() | {
+        "guess": source, "guess_pose": [g.x, g.y, g.theta], "on_ref": o.on_ref, "frame": frames.frame_name(base),
+        "params": params.as_dict()}  # guess_pose (laser frame) and params: the pair reopens exactly as it ran
     if guess is Guess.search:
         row["guess_ms"] = guess_ms
     if ref.odometry is not None and obj.odometry is not None:  # how far the match is from the odometry

@@ -13,6 +13,7 @@ that a match (the laser's motion T) is the base's motion ``mount @ T @ mount.inv
 from __future__ import annotations
 
 import bisect
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,7 +47,9 @@ class Frames:
         laser = f"the laser frame{f' {self.frame_id!r}' if self.frame_id else ''}"
         if not self.reports_base(base):
             return laser if not base else f"{laser} (no mount known: give --mount X Y THETA_DEG for the base's motion)"
-        return f"the robot's {self.base_frame} (the laser's mount from {self.mount_source}: {self.mount})"
+        m = self.mount
+        return (f"the robot's {self.base_frame} (laser mount ({m.x:g} m, {m.y:g} m, {math.degrees(m.theta):g} deg) "
+                f"from {self.mount_source})")
 
     def reported(self, motion: Pose2, base: bool) -> Pose2:
         """A motion of the laser as reported: the base's motion when ``base`` and the mount is known."""

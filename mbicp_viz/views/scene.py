@@ -54,7 +54,29 @@ STYLES = (REFERENCE, TRUTH, INITIAL, OBJECT, OBJECT_AFTER, HIDDEN, PAIR_POINT, P
 # Plot series: the legend of the plots.
 ERROR = Style("mean squared residual [m²]", (90, 90, 90))
 THRESHOLD = Style("rejection threshold [m]", (245, 160, 0))
+HARD_CUT = Style("hard cut [m]", (200, 60, 60))
 METRIC_WEIGHT = Style("PMWN metric weight λ [m/rad]", (210, 0, 130))
+
+
+def threshold_style(params) -> Style:
+    """What a matcher's per-iteration threshold (``IterationEvent.threshold``) is, in its plots."""
+    if getattr(params, "mad_rejection", False):
+        return replace(THRESHOLD, label=f"MAD threshold: median + {params.mad_k:g} MAD, at least "
+                                        f"{params.mad_floor:g} m [m]")
+    if hasattr(params, "max_error"):
+        return replace(THRESHOLD, label="max_error: residuals beyond are not used [m]")
+    return replace(THRESHOLD, label=f"trim cut: the best {100 * params.filter:g} % of the pairs kept [m]")
+
+
+def hard_cut(params) -> tuple[Style, float] | None:
+    """The distance beyond which a matcher never pairs (MbICP's radial window Br, ICP's maximum
+    correspondence distance), with its legend entry; None for the polar matchers."""
+    if hasattr(params, "Br"):
+        return replace(HARD_CUT, label=f"Br: radial window, {params.Br:g} m"), params.Br
+    if hasattr(params, "max_correspondence_dist"):
+        return (replace(HARD_CUT, label=f"max_correspondence_dist, {params.max_correspondence_dist:g} m"),
+                params.max_correspondence_dist)
+    return None
 
 # Compare mode: one colour per matcher, none of them a colour of the layers above.
 RUN_COLORS: dict[str, RGB] = {"icp": (230, 159, 0), "mbicp": (0, 114, 178), "improved": (204, 80, 170),
@@ -143,10 +165,11 @@ SEQUENCE = "sequence"
 
 def scene_scale(points: np.ndarray) -> float:
     """How much to enlarge dots and lines so that they stay visible on a large scene: 1 for a
-    scene up to 10 m across, its extent / 10 m above."""
+    scene up to 5 m across, its extent / 5 m above (a view fitted to the scene shows dots of about
+    the same size on the screen)."""
     if len(points) < 2:
         return 1.0
-    return max(1.0, float(np.ptp(points, axis=0).max()) / 10.0)
+    return max(1.0, float(np.ptp(points, axis=0).max()) / 5.0)
 
 
 def ratio_colors(ratio: np.ndarray) -> np.ndarray:
@@ -209,7 +232,7 @@ def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
         Text(LOG, iteration_text(ev)),
     ]
     if ev.threshold is not None:
-        layers.append(Scalar(f"{PLOTS}/threshold", ev.threshold, THRESHOLD))
+        layers.append(Scalar(f"{PLOTS}/threshold", ev.threshold, threshold_style(start.params)))
     return layers + polar_layers(ev, s)
 
 
@@ -290,7 +313,7 @@ def teaching_layers(start: StartEvent, ev: IterationEvent, n_points: int = 6, bi
         layers.append(Strips(f"{SCANS}/{TEACH}/euclidean_circles",
                              [circle(t, float(np.linalg.norm(s - t))) for s, t in zip(src, tgt)], ISO_EUCLID, w))
     if len(p.distance):
-        layers += histogram_layers(histogram(p.distance, ev.threshold, bins))
+        layers += histogram_layers(histogram(p.distance, ev.threshold, bins), threshold_style(start.params))
     return layers
 
 
@@ -319,7 +342,7 @@ HIST_BARS = Style("pairs per distance bin", (120, 120, 120))
 MEDIAN = Style("median distance", (20, 20, 20))
 
 
-def histogram_layers(h: Histogram) -> list[Layer]:
+def histogram_layers(h: Histogram, threshold: Style = THRESHOLD) -> list[Layer]:
     """The histogram as bars in a 2-D plot (x: metres, bar heights scaled to about 0.6 of the x
     range, so that the view is square), with median and threshold lines."""
     hi = float(h.edges[-1])
@@ -331,7 +354,7 @@ def histogram_layers(h: Histogram) -> list[Layer]:
                         Strips(f"{TEACH}/histogram/median", [np.array([[h.median, 0.0], [h.median, top]])], MEDIAN, w)]
     if h.threshold is not None:
         out.append(Strips(f"{TEACH}/histogram/threshold", [np.array([[h.threshold, 0.0], [h.threshold, top]])],
-                          THRESHOLD, w))
+                          threshold, w))
     return out
 
 

@@ -70,7 +70,9 @@ def draw(scene_api, name: str, layer: scene.Layer, visible: bool = True):
         pts = _xyz(layer.xy, z)
         c = layer.colors[:, :3] if layer.colors is not None else np.broadcast_to(
             np.asarray(layer.style.color, np.uint8), (len(pts), 3))
-        return scene_api.add_point_cloud(name, pts, np.asarray(c, np.uint8), point_size=2.0 * layer.radius,
+        # viser 1.1's point shader draws point_size / tan(fov/2) * height / z pixels: twice the
+        # projection of a world length, so a dot of diameter 2r takes point_size = r.
+        return scene_api.add_point_cloud(name, pts, np.asarray(c, np.uint8), point_size=layer.radius,
                                          point_shape="circle", precision="float32", visible=visible)
     if isinstance(layer, (scene.Segments, scene.Strips, scene.Boxes)):
         segs, colors, width = _line_geometry(layer, z)

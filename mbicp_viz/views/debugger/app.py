@@ -14,6 +14,7 @@ import traceback
 
 import viser
 
+from .camera import TopDownCamera
 from .session import Session
 from .state import Source, run_match
 
@@ -31,6 +32,7 @@ class App:
                  allow_origins: tuple[str, ...] = ()):
         self.source = source
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())  # where every tab starts
         self.origins = local_origins(host, self.port) | set(allow_origins)
         self.sessions: dict[int, Session] = {}
         self.refused: dict[int, str] = {}  # client id -> the origin whose websocket was closed

@@ -10,23 +10,24 @@ top-down and pass untouched.
 from __future__ import annotations
 
 import math
+import threading
+import time
 
 import numpy as np
 import viser
 
 TOLERANCE_RAD = math.radians(0.5)
+SETTLE_S = 1.0  # reports this soon after the camera was placed may still show the view before
+DEFAULT_ASPECT = 1.1  # a tab's view beside the fixed control panel, until it reports its own
 
 
 class TopDownCamera:
     def __init__(self, client: viser.ClientHandle | viser.ViserServer):
         self.client = client
+        self.placed_at = -math.inf  # when this put the camera somewhere (the tab's reports lag behind)
+        self.recheck: threading.Timer | None = None
         if isinstance(client, viser.ClientHandle):
             client.camera.on_update(lambda cam: self.level(cam))
-
-    def _cameras(self):
-        if isinstance(self.client, viser.ClientHandle):
-            return [self.client.camera]
-        return [c.camera for c in self.client.get_clients().values()]
 
     @staticmethod
     def is_top_down(position, look_at, up) -> bool:
@@ -40,24 +41,42 @@ class TopDownCamera:
         """Put a tilted or turned camera back top-down (same point, same distance)."""
         if self.is_top_down(cam.position, cam.look_at, cam.up_direction):
             return
+        wait = SETTLE_S - (time.monotonic() - self.placed_at)
+        if wait > 0:  # maybe a report from before the tab took the last placement: look again later
+            if self.recheck is None or not self.recheck.is_alive():
+                self.recheck = threading.Timer(wait, self.level, (cam,))
+                self.recheck.daemon = True
+                self.recheck.start()
+            return
         look = np.asarray(cam.look_at, float)
-        dist = float(np.linalg.norm(np.asarray(cam.position, float) - look))
-        self._place(cam, look[:2], dist)
+        self._place(cam, look[:2], float(np.linalg.norm(np.asarray(cam.position, float) - look)))
 
-    @staticmethod
-    def _place(cam, centre, height: float) -> None:
+    def _place(self, cam, centre, height: float) -> None:
+        self.placed_at = time.monotonic()
         with cam.client.atomic():
             cam.up_direction = (0.0, 1.0, 0.0)
             cam.position = (float(centre[0]), float(centre[1]), float(height))
             cam.look_at = (float(centre[0]), float(centre[1]), 0.0)
 
+    @staticmethod
+    def framing(points: np.ndarray, fov: float, aspect: float) -> tuple[np.ndarray, float]:
+        """Centre and height of a top-down camera that shows all of ``points``."""
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        w, h = np.maximum(hi - lo, 1.0) * 1.15
+        tan = math.tan(fov / 2)
+        return (lo + hi) / 2, max(h / (2 * tan), w / (2 * tan * aspect))
+
     def fit(self, points: np.ndarray) -> None:
-        """Top-down over ``points`` (the reference scan), the whole scan in view."""
-        c = points.mean(axis=0) if len(points) else np.zeros(2)
-        extent = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 10.0
-        height = max(extent * 1.1, 2.0)
-        if isinstance(self.client, viser.ViserServer):  # no tab yet: where every tab starts
+        """Top-down over ``points`` (the reference scan), the whole scan in view. On the server (no
+        tab yet) this is where every new tab starts: a view set while a tab is still opening races
+        the tab's own first view."""
+        pts = points if len(points) else np.zeros((1, 2))
+        if isinstance(self.client, viser.ViserServer):
             cam = self.client.initial_camera
+            c, height = self.framing(pts, cam.fov, DEFAULT_ASPECT)
             cam.up, cam.position, cam.look_at = (0.0, 1.0, 0.0), (c[0], c[1], height), (c[0], c[1], 0.0)
-        for cam in self._cameras():
+            return
+        cam = self.client.camera
+        if cam.update_timestamp > 0.0:
+            c, height = self.framing(pts, cam.fov, cam.aspect or DEFAULT_ASPECT)
             self._place(cam, c, height)

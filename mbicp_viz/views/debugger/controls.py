@@ -86,6 +86,13 @@ class Matchers:
         self.params = panels.param_panel(self.gui, f"Parameters: {self.edited}", self.s.state.params[self.edited],
                                          self.order + 1, lambda name, text: self.s.guarded(lambda: self._typed(name, text)))
 
+    def show(self) -> None:
+        """The boxes as the model holds them (after a pair was reopened with its own matcher)."""
+        for n, box in self.boxes.items():
+            box.value = n in self.s.state.algorithms
+        self.edited = self.edit.value = self.s.state.algorithms[0]
+        self._build_params()
+
     def _chosen(self) -> None:
         error = self.s.state.set_algorithms([n for n, box in self.boxes.items() if box.value])
         if error:
@@ -239,3 +246,29 @@ class Layers:
                 self.s.state.visible[style.label] = True
                 self.boxes[style.label].value = True
         self.s.redraw()
+
+
+class Failures:
+    """An evaluation's failed pairs (``serve LOG --rows FILE``), worst first with their reason;
+    choosing one reopens it exactly as the evaluation ran it."""
+
+    MAX_LISTED = 500  # a dropdown longer than this is no longer read; the file keeps them all
+
+    def __init__(self, session, gui, order: float):
+        from mbicp_viz.evaluation.failures import failure_label
+
+        self.s = session
+        src = session.state.source
+        rows = src.failures[:self.MAX_LISTED]
+        self.rows = {failure_label(k + 1, r): r for k, r in enumerate(rows)}
+        with gui.add_folder(f"Failures ({src.rows_label})", order=order):
+            if not rows:
+                gui.add_markdown("no failed pair among them")
+                return
+            gui.add_markdown(f"{len(src.failures)} failed, worst first (translation error)"
+                             + (f"; the first {len(rows)} are listed" if len(src.failures) > len(rows) else ""))
+            self.pick = gui.add_dropdown("open", list(self.rows), initial_value=next(iter(self.rows)))
+        self.pick.on_update(lambda _: session.guarded(self._picked))
+
+    def _picked(self) -> None:
+        self.s.open_row(self.rows[self.pick.value])

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import html
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import viser
@@ -89,95 +89,164 @@ def param_panel(gui, title: str, params: Params, order: float, on_commit) -> Par
     return ParamPanel(folder, boxes, message)
 
 
-@dataclass
-class Plots:
-    error: viser.GuiUplotHandle
-    histogram: viser.GuiUplotHandle
-    cost: viser.GuiUplotHandle
-
-
-def _numeric(x_label: str, *axes: tuple[str, str, int]) -> dict:
-    """uPlot options for numeric axes (uPlot's x axis is a time axis unless told otherwise)."""
-    scales = {"x": uplot.Scale(time=False, auto=True)} | {key: uplot.Scale(auto=True) for key, _, _ in axes}
+def _numeric(x_label: str, *axes: tuple[str, str, int, float]) -> dict:
+    """uPlot options: a numeric x axis (uPlot's is a time axis unless told otherwise) and y axes of
+    fixed range [0, top]. The ranges cover every iteration of the runs, so the axes stay still while
+    stepping, and a gap (NaN) in a line cannot break the auto-ranging (uPlot draws nothing when a
+    line on an auto-ranged axis starts with one)."""
+    scales = {"x": uplot.Scale(time=False, auto=True)}
+    scales |= {key: uplot.Scale(auto=False, range=(0.0, top)) for key, _, _, top in axes}
     return dict(scales=scales, axes=(uplot.Axis(label=x_label, scale="x"),
-                                     *(uplot.Axis(label=label, scale=key, side=side) for key, label, side in axes)))
+                                     *(uplot.Axis(label=label, scale=key, side=side) for key, label, side, _ in axes
+                                       if label)))
 
 
-def plots(gui, order: float) -> Plots:
-    empty3 = (np.zeros(1), np.zeros(1), np.zeros(1))
-    with gui.add_folder("Plots", order=order):
-        error = gui.add_uplot(
-            data=empty3, title="error and threshold per iteration", aspect=1.6,
-            series=(uplot.Series(label="iteration"),
-                    uplot.Series(label=scene.ERROR.label, scale="err", stroke=_css(scene.ERROR.color), width=2),
-                    uplot.Series(label=scene.THRESHOLD.label, scale="m", stroke=_css(scene.THRESHOLD.color),
-                                 width=2)),
-            **_numeric("iteration", ("err", "error [m²]", 3), ("m", "threshold [m]", 1)))
-        histogram = gui.add_uplot(
-            data=(np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1)),
-            title="pair distances (current iteration)", aspect=1.6,
-            series=(uplot.Series(label="distance [m]"),
-                    uplot.Series(label="pairs", scale="n", stroke=_css(scene.HIST_BARS.color), width=2),
-                    uplot.Series(label=scene.MEDIAN.label, scale="n", stroke=_css(scene.MEDIAN.color), width=2),
-                    uplot.Series(label=scene.THRESHOLD.label, scale="n", stroke=_css(scene.THRESHOLD.color),
-                                 width=2)),
-            **_numeric("pair distance [m]", ("n", "pairs per bin", 3)))
-        cost = gui.add_uplot(
-            data=empty3, title="polar matchers: cost per shift (current iteration)", aspect=1.6, visible=False,
-            series=(uplot.Series(label="shift [deg]"),
-                    uplot.Series(label="cost [m]", scale="m", stroke=_css(scene.COST.color), width=2),
-                    uplot.Series(label=scene.FIT.label, scale="m", stroke=_css(scene.FIT.color), width=2)),
-            **_numeric("shift [deg]", ("m", "cost [m]", 3)))
-    return Plots(error, histogram, cost)
+def _line(label: str, scale: str, style: scene.Style, dash: bool = False) -> uplot.Series:
+    return uplot.Series(label=label, scale=scale, stroke=_css(style.color), width=2, dash=[6, 4] if dash else None)
+
+
+def _top(values) -> float:
+    """The top of a fixed y range: a little above the largest finite value (1 when there is none)."""
+    v = np.asarray([x for x in values if x is not None], dtype=float)
+    v = v[np.isfinite(v)]
+    return float(v.max()) * 1.08 if len(v) and v.max() > 0 else 1.0
+
+
+class Plots:
+    """Error and threshold of every run per iteration; the pair distances and (PSM, PMWN) the cost per
+    shift of one run at the current iteration. The plots follow the runs: each run its lines, each
+    line its legend entry, numeric axes with units."""
+
+    def __init__(self, gui, order: float):
+        self.gui, self.shown = gui, None
+        with gui.add_folder("Plots", order=order) as self.folder:
+            self.error = self.histogram = self.cost = None
+
+    def show_runs(self, state: DebugState) -> None:
+        """Rebuild the plots when the runs (matchers, parameters, pair, guess) change; then fill them."""
+        key = tuple(id(r) for r in state.runs)
+        if key != self.shown:
+            self.shown = key
+            for handle in (self.error, self.histogram, self.cost):
+                if handle is not None:
+                    handle.remove()
+            with self.folder:
+                self._build(state)
+        self.error.data = error_series(state)
+        self.iteration(state)
+
+    def _build(self, state: DebugState) -> None:
+        events = [e for r in state.runs for e in r.iterations]
+        polar = polar_run(state)
+        first = state.runs[0]
+        self.error = self.gui.add_uplot(
+            data=error_series(state), series=error_legend(state), aspect=1.6, title="error and threshold per iteration",
+            **_numeric("iteration", ("err", "error [m²]", 3, _top(e.error for e in events)),
+                       ("m", "threshold [m]", 1, _top(e.threshold for e in events))))
+        counts = [scene.histogram(e.pairs.distance, e.threshold).counts.max() for e in first.iterations
+                  if len(e.pairs.distance)]
+        self.histogram = self.gui.add_uplot(
+            data=histogram_series(state), series=histogram_legend(state), aspect=1.6,
+            title=f"{first.name}: pair distances (this iteration)",
+            **_numeric("pair distance [m]", ("n", "pairs per bin", 3, _top(counts)), ("mark", "", 1, 1.0)))
+        costs = [np.nanmax(e.polar.cost) for e in (polar.iterations if polar else []) if np.any(np.isfinite(e.polar.cost))]
+        self.cost = self.gui.add_uplot(
+            data=cost_series(state) or (np.zeros(1),) * 3, aspect=1.6, visible=polar is not None,
+            title=f"{polar.name if polar else 'polar matchers'}: cost per shift (this iteration)",
+            series=(uplot.Series(label="shift [deg]"), _line("cost [m]", "m", scene.COST),
+                    _line(scene.FIT.label, "m", scene.FIT)),
+            **_numeric("shift [deg]", ("m", "cost [m]", 3, _top(costs))))
+
+    def iteration(self, state: DebugState) -> None:
+        """The plots of the current iteration."""
+        self.histogram.data = histogram_series(state)
+        cost = cost_series(state)
+        if cost is not None:
+            self.cost.data = cost
 
 
 def _css(rgb) -> str:
     return "rgb({},{},{})".format(*rgb)
 
 
-def legend_html(styles: list[scene.Style]) -> str:
-    """A swatch and a label per style (the layers shown now)."""
+def legend_html(styles: list[scene.Style], grid_m: float | None = None) -> str:
+    """A swatch and a label per style (the layers shown now), and the grid's cell size."""
+    grid = (f'<div class="legend-entry" style="font-size:12px;line-height:1.6;color:#666">grid: {grid_m:g} m cells, '
+            f'thicker every {5 * grid_m:g} m; x right, y up (the reference laser frame)</div>' if grid_m else "")
     rows = "".join(
         f'<div class="legend-entry" style="display:flex;align-items:center;gap:6px;font-size:12px;line-height:1.6">'
         f'<span style="display:inline-block;width:12px;height:12px;border-radius:6px;background:{_css(s.color)}">'
         f'</span><span>{html.escape(s.label)}</span></div>' for s in styles)
-    return f'<div class="mbicp-legend" style="padding:2px 8px">{rows or "no layer shown"}</div>'
+    return f'<div class="mbicp-legend" style="padding:2px 8px">{rows or "no layer shown"}{grid}</div>'
 
 
 # ---- plot data (what the plots show at the current iteration) ---------------------------------
 
+def error_legend(state: DebugState) -> tuple[uplot.Series, ...]:
+    series = [uplot.Series(label="iteration")]
+    for run in state.runs:
+        own = scene.RUN_COLORS[run.name] if len(state.runs) > 1 else scene.ERROR.color
+        series.append(_line(f"{run.name}: {scene.ERROR.label}", "err", replace(scene.ERROR, color=own)))
+        thr = scene.threshold_style(run.start.params)
+        own = scene.RUN_COLORS[run.name] if len(state.runs) > 1 else thr.color
+        series.append(_line(f"{run.name}: {thr.label}", "m", replace(thr, color=own), dash=True))
+    return tuple(series)
+
+
 def error_series(state: DebugState) -> tuple[np.ndarray, ...]:
-    """Iteration, error [m²] and threshold [m] of the first run (compare: see ``compare_series``)."""
-    run = state.runs[0]
-    x = np.arange(1, len(run.iterations) + 1, dtype=float)
-    err = np.array([e.error for e in run.iterations], dtype=float)
-    thr = np.array([np.nan if e.threshold is None else e.threshold for e in run.iterations], dtype=float)
-    return x, err, thr
+    """Iteration, then error [m²] and threshold [m] of each run (NaN past its end or without one)."""
+    n = max(state.max_iteration(), 1)
+    out = [np.arange(1, n + 1, dtype=float)]
+    for run in state.runs:
+        err, thr = np.full(n, np.nan), np.full(n, np.nan)
+        for k, e in enumerate(run.iterations):
+            err[k] = e.error
+            thr[k] = np.nan if e.threshold is None else e.threshold
+        out += [err, thr]
+    return tuple(out)
+
+
+def histogram_legend(state: DebugState) -> tuple[uplot.Series, ...]:
+    params = state.runs[0].start.params
+    cut = scene.hard_cut(params)
+    return (uplot.Series(label="distance [m]"), _line(scene.HIST_BARS.label, "n", scene.HIST_BARS),
+            _line(scene.MEDIAN.label, "mark", scene.MEDIAN),
+            _line(scene.threshold_style(params).label, "mark", scene.THRESHOLD),
+            _line(cut[0].label if cut else "no hard cut", "mark", scene.HARD_CUT, dash=True))
+
+
+def polar_run(state: DebugState):
+    return next((r for r in state.runs if r.iterations and r.iterations[0].polar is not None), None)
 
 
 def histogram_series(state: DebugState) -> tuple[np.ndarray, ...]:
-    """The current iteration's pair distances as a staircase of bars, with vertical median and
-    threshold lines (uPlot joins consecutive points: two points at one x make a vertical line)."""
-    ev = state.event(state.runs[0])
+    """The first run's pair distances at the current iteration as a staircase of bars, and vertical
+    lines (0 to 1 on the plot's full height) at the median, the threshold and the hard cut; uPlot
+    joins consecutive points, so two points at one x make a vertical line."""
+    run = state.runs[0]
+    ev = state.event(run)
     if ev is None or not len(ev.pairs.distance):
-        z = np.zeros(1)
-        return z, z, np.full(1, np.nan), np.full(1, np.nan)
+        z, nan = np.zeros(2), np.full(2, np.nan)
+        return np.array([0.0, 1.0]), z, nan, nan, nan
     h = scene.histogram(ev.pairs.distance, ev.threshold)
-    top, nan = float(h.counts.max()) or 1.0, float("nan")
+    cut = scene.hard_cut(run.start.params)
+    nan = float("nan")
     bx, by = np.repeat(h.edges, 2)[1:-1], np.repeat(h.counts.astype(float), 2)
-    rows = [(x, b, nan, nan) for x, b in zip(bx, by)] + [(h.median, nan, 0.0, nan), (h.median, nan, top, nan)]
-    if h.threshold is not None:
-        rows += [(h.threshold, nan, nan, 0.0), (h.threshold, nan, nan, top)]
+    rows = [(x, b, nan, nan, nan) for x, b in zip(bx, by)]
+    for column, value in ((2, h.median), (3, h.threshold), (4, cut[1] if cut else None)):
+        if value is not None:
+            rows += [tuple(value if c == 0 else (y if c == column else nan) for c in range(5)) for y in (0.0, 1.0)]
     rows.sort(key=lambda r: r[0])  # stable: a line's two points stay in order
-    x, bars, median, threshold = np.array(rows).T
+    x, bars, *lines = np.array(rows).T
     gaps = np.isnan(bars)
-    bars[gaps] = np.interp(x[gaps], bx, by)  # the bars' height where a line is inserted
-    return x, bars, median, threshold
+    bars[gaps] = np.interp(x[gaps], bx, by, right=0.0)  # the bars' height where a line is inserted
+    return (x, bars, *lines)
 
 
 def cost_series(state: DebugState) -> tuple[np.ndarray, ...] | None:
     """PSM/PMWN: the orientation step's cost per shift and the fit at its minimum; None otherwise."""
-    ev = state.event(state.runs[0])
+    run = polar_run(state)
+    ev = state.event(run) if run is not None else None
     polar = ev.polar if ev is not None else None
     if polar is None or not np.any(np.isfinite(polar.cost)):
         return None

@@ -20,6 +20,11 @@ from .camera import TopDownCamera
 from .state import DebugState, Source
 
 
+def grid_cell(extent_m: float) -> float:
+    """A round grid cell for a scene ``extent_m`` across: 10 to 40 cells over it."""
+    return next((c for c in (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0) if extent_m / c <= 40), 100.0)
+
+
 COMPILING = "Compiling the matchers' kernels (the first start after an install takes a few seconds)…"
 
 
@@ -34,6 +39,8 @@ class Session:
         self.client, self.lock = client, threading.RLock()
         self.state = DebugState(source)
         self.nodes: dict[str, object] = {}  # scene node name -> viser handle, as last drawn
+        self.grid_m = 1.0  # the metric grid's cell [m]
+        self.shown: list[scene.Style] = []  # the styles of what is drawn, for the legend
         self._build(client.gui, source)
         if ready is None:
             self.first_match()
@@ -46,9 +53,11 @@ class Session:
             ready.wait()
         with self.lock:
             self.after_match(self.state.rematch())
-            self.fit_view()
+            self.fit_view(camera=False)  # a new tab starts where the server placed its camera
 
     def _build(self, gui, src: Source) -> None:
+        gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
+        gui.main_panel.dock_right()  # beside the view, never over it
         gui.add_markdown(f"**mbicp-viz** — {src.label}", order=0)
         self.h_status = gui.add_markdown("", order=1)
         if src.note:
@@ -57,6 +66,8 @@ class Session:
         self.camera = TopDownCamera(self.client)
         gui.add_button("fit the view", order=4, hint="top-down over the reference scan").on_click(
             lambda _: self.fit_view())
+        if src.rows_label:
+            controls.Failures(self, gui, order=5)
         self.playback = controls.Playback(self, gui, order=10)
         with gui.add_folder("Result", order=20):
             self.h_result = gui.add_markdown("")
@@ -64,7 +75,7 @@ class Session:
         self.guess = controls.Guess(self, gui, order=40)
         self.scans = controls.Scans(self, gui, order=50) if src.pick_pair else None
         self.layers = controls.Layers(self, gui, order=60)
-        self.plots = panels.plots(gui, order=70)
+        self.plots = panels.Plots(gui, order=70)
         with gui.add_folder("Export", order=80):
             gui.add_button("export .rrd").on_click(lambda _: self.guarded(self.export_rrd))
             gui.add_button("save parameters (TOML)").on_click(lambda _: self.guarded(self.export_params))
@@ -81,8 +92,15 @@ class Session:
         self.playback.show(self.state.max_iteration())
         self.redraw()
         self.h_result.content = self.state.result_markdown()
-        self.plots.error.data = panels.error_series(self.state)
+        self.plots.show_runs(self.state)
         self.guess.show()
+
+    def open_row(self, row) -> None:
+        """Reopen an evaluated pair as it ran; the controls then show its matcher, pair and guess."""
+        error = self.state.open_row(row)
+        if not error:
+            self.matchers.show()
+        self.scans.open(error)
 
     def redraw(self) -> None:
         """Every run's layers at the current iteration, the legend of what is shown, the plots."""
@@ -97,22 +115,31 @@ class Session:
                     self.nodes[name] = viser_draw.draw(self.client.scene, name, layer, visible)
                     if visible and scene.has_content(layer):
                         shown.setdefault(layer.style.label, layer.style)
-            self.h_legend.content = panels.legend_html(list(shown.values()))
+            self.shown = list(shown.values())
+            self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
             self.playback.text.content = "  \n".join(
                 f"**{r.name}**: {self.state.iteration_text(r)}" for r in self.state.runs)
-            self.plots.histogram.data = panels.histogram_series(self.state)
-            cost = panels.cost_series(self.state)
-            self.plots.cost.visible = cost is not None
-            if cost is not None:
-                self.plots.cost.data = cost
+            if self.plots.shown is not None:
+                self.plots.iteration(self.state)
 
     def clear_scene(self) -> None:
         for handle in self.nodes.values():
             handle.remove()
         self.nodes = {}
 
-    def fit_view(self) -> None:
-        self.camera.fit(self.state.runs[0].start.ref_points if self.state.runs else np.zeros((1, 2)))
+    def fit_view(self, camera: bool = True) -> None:
+        """Top-down over the reference scan, with a metric grid under it (its cell size in the legend)."""
+        pts = self.state.runs[0].start.ref_points if self.state.runs else np.zeros((1, 2))
+        if camera:
+            self.camera.fit(pts)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        self.grid_m = grid_cell(float((hi - lo).max()))
+        size = (np.ceil((hi - lo) / self.grid_m) + 4) * self.grid_m
+        centre = np.round((lo + hi) / 2 / self.grid_m) * self.grid_m
+        self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
+        self.client.scene.add_grid("/grid", float(size[0]), float(size[1]), plane="xy", cell_size=self.grid_m,
+                                   section_size=self.grid_m * 5, position=(float(centre[0]), float(centre[1]), -0.01),
+                                   shadow_opacity=0.0)
 
     def guarded(self, fn) -> None:
         """Run a callback under the tab's lock; a bug inside it is shown in the page and the server

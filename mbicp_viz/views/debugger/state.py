@@ -16,12 +16,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mbicp_viz.core import (MATCHERS, FieldSpec, IterationEvent, MatchResult, ParamError, Params, Pose2, Recorder,
-                            ScanError, SearchParams, StartEvent, field_specs, match)
+                            ScanError, SearchParams, StartEvent, field_specs, match, pose_error)
 from mbicp_viz.core.agreement import INLIER_RADIUS_M, inlier_fraction
 from mbicp_viz.core.params import check_value
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess, pair_guess, stored_truth
 from mbicp_viz.readers import ScanLog
+from mbicp_viz.readers.rows import EvalRow
 
 from .. import scene, text
 
@@ -43,6 +44,9 @@ class Source:
     search: SearchParams = field(default_factory=SearchParams)
     note: str = ""  # Markdown shown above the panels (a scenario's "what to look at")
     teaching: bool = False  # iso-distance curves on from the start
+    failures: list[EvalRow] = field(default_factory=list)  # an evaluation's failed pairs, worst first
+    rows_label: str = ""  # the rows file they come from, and how many rows it holds
+    opened: EvalRow | None = None  # the row the first match reopens
 
 
 @dataclass
@@ -124,7 +128,10 @@ class DebugState:
         self.search = source.search
         self.algorithms: list[str] = list(source.algorithms)
         self.pair = source.pair
+        self.opened: EvalRow | None = None  # the evaluation row last reopened
         self.guess, self.guess_source = self._pair_guess()
+        if source.opened is not None:
+            self._apply_row(source.opened)
         self.runs: list[Run] = []
         self.iteration = 0
         self.visible = {s.label: s.on or (source.teaching and s in (scene.ISO_METRIC, scene.ISO_EUCLID))
@@ -167,6 +174,26 @@ class DebugState:
             self.pair = old
             return str(e)
         return self.rematch()
+
+    def _apply_row(self, row: EvalRow) -> None:
+        self.pair, self.opened = (row.ref, row.obj), row
+        self.ref, self.obj  # noqa: B018 - an unusable scan is refused here
+        self.algorithms, self.params[row.algorithm] = [row.algorithm], row.params
+        self.guess, self.guess_source = row.guess, f"the evaluation's guess ({row.guess_source})"
+
+    def open_row(self, row: EvalRow) -> str | None:
+        """Reopen an evaluated pair exactly as the evaluation ran it: its scans, matcher,
+        parameters and initial guess. None, or why not (then nothing changes)."""
+        old = self.pair, self.opened, list(self.algorithms), self.params[row.algorithm], self.guess, self.guess_source
+        try:
+            self._apply_row(row)
+            err = self.rematch()
+        except InputError as e:
+            err = str(e)
+        if err:
+            (self.pair, self.opened, self.algorithms, self.params[row.algorithm], self.guess,
+             self.guess_source) = old
+        return err
 
     # ---- matching ---------------------------------------------------------------------------
     def rematch(self) -> str | None:
@@ -233,7 +260,10 @@ class DebugState:
         """Replace the guess by the correlative search's best pose around it (core/search.py)."""
         from mbicp_viz.core.search import correlative_search
 
-        found = correlative_search(self.ref, self.obj, self.guess, self.search)
+        try:
+            found = correlative_search(self.ref, self.obj, self.guess, self.search)
+        except ParamError as e:  # a search its parameters make too costly
+            return f"the search was refused: {e}"
         return self.set_guess(found.pose, f"searched within {self.search.window_text()} of the last guess")
 
     # ---- what is shown ----------------------------------------------------------------------
@@ -274,10 +304,36 @@ class DebugState:
                 lines.append(f"**known answer** {text.truth_line(r.pose, frames.reported(truth, True))}")
             parts.append("  \n".join(lines))
         parts.append(f"initial guess {self.guess} (laser frame; {self.guess_source}); match time {self.match_ms:.1f} ms")
+        if (row := self.opened) is not None and self.pair == (row.ref, row.obj):
+            parts.append(self._row_markdown(row))
         return "\n\n".join(parts)
 
+    def _row_markdown(self, row: EvalRow) -> str:
+        """What the evaluation found for this pair, and whether this run reproduces it."""
+        from mbicp_viz.evaluation.failures import failed, failure_reason
+        from mbicp_viz.evaluation.single import reported
+
+        lines = [f"**evaluation** ({self.source.rows_label}, line {row.line}): {row.algorithm} gave {row.pose} "
+                 f"(motion of the {row.frame} frame)"]
+        if row.error_xy is not None:
+            lines.append(f"{row.error_xy * 1000:.1f} mm, {math.degrees(row.error_theta):.3f} deg from the scan poses")
+        if failed(row):
+            lines.append(f"failed: {failure_reason(row)}")
+        run = next((r for r in self.runs if r.name == row.algorithm), None)
+        frames = self.source.log.frames
+        if run is None or row.frame not in (frames.frame_name(True), frames.frame_name(False)):
+            lines.append(f"not comparable with this run (its matcher or its frame differ: this log reads as "
+                         f"{frames.frame_name(True)})")
+        else:
+            et, er = pose_error(reported(run.result, frames, row.frame == frames.frame_name(True)).pose, row.pose)
+            lines.append("this run reproduces it (the poses agree within 1 nm and 1 nrad)" if et < 1e-9 and er < 1e-9
+                         else f"this run differs from it by {et * 1000:.1f} mm, {math.degrees(er):.3f} deg (its "
+                              "parameters, guess or scans changed)")
+        return "  \n".join(lines)
+
     def pair_label(self) -> str:
-        return f"scans {self.pair[0]} -> {self.pair[1]}"
+        """The pair, for a log; a fixed pair's label (the source's) says which scans it is."""
+        return f"scans {self.pair[0]} -> {self.pair[1]}" if self.source.pick_pair else ""
 
     def nearest_object_point(self, xy) -> int:
         """The object point (index into the start event's points) nearest to ``xy`` where the first
@@ -298,6 +354,7 @@ class DebugState:
             path = Path(tmp) / "session.rrd"
             runs = [Run(n, self.ref, self.obj, self.guess, self.params[n], self.truth()) for n in self.algorithms]
             record(runs, str(path), teaching=True, recording_id="mbicp-viz/session",
-                   about=f"# mbicp-viz session\n\n{self.source.label}: {self.pair_label()}; initial guess "
+                   about=f"# mbicp-viz session\n\n{', '.join(filter(None, (self.source.label, self.pair_label())))}"
+                         f"; initial guess "
                          f"{self.guess} ({self.guess_source})\n")
             return path.read_bytes()

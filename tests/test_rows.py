@@ -1,0 +1,126 @@
+"""Rows files: written by ``eval sequence``, read back, and a failure reopened in the debugger
+exactly as the evaluation ran it."""
+
+import json
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from mbicp_viz.cli import app
+from mbicp_viz.core import MATCHERS
+from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.failures import failed, failure_reason, worst_first
+from mbicp_viz.readers.rows import read_rows
+from mbicp_viz.views.debugger.sources import files_source
+from mbicp_viz.views.debugger.state import DebugState
+
+from .conftest import DATA
+
+LOG = DATA / "intel-relations.log"
+
+
+@pytest.fixture(scope="module")
+def rows_file(tmp_path_factory):
+    """A real evaluation of a real Intel piece, from the identity (so that some pairs fail)."""
+    out = tmp_path_factory.mktemp("rows") / "rows.json"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(LOG), "--guess", "identity", "--truth", "pose",
+                                   "--out", str(out), "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    assert "worst failures of" in res.output and f"--rows {out}" in res.output
+    return out
+
+
+def test_rows_read_back_as_written(rows_file):
+    written = json.loads(rows_file.read_text())
+    rows = read_rows(rows_file)
+    assert [(r.ref, r.obj) for r in rows] == [(w["ref"], w["obj"]) for w in written]
+    for r, w in zip(rows, written):
+        assert r.params.as_dict() == w["params"] and r.algorithm == w["algorithm"] == "improved"
+        assert [r.guess.x, r.guess.y, r.guess.theta] == w["guess_pose"] and r.success == w["success"]
+        assert rows_file.read_text().split("\n")[r.line - 1].strip() == "{"  # the line its object starts on
+
+
+def test_failures_worst_first_with_a_reason(rows_file):
+    rows = read_rows(rows_file)
+    bad = worst_first(rows)
+    assert bad and all(failed(r) for r in bad) and len(bad) == sum(not r.success for r in rows)
+    assert [r.error_xy for r in bad] == sorted((r.error_xy for r in bad), reverse=True)
+    for r in bad:
+        reason = failure_reason(r)
+        if not r.converged:
+            assert reason.startswith("stopped early")
+        elif r.inliers_truth < 0.5:
+            assert reason.startswith("low overlap") and f"{100 * r.inliers_truth:.0f} %" in reason
+        else:
+            assert reason.split(" (")[0] in ("degenerate direction", "wrong basin")
+
+
+def test_every_failure_reopens_exactly_as_it_failed(rows_file):
+    """Each failure's own matcher, parameters and guess give back the evaluation's pose."""
+    src = files_source(str(LOG), None, rows=str(rows_file))
+    state = DebugState(src)
+    assert state.rematch() is None
+    first = src.failures[0]
+    assert state.pair == (first.ref, first.obj) and state.guess == first.guess
+    for row in src.failures:
+        assert state.open_row(row) is None
+        assert state.algorithms == [row.algorithm] and state.params[row.algorithm] == row.params
+        pose = state.runs[0].result.pose
+        assert math.hypot(pose.x - row.pose.x, pose.y - row.pose.y) < 1e-9 and abs(pose.theta - row.pose.theta) < 1e-9
+        text = state.result_markdown()
+        assert f"line {row.line}" in text and "this run reproduces it" in text and failure_reason(row) in text
+    # change what the evaluation ran with: the page says the run no longer reproduces it
+    assert state.set_params(row.algorithm, {"MaxIter": "3"}) is None
+    assert "this run differs from it" in state.result_markdown()
+
+
+def test_rows_from_another_log_are_refused(rows_file, tmp_path):
+    rows = json.loads(rows_file.read_text())
+    rows[2]["obj"] = 5000
+    bad = tmp_path / "other.json"
+    bad.write_text(json.dumps(rows, indent=1))
+    with pytest.raises(InputError) as e:
+        files_source(str(LOG), None, rows=str(bad))
+    line = read_rows(bad)[2].line
+    assert e.value.line == line and e.value.field == "obj" and "another log" in e.value.message
+    res = CliRunner().invoke(app, ["serve", str(LOG), "--rows", str(bad), "--port", "0", "--for-seconds", "0"])
+    assert res.exit_code == 2 and f"other.json:{line}: obj:" in res.output and "Traceback" not in res.output
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda r: r.pop("guess_pose"), "guess_pose"),
+    (lambda r: r.update(params={**r["params"], "Bw": -1.0}), "params.Bw"),
+    (lambda r: r.update(params={**r["params"], "nope": 1}), "params.nope"),
+    (lambda r: r.update(algorithm="ransac"), "algorithm"),
+    (lambda r: r.update(ref=1.5), "ref"),
+    (lambda r: r.update(converged="yes"), "converged"),
+    (lambda r: r.update(guess_pose=[0, 0]), "guess_pose"),
+    (lambda r: r.update(error_xy=float("nan")), "error_xy"),
+])
+def test_a_bad_field_names_its_line(rows_file, tmp_path, change, field):
+    rows = json.loads(rows_file.read_text())
+    change(rows[3])
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(rows, indent=1))
+    with pytest.raises(InputError) as e:
+        read_rows(path)
+    starts = [k + 1 for k, text in enumerate(path.read_text().split("\n")) if text == " {"]
+    assert e.value.field == field and e.value.line == starts[3]
+
+
+@settings(max_examples=60, deadline=None)
+@given(cut=st.floats(0.0, 1.0), flip=st.tuples(st.floats(0.0, 1.0), st.integers(0, 255)))
+def test_damaged_rows_files_end_in_one_line(tmp_path_factory, rows_file, cut, flip):
+    data = bytearray(rows_file.read_bytes()[: max(1, int(cut * rows_file.stat().st_size))])
+    data[int(flip[0] * (len(data) - 1))] = flip[1]
+    path = tmp_path_factory.mktemp("fuzz") / "rows.json"
+    path.write_bytes(bytes(data))
+    try:
+        rows = read_rows(path)
+    except InputError as e:
+        assert "\n" not in str(e) and "rows.json" in str(e)
+    else:
+        assert rows and all(r.algorithm in MATCHERS for r in rows)
