@@ -166,3 +166,29 @@ def test_a_bag_cut_short_keeps_its_intact_chunks_and_says_what_was_lost(tmp_path
     cut.write_bytes(data[:2000])  # nothing left to read: an error, not an empty log
     with pytest.raises(InputError):
         read_log(cut)
+
+
+def test_the_debugger_switches_topics_and_shows_the_odometry(tmp_path, intel, laserazos):
+    """A bag with two scanners opens on the topic asked for; the debugger's picker reads the other
+    one (never both); the object scan at the bag's odometry is a layer, with its distance in the result."""
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.sources import files_source
+    from mbicp_viz.views.debugger.state import DebugState
+
+    robot = intel_robot(intel, 30, 4, MOUNT)
+    robot.topics.append(Topic("/rear/scan", "rear_laser", [laserazos.scan(k) for k in range(4)]))
+    path = write(tmp_path / "two.bag", robot, "ros1")
+    state = DebugState(files_source(str(path), None, guess="identity", options=ReadOptions(topic="/scan")))
+    assert state.rematch() is None and set(state.source.log.scan_topics) == {"/scan", "/rear/scan"}
+    paths = {ly.path: ly for ly in state.layers(state.runs[0])}
+    odometry = paths[f"{scene.SCANS}/odometry"]
+    assert odometry.style is scene.ODOMETRY
+    laser = relative(intel.scan(30).pose, intel.scan(31).pose)  # the odometry, seen by the laser
+    assert np.allclose(odometry.xy, laser.apply(state.runs[0].start.obj_points), atol=1e-9)
+    assert "from the odometry (/odom (nav_msgs/Odometry))" in state.result_markdown()
+
+    assert state.set_topic("/rear/scan") is None
+    log = state.source.log
+    assert log.topic == "/rear/scan" and log.frames.frame_id == "rear_laser" and state.pair == (0, 1)
+    assert same_scan(state.ref, laserazos.scan(0)) and same_scan(state.obj, laserazos.scan(1))
+    assert state.set_topic("/nope") is not None and state.source.log.topic == "/rear/scan"  # refused, kept

@@ -166,6 +166,11 @@ def test_arrow_keys_on_the_slider_leave_the_view_top_down(browser, app):
     from mbicp_viz.views.debugger.camera import TopDownCamera
 
     page, session = open_tab(browser, app)
+    pts = session.state.runs[0].start.ref_points
+    centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
+    cam = session.client.camera  # a new tab opens top-down over the whole reference scan
+    assert wait_for(lambda: np.allclose(cam.look_at[:2], centre, atol=1e-3)), (cam.look_at, centre)
+    assert TopDownCamera.is_top_down(cam.position, cam.look_at, cam.up_direction)
     slider = page.get_by_role("slider").first
     slider.focus()
     for _ in range(35):  # each press also turns viser's camera: it is put back top-down

@@ -75,6 +75,11 @@ def stored_truth(ref: Scan, obj: Scan) -> Pose2 | None:
     return relative(ref.pose, obj.pose) if ref.pose is not None and obj.pose is not None else None
 
 
+def stored_odometry(ref: Scan, obj: Scan) -> Pose2 | None:
+    """The laser's motion by the log's odometry (wheels, or a bag's /odom or /tf), or None."""
+    return relative(ref.odometry, obj.odometry) if ref.odometry is not None and obj.odometry is not None else None
+
+
 # One scan made into a pair with a known answer (paper 000 §3.1's protocol, curated scenarios).
 
 def seen_from(scan: Scan, T: Pose2, keep: np.ndarray | None = None) -> Scan:

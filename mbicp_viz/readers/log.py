@@ -65,6 +65,7 @@ class ScanLog:
     unusable: dict[int, UnusableScan] = field(default_factory=dict)  # scan record -> why it cannot be matched
     frames: Frames = field(default_factory=Frames)
     topic: str | None = None  # a bag's scan topic
+    scan_topics: dict[str, str] = field(default_factory=dict)  # every LaserScan topic of a bag -> its description
     odometry_source: str | None = None
     notes: list[str] = field(default_factory=list)  # warnings for the user (a bag cut short ...)
 

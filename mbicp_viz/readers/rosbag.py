@@ -238,24 +238,29 @@ def _chunk(data: bytes, p: Path, store, conns: dict, out: list) -> None:
 
 # ---- scans, topics, frames and odometry ---------------------------------------------------------
 
-def _scan_topic(messages: list[Message], topic: str | None, path: str) -> str:
-    """The one scan topic to read: the one named, else the only one; several: an error listing them."""
+def _scan_topics(messages: list[Message]) -> dict[str, str]:
+    """Every LaserScan topic, described by its message count and frame id."""
     counts: dict[str, tuple[int, str]] = {}
     for m in messages:
         if m.msgtype == LASER_SCAN:
             n, frame = counts.get(m.topic, (0, m.msg.header.frame_id))
             counts[m.topic] = (n + 1, frame)
-    listing = "; ".join(f"{t} ({n} messages, frame_id {f!r})" for t, (n, f) in sorted(counts.items()))
+    return {t: f"{n} messages, frame_id {f!r}" for t, (n, f) in sorted(counts.items())}
+
+
+def _scan_topic(topics: dict[str, str], messages: list[Message], topic: str | None, path: str) -> str:
+    """The one scan topic to read: the one named, else the only one; several: an error listing them."""
+    listing = "; ".join(f"{t} ({d})" for t, d in topics.items())
     if topic is not None:
-        if topic not in counts:
+        if topic not in topics:
             raise InputError(f"no LaserScan topic {topic!r}; the bag has: {listing or 'none'}", path, field="--topic")
         return topic
-    if not counts:
+    if not topics:
         others = sorted({m.topic for m in messages})
         raise InputError(f"no {LASER_SCAN} messages (topics read: {', '.join(others) or 'none'})", path)
-    if len(counts) > 1:
-        raise InputError(f"{len(counts)} LaserScan topics, choose one with --topic: {listing}", path, field="--topic")
-    return next(iter(counts))
+    if len(topics) > 1:
+        raise InputError(f"{len(topics)} LaserScan topics, choose one with --topic: {listing}", path, field="--topic")
+    return next(iter(topics))
 
 
 def _odometry(messages: list[Message], tf: TfTree, mount: Mount | None):
@@ -277,7 +282,8 @@ def _planar(pose) -> tuple[float, float, float]:
 
 def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[str]) -> ScanLog:
     try:
-        chosen = _scan_topic(messages, topic, path)
+        topics = _scan_topics(messages)
+        chosen = _scan_topic(topics, messages, topic, path)
     except InputError as e:
         if not notes:
             raise
@@ -291,7 +297,7 @@ def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[s
     mount = tf.mount(frame_id, path) if frame_id else None
     odometry = _odometry(messages, tf, mount)
     frames = Frames(mount.pose, mount.source, mount.base_frame, frame_id) if mount else Frames(frame_id=frame_id)
-    log = ScanLog(path, [], frames=frames, topic=chosen, notes=notes)
+    log = ScanLog(path, [], frames=frames, topic=chosen, scan_topics=topics, notes=notes)
     if odometry is not None:
         log.odometry_source = odometry[0]
     for k, m in enumerate(scans):

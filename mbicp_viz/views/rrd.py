@@ -127,8 +127,9 @@ def log_layer(stream: rr.RecordingStream, root: str, layer: scene.Layer, static:
 class RerunObserver:
     """An observer that writes one run under ``root`` of a rerun stream as it happens."""
 
-    def __init__(self, stream: rr.RecordingStream, root: str, teaching: bool = False, truth: Pose2 | None = None):
-        self.stream, self.root, self.teaching, self.truth = stream, root, teaching, truth
+    def __init__(self, stream: rr.RecordingStream, root: str, teaching: bool = False, truth: Pose2 | None = None,
+                 odometry: Pose2 | None = None):
+        self.stream, self.root, self.teaching, self.truth, self.odometry = stream, root, teaching, truth, odometry
         self.start: StartEvent | None = None
         self.last_iteration = 0
         self.series: set[str] = set()  # plot paths whose line style is logged
@@ -137,7 +138,7 @@ class RerunObserver:
         if isinstance(ev, StartEvent):
             self.start = ev
             self._static_styles()
-            for layer in scene.static_layers(ev, self.truth):
+            for layer in scene.static_layers(ev, self.truth, self.odometry):
                 log_layer(self.stream, self.root, layer, static=True)
             self.stream.set_time("iteration", sequence=0)
             for layer in scene.initial_layers(ev):
@@ -170,7 +171,8 @@ class RerunObserver:
 
 @dataclass(frozen=True)
 class Run:
-    """One matcher run to record under ``root``; ``truth`` (if known) is drawn as the object scan there."""
+    """One matcher run to record under ``root``; ``truth`` (if known) is drawn as the object scan
+    there, and so is the scans' odometry when they have some."""
 
     root: str
     ref: Scan
@@ -188,6 +190,7 @@ def record(runs: list[Run], path: str | None = None, connect: str | None = None,
     ``about`` (Markdown) is stored as a document beside the runs: what the recording shows.
     """
     from mbicp_viz.core import matcher_for
+    from mbicp_viz.evaluation.pairs import stored_odometry
 
     stream = new_stream(recording_id, live=connect is not None)
     polar = {r.root for r in runs if matcher_for(r.params).module in ("psm", "pmwn")}
@@ -200,7 +203,7 @@ def record(runs: list[Run], path: str | None = None, connect: str | None = None,
         stream.log(ABOUT, rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
     results = []
     for r in runs:
-        obs = RerunObserver(stream, r.root, teaching, r.truth)
+        obs = RerunObserver(stream, r.root, teaching, r.truth, stored_odometry(r.ref, r.obj))
         results.append(match(r.ref, r.obj, r.guess, r.params, obs if extra_observer is None
                              else broadcast(obs, extra_observer)))
     stream.flush()

@@ -37,6 +37,7 @@ class Style:
 REFERENCE = Style("reference scan", (220, 40, 40), 2.0)
 TRUTH = Style("object scan at the known answer", (0, 190, 190), 1.0)  # larger, under the object: seen where it differs
 INITIAL = Style("object scan at the initial guess", (165, 165, 165), 0.5)
+ODOMETRY = Style("object scan at the odometry", (150, 210, 40), 0.8)
 OBJECT = Style("object scan where the pairs were made", (40, 90, 220), 3.0)
 OBJECT_AFTER = Style("object scan after the step", (150, 180, 245), 2.5)
 HIDDEN = Style("object points hidden by the projection filter", (140, 90, 40), 3.5, on=False)
@@ -48,7 +49,7 @@ ISO_METRIC = Style("MbICP iso-distance ellipse", (130, 60, 200), 4.5, on=False)
 ISO_EUCLID = Style("Euclidean circle through the same target", (150, 130, 0), 4.5, on=False)
 CIRCLE = Style("PMWN projected circle and its centre", (210, 0, 130), 4.2)
 ESTIMATE = Style("estimate: object frame (x red, y green)", (40, 90, 220), 5.0)
-STYLES = (REFERENCE, TRUTH, INITIAL, OBJECT, OBJECT_AFTER, HIDDEN, PAIR_POINT, PAIR_INTERPOLATED, PAIR_REJECTED,
+STYLES = (REFERENCE, TRUTH, INITIAL, ODOMETRY, OBJECT, OBJECT_AFTER, HIDDEN, PAIR_POINT, PAIR_INTERPOLATED, PAIR_REJECTED,
           GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, ESTIMATE)
 
 # Plot series: the legend of the plots.
@@ -180,9 +181,10 @@ def ratio_colors(ratio: np.ndarray) -> np.ndarray:
     return np.round(np.hstack((rgb, alpha))).astype(np.uint8)
 
 
-def static_layers(start: StartEvent, truth: Pose2 | None = None) -> list[Layer]:
+def static_layers(start: StartEvent, truth: Pose2 | None = None, odometry: Pose2 | None = None) -> list[Layer]:
     """What every iteration shows: the reference scan, the object scan at the initial guess, the
-    resampling grid (improved MbICP), and the object scan at the known answer when there is one."""
+    resampling grid (improved MbICP), and the object scan at the known answer and at the log's
+    odometry when there are some (the odometry unless it is the guess itself)."""
     s = scene_scale(start.ref_points)
     layers: list[Layer] = [
         Points(f"{SCANS}/reference", start.ref_points, REFERENCE, 0.02 * s),
@@ -190,6 +192,8 @@ def static_layers(start: StartEvent, truth: Pose2 | None = None) -> list[Layer]:
     ]
     if truth is not None:
         layers.append(Points(f"{SCANS}/truth", truth.apply(start.obj_points), TRUTH, 0.03 * s))
+    if odometry is not None and odometry != start.initial_guess:
+        layers.append(Points(f"{SCANS}/odometry", odometry.apply(start.obj_points), ODOMETRY, 0.02 * s))
     rs = start.resampling
     if rs is not None:
         # the grid lives in the object sensor frame: draw it where the initial guess puts it
@@ -244,9 +248,9 @@ def finish_layers(result) -> list[Layer]:
 
 
 def layers_at(start: StartEvent, iterations: list[IterationEvent], k: int, truth: Pose2 | None = None,
-              teaching: bool = False, chosen: int | None = None) -> list[Layer]:
+              teaching: bool = False, chosen: int | None = None, odometry: Pose2 | None = None) -> list[Layer]:
     """Every layer of a recorded run at iteration ``k`` (0: the initial guess; past the last: the last)."""
-    layers = static_layers(start, truth)
+    layers = static_layers(start, truth, odometry)
     if k == 0 or not iterations:
         return layers + initial_layers(start)
     ev = iterations[min(k, len(iterations)) - 1]

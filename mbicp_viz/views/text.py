@@ -50,9 +50,13 @@ def agreement_line(on_ref: float, radius_m: float) -> str:
     return f"{100 * on_ref:.1f} % of the object points lie within {100 * radius_m:.0f} cm of a reference point"
 
 
+def pose_distance(pose: Pose2, other: Pose2) -> str:
+    et, er = pose_error(pose, other)
+    return f"{et * 1000:.1f} mm, {math.degrees(er):.3f} deg"
+
+
 def truth_line(pose: Pose2, truth: Pose2) -> str:
-    et, er = pose_error(pose, truth)
-    return f"{et * 1000:.1f} mm, {math.degrees(er):.3f} deg from the known answer"
+    return f"{pose_distance(pose, truth)} from the known answer"
 
 
 ITERATION_HEADER = (f"{'it':>3} {'pairs':>5} {'interp':>6} {'kept':>5} {'rejected':>8} {'threshold_m':>11} "

@@ -25,6 +25,7 @@ class TopDownCamera:
     def __init__(self, client: viser.ClientHandle | viser.ViserServer):
         self.client = client
         self.placed_at = -math.inf  # when this put the camera somewhere (the tab's reports lag behind)
+        self.pending: np.ndarray | None = None  # points to fit once the tab has reported its first view
         self.recheck: threading.Timer | None = None
         if isinstance(client, viser.ClientHandle):
             client.camera.on_update(lambda cam: self.level(cam))
@@ -38,7 +39,12 @@ class TopDownCamera:
                 and up[1] >= float(np.linalg.norm(up)) * math.cos(TOLERANCE_RAD))
 
     def level(self, cam) -> None:
-        """Put a tilted or turned camera back top-down (same point, same distance)."""
+        """Fit a view asked for before the tab had one; put a tilted or turned camera back top-down
+        (same point, same distance)."""
+        if self.pending is not None:
+            points, self.pending = self.pending, None
+            self.fit(points)
+            return
         if self.is_top_down(cam.position, cam.look_at, cam.up_direction):
             return
         wait = SETTLE_S - (time.monotonic() - self.placed_at)
@@ -67,9 +73,9 @@ class TopDownCamera:
         return (lo + hi) / 2, max(h / (2 * tan), w / (2 * tan * aspect))
 
     def fit(self, points: np.ndarray) -> None:
-        """Top-down over ``points`` (the reference scan), the whole scan in view. On the server (no
-        tab yet) this is where every new tab starts: a view set while a tab is still opening races
-        the tab's own first view."""
+        """Top-down over ``points`` (the reference scan), the whole scan in view. On the server, the
+        view "reset view" returns to; on a tab that has not reported its first view yet, done when it
+        does (a view placed while the tab is still opening is overwritten by the tab's own)."""
         pts = points if len(points) else np.zeros((1, 2))
         if isinstance(self.client, viser.ViserServer):
             cam = self.client.initial_camera
@@ -80,3 +86,5 @@ class TopDownCamera:
         if cam.update_timestamp > 0.0:
             c, height = self.framing(pts, cam.fov, cam.aspect or DEFAULT_ASPECT)
             self._place(cam, c, height)
+        else:  # the tab has not shown its first view yet: a view placed now would race it
+            self.pending = pts

@@ -169,17 +169,24 @@ class Guess:
 
 
 class Scans:
-    """Which two scans of a log are matched."""
+    """Which two scans of a log are matched, and which of a bag's scan topics."""
 
     def __init__(self, session, gui, order: float):
         self.s = session
         state = session.state
-        with gui.add_folder(f"Scans (0 .. {state.source.log.records - 1})", order=order):
+        log = state.source.log
+        with gui.add_folder("Scans", order=order):
+            self.info = gui.add_markdown("")
+            if len(log.scan_topics) > 1 and not state.source.rows_label:  # an evaluation's rows hold to one topic
+                self.topic = gui.add_dropdown("scan topic", list(log.scan_topics), initial_value=log.topic,
+                                              hint="; ".join(f"{t}: {d}" for t, d in log.scan_topics.items()))
+                self.topic.on_update(lambda _: session.guarded(self._topic))
             self.consecutive = gui.add_checkbox("consecutive (object = reference + 1)", True)
             self.ref = panels.CommitBox(gui, "reference scan", str(state.pair[0]), "a scan number",
                                         lambda text: session.guarded(lambda: self._typed(ref=text)))
             self.obj = panels.CommitBox(gui, "object scan", str(state.pair[1]), "a scan number",
                                         lambda text: session.guarded(lambda: self._typed(obj=text)))
+        self._show_records()
 
     def _typed(self, ref: str | None = None, obj: str | None = None) -> None:
         pair = self.s.state.pair
@@ -192,10 +199,22 @@ class Scans:
             error = self.s.state.set_pair(i, j)
         self.open(error)
 
+    def _show_records(self) -> None:
+        log = self.s.state.source.log
+        self.info.content = (f"records 0 .. {log.records - 1}" + (f" of {log.topic}" if log.topic else "")
+                             + (f" ({len(log.unusable)} unusable)" if log.unusable else ""))
+
+    def _topic(self) -> None:
+        error = self.s.state.set_topic(self.topic.value)
+        if error:
+            self.topic.value = self.s.state.source.log.topic
+        self.open(error)
+
     def open(self, error: str | None) -> None:
         """Show the pair the model holds (a new one, or the last good one with why not)."""
         if not error:
             self.s.clear_scene()
+        self._show_records()
         self.ref.show(str(self.s.state.pair[0]))
         self.obj.show(str(self.s.state.pair[1]))
         self.s.after_match(error)

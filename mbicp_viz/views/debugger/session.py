@@ -53,7 +53,7 @@ class Session:
             ready.wait()
         with self.lock:
             self.after_match(self.state.rematch())
-            self.fit_view(camera=False)  # a new tab starts where the server placed its camera
+            self.fit_view()
 
     def _build(self, gui, src: Source) -> None:
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
@@ -127,11 +127,10 @@ class Session:
             handle.remove()
         self.nodes = {}
 
-    def fit_view(self, camera: bool = True) -> None:
+    def fit_view(self) -> None:
         """Top-down over the reference scan, with a metric grid under it (its cell size in the legend)."""
         pts = self.state.runs[0].start.ref_points if self.state.runs else np.zeros((1, 2))
-        if camera:
-            self.camera.fit(pts)
+        self.camera.fit(pts)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         self.grid_m = grid_cell(float((hi - lo).max()))
         size = (np.ceil((hi - lo) / self.grid_m) + 4) * self.grid_m

@@ -39,7 +39,7 @@ def files_source(first: str | None, second: str | None, pair: tuple[int, int] | 
     i, j = pair if pair is not None else (opened.ref, opened.obj) if opened else log.consecutive_pairs(1)[0]
     log.scan(i), log.scan(j)  # an unusable or missing scan is refused here, in one line
     return Source(first, log, (i % log.records, j % log.records), pick_pair=True, guess_kind=guess, failures=failed,
-                  rows_label=label, opened=opened)
+                  rows_label=label, opened=opened, options=options)
 
 
 def _failures(path: str, log: ScanLog) -> tuple[list[EvalRow], str]:

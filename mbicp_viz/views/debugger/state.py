@@ -20,8 +20,8 @@ from mbicp_viz.core import (MATCHERS, FieldSpec, IterationEvent, MatchResult, Pa
 from mbicp_viz.core.agreement import INLIER_RADIUS_M, inlier_fraction
 from mbicp_viz.core.params import check_value
 from mbicp_viz.errors import InputError
-from mbicp_viz.evaluation.pairs import Guess, pair_guess, stored_truth
-from mbicp_viz.readers import ScanLog
+from mbicp_viz.evaluation.pairs import Guess, pair_guess, stored_odometry, stored_truth
+from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 from mbicp_viz.readers.rows import EvalRow
 
 from .. import scene, text
@@ -47,6 +47,7 @@ class Source:
     failures: list[EvalRow] = field(default_factory=list)  # an evaluation's failed pairs, worst first
     rows_label: str = ""  # the rows file they come from, and how many rows it holds
     opened: EvalRow | None = None  # the row the first match reopens
+    options: ReadOptions | None = None  # how the log was read (to read another of a bag's scan topics)
 
 
 @dataclass
@@ -175,6 +176,29 @@ class DebugState:
             return str(e)
         return self.rematch()
 
+    def set_topic(self, topic: str) -> str | None:
+        """Read another LaserScan topic of the bag and open its first consecutive pair."""
+        from dataclasses import replace
+
+        src = self.source
+        try:
+            log = read_log(src.log.path, replace(src.options or ReadOptions(), topic=topic))
+            if len(log.scans) < 2:
+                raise InputError(f"topic {topic} has fewer than two usable scans", log.path, field="topic")
+        except InputError as e:
+            return str(e)
+        old = self.source, self.pair, self.guess, self.guess_source
+        self.source, self.pair = replace(src, log=log, options=replace(src.options or ReadOptions(), topic=topic)), \
+            log.consecutive_pairs(1)[0]
+        try:
+            self.guess, self.guess_source = self._pair_guess()
+            err = self.rematch()
+        except InputError as e:
+            err = str(e)
+        if err:
+            self.source, self.pair, self.guess, self.guess_source = old
+        return err
+
     def _apply_row(self, row: EvalRow) -> None:
         self.pair, self.opened = (row.ref, row.obj), row
         self.ref, self.obj  # noqa: B018 - an unusable scan is refused here
@@ -277,7 +301,7 @@ class DebugState:
         """The scene layers of ``run`` at the current iteration; in compare mode each run's object
         scan takes its matcher's colour."""
         layers = scene.layers_at(run.start, run.iterations, self.iteration, self.truth(), teaching=True,
-                                 chosen=self.iso_point)
+                                 chosen=self.iso_point, odometry=stored_odometry(self.ref, self.obj))
         if len(self.runs) > 1:
             layers = [scene.recolor(ly, scene.run_style(run.name)) if ly.path == f"{scene.SCANS}/object" else ly
                       for ly in layers]
@@ -295,6 +319,7 @@ class DebugState:
         from mbicp_viz.evaluation.single import reported
 
         frames, truth, parts = self.source.log.frames, self.truth(), []
+        odometry = stored_odometry(self.ref, self.obj)
         for run in self.runs:
             r = reported(run.result, frames, True)
             lines = [f"**{label}** {value}" for label, value in text.result_fields(r, frames.frame_text())]
@@ -302,6 +327,9 @@ class DebugState:
             lines.append(f"**on ref** {text.agreement_line(on_ref, INLIER_RADIUS_M)}")
             if truth is not None:
                 lines.append(f"**known answer** {text.truth_line(r.pose, frames.reported(truth, True))}")
+            if odometry is not None:
+                lines.append(f"**odometry** {text.pose_distance(r.pose, frames.reported(odometry, True))} from "
+                             f"the odometry ({self.source.log.odometry_source or 'the log'})")
             parts.append("  \n".join(lines))
         parts.append(f"initial guess {self.guess} (laser frame; {self.guess_source}); match time {self.match_ms:.1f} ms")
         if (row := self.opened) is not None and self.pair == (row.ref, row.obj):
