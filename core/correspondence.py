@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from .events import PairKind
-from .metric import metric_distance_sq, metric_project_on_segment, metric_sq
+from .metric import metric_sq
 from .scan import Scan
 
 
@@ -50,7 +50,8 @@ class ReferenceIndex:
         nb = np.arange(n)[:, None] + np.array([-1, 1])
         nb = nb % n if full else np.where((nb >= 0) & (nb < n), nb, -1)
         return ReferenceIndex(pts, b, ext_b, ext_map, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
-                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, nb)
+                              float(np.sqrt(k.max()) / L) if n else 1.0,
+                              float(np.diff(ext_b).max()) if n else 2 * np.pi, full, nb)
 
 
 # Candidates tried first around each point's bearing: the K reference beams on either side.
@@ -161,38 +162,83 @@ def _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L):
     return rows[found], p[found], best[found], d2[found]
 
 
-def _segment_candidate(ref, p, j, other, L, max_len):
-    """Metric projection of p onto segment (j, other) where it exists and is short enough."""
-    ok = other >= 0
-    a = ref.points[j]
-    b = ref.points[np.where(ok, other, j)]
-    ok &= np.einsum("ij,ij->i", b - a, b - a) <= max_len * max_len
-    t = metric_project_on_segment(p, a, b, L)
-    c = a + t[:, None] * (b - a)
-    d2 = np.where(ok, metric_distance_sq(p, c, L), np.inf)
-    return c, d2, t
+@njit(cache=True)
+def _window_kernel(p, alpha, eb, ex, ey, ek, ext_map, n_ref: int, full: bool, Bw: float, L: float,
+                   max_inter: float):
+    """The loop of ``mbicp_pairs``: per object point the target, d^2, kind and reference indices
+    (j, -1) or (j1, j2); d^2 = inf where the window holds no reference point."""
+    n = len(alpha)
+    target = np.empty((n, 2))
+    d2 = np.empty(n)
+    kind = np.empty(n, dtype=np.int8)
+    ref_index = np.empty((n, 2), dtype=np.int64)
+    L2 = L * L
+    for i in range(n):
+        px, py, a = p[i, 0], p[i, 1], alpha[i]
+        lo = _first_at_least(eb, a - Bw, False)  # the C code's L
+        hi = min(_first_at_least(eb, a + Bw, False) - 1, lo + n_ref - 1)  # its R: a point once
+        d2[i], kind[i], ref_index[i, 0], ref_index[i, 1] = np.inf, PairKind.POINT, -1, -1
+        target[i, 0], target[i, 1] = 0.0, 0.0
+        if hi < lo:  # no reference point within +/-Bw (the C code pairs it with the origin)
+            continue
+        if hi == lo:
+            target[i, 0], target[i, 1] = ex[lo], ey[lo]
+            d2[i], ref_index[i, 0] = metric_sq(px, py, ex[lo], ey[lo], ek[lo]), ext_map[lo]
+            continue
+        # every segment of the window; lambda minimises the metric of the object point (MbICP §IV-B)
+        A = 1.0 / (px * px + py * py + L2)
+        B, C, D = 1.0 - A * py * py, 1.0 - A * px * px, A * px * py
+        for J in range(lo + 1, hi + 1):
+            if not full and ext_map[J] == 0:  # a partial scan has no segment from its last point to its first
+                continue
+            q1x, q1y, q2x, q2y = ex[J - 1], ey[J - 1], ex[J], ey[J]
+            dqx, dqy = q1x - q2x, q1y - q2y
+            dqpx, dqpy = q1x - px, q1y - py
+            den = B * dqx * dqx + C * dqy * dqy + 2.0 * D * dqx * dqy
+            lam = (D * (dqx * dqpy + dqy * dqpx) + B * dqx * dqpx + C * dqy * dqpy) / den if den > 0.0 else 0.0
+            j1, j2 = ext_map[J - 1], ext_map[J]
+            if lam < 0.0:
+                qx, qy, k, j, other = q1x, q1y, ek[J - 1], j1, -1
+            elif lam > 1.0:
+                qx, qy, k, j, other = q2x, q2y, ek[J], j2, -1
+            elif dqx * dqx + dqy * dqy < max_inter:  # the C code compares the squared length
+                qx, qy = (1.0 - lam) * q1x + lam * q2x, (1.0 - lam) * q1y + lam * q2y
+                k, j, other = qx * qx + qy * qy + L2, j1, j2
+            elif lam < 0.5:  # too long to interpolate: the nearer end
+                qx, qy, k, j, other = q1x, q1y, ek[J - 1], j1, -1
+            else:
+                qx, qy, k, j, other = q2x, q2y, ek[J], j2, -1
+            d = metric_sq(px, py, qx, qy, k)
+            if d < d2[i]:  # the first of equal minima, as the C code keeps it
+                d2[i], target[i, 0], target[i, 1], ref_index[i, 0], ref_index[i, 1] = d, qx, qy, j, other
+                kind[i] = PairKind.INTERPOLATED if other >= 0 else PairKind.POINT
+    return target, d2, kind, ref_index
 
 
 def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float, Br: float,
                 L: float, max_dist_inter: float) -> Pairs:
-    """MbICP correspondences: metric-nearest reference point, or a point interpolated on a segment.
+    """MbICP's correspondences as the original C code makes them (Minguez et al. 2006, §IV).
 
-    The original searches every segment in the window; here the two segments adjacent to the
-    metric-nearest point are tried, which is where the nearest segment lies except at folds.
-    Segments longer than MaxDistInter bridge a gap between surfaces and are not interpolated.
+    The window of an object point holds the reference points whose bearing lies in
+    [alpha - Bw, alpha + Bw), bearings compared modulo 2 pi. With one point there, that point;
+    with more, every segment between consecutive window points is tried: its point metrically
+    closest to the object point (the metric of the object point, as the code's lambda), clamped
+    to the segment, or the nearer end when the segment's *squared* length is MaxDistInter or
+    more (the code compares it so); the candidate of smallest metric distance (the reference
+    point's metric) wins. A 360-degree reference is searched across its seam, a partial one has
+    no segment from its last point to its first.
+
+    Where this departs from the code, the code is wrong: its atan2 angles wrap at +/-pi (a
+    window there misses half its points); a point more than Bw past the scan's end is paired
+    with the scan's last point (beyond Br at any range that matters); a window without
+    reference points pairs its point with the origin at distance Br. Here such a point gets no
+    pair. Pairs at a metric distance above Br are cut later (``rejection.reject``).
     """
-    rows, p, best, d2 = _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L)
-    target = ref.points[best].copy()
-    kind = np.full(len(rows), PairKind.POINT, dtype=np.int8)
-    ref_index = np.column_stack((best, np.full(len(best), -1)))
-    for other in ref.neighbours[best].T:
-        c, ds, t = _segment_candidate(ref, p, best, other, L, max_dist_inter)
-        better = (ds < d2) & (t > 0.0) & (t < 1.0)
-        target[better] = c[better]
-        d2 = np.where(better, ds, d2)
-        kind[better] = PairKind.INTERPOLATED
-        ref_index[better, 1] = other[better]
-    return Pairs(rows, target, kind, ref_index, np.sqrt(d2))
+    target, d2, kind, ref_index = _window_kernel(
+        moved[rows], moved_polar[0][rows], ref.ext_bearings, ref.ext_x, ref.ext_y, ref.ext_sq_norm_L2, ref.ext_map,
+        len(ref.points), ref.full_circle, float(Bw), float(L), float(max_dist_inter))
+    found = np.isfinite(d2)
+    return Pairs(rows[found], target[found], kind[found], ref_index[found], np.sqrt(np.maximum(d2[found], 0.0)))
 
 
 def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float,
@@ -257,6 +303,16 @@ def _share_targets(p, best, d2, points, sq_norm_L2, neighbours, L: float, max_le
         second[i] = s
         d2[i] = max(metric_sq(px, py, cx, cy, cx * cx + cy * cy + L * L), 0.0)
     return target, kind, second, d2
+
+
+def visible_in_order(moved_polar) -> np.ndarray:
+    """The original MbICP's projection filter: walking the object points in scan order, a point
+    whose bearing falls below that of the last point kept is hidden (it went behind a surface
+    seen before it). Bearings are unwrapped along the scan (the code's atan2 angles jump at
+    +/-pi, which it warns about); a 360-degree scanner still wants the z-buffer
+    (``visible_from_reference``)."""
+    alpha = np.unwrap(moved_polar[0])
+    return alpha >= np.maximum.accumulate(alpha)
 
 
 def visible_from_reference(moved_polar, bin_start: float, bin_width: float, margin: float) -> np.ndarray:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .correspondence import ReferenceIndex, mbicp_pairs, point_line_pairs, polar, visible_from_reference
+from .correspondence import (ReferenceIndex, mbicp_pairs, point_line_pairs, polar, visible_from_reference,
+                             visible_in_order)
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairStatus, StartEvent
 from .rejection import reject
 from .metric import mean_sq_residual, metric_normal_equations, solve3
@@ -54,6 +55,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     params = params if params is not None else MbicpParams()
     improved = isinstance(params, ImprovedParams)
     name = "improved" if improved else "mbicp"
+    ref, obj = ref.within(params.max_range), obj.within(params.max_range)
     R = ReferenceIndex.build(ref, params.L)
     obj_pts = obj.points()
     resampling = grid_resample(obj_pts, params.cell_size) if improved and params.resample else None
@@ -61,7 +63,6 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     P = obj_pts[used]
     pair_fn = point_line_pairs if improved and params.point_line else mbicp_pairs
     bin_width = projection_bin_width(R.bearings)
-    min_pairs = max(3, int(np.ceil(params.AsocError * len(P))))
     if observer is not None:
         observer(StartEvent(name, params, R.points, obj_pts, used, initial_guess, resampling))
 
@@ -69,14 +70,18 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     cycles = CycleWatch(params)
     prev_error = None
     n_conv = 0
-    reason = Termination.MAX_ITERATIONS
+    reason = Termination.MAX_ITERATIONS if len(R.points) else Termination.TOO_FEW_PAIRS
     it = 0
     last = None
-    for it in range(1, params.MaxIter + 1):
+    for it in range(1, params.MaxIter + 1 if len(R.points) else 1):
         moved = est.apply(P)
         moved_polar = polar(moved)
-        vis = (visible_from_reference(moved_polar, R.bearings[0], bin_width, PROJECTION_MARGIN_M)
-               if params.ProjectionFilter else np.ones(len(P), dtype=bool))
+        if not params.ProjectionFilter:
+            vis = np.ones(len(P), dtype=bool)
+        elif params.projection_zbuffer:
+            vis = visible_from_reference(moved_polar, R.bearings[0], bin_width, PROJECTION_MARGIN_M)
+        else:
+            vis = visible_in_order(moved_polar)
         rows = np.flatnonzero(vis)
         pairs = pair_fn(R, moved, moved_polar, rows, params.Bw, params.Br, params.L, params.MaxDistInter)
         status, thr = reject(pairs.dist, params.Br, params.filter,
@@ -84,8 +89,10 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
                              rejection_floor(params, it) if improved else 0.0)
         kept = status == PairStatus.KEPT
         n_kept = int(np.count_nonzero(kept))
+        # the C code's association test: pairs within Br against the points the filter left
+        n_within = int(np.count_nonzero(status != PairStatus.OUTSIDE_BR))
         step = None
-        if n_kept >= min_pairs:
+        if n_within >= params.AsocError * len(rows) and n_kept >= 3:
             p_k, c_k = moved[pairs.obj[kept]], pairs.target[kept]
             A, b = metric_normal_equations(p_k, c_k, params.L)
             step = solve3(A, b)
@@ -95,6 +102,7 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
             reason = Termination.TOO_FEW_PAIRS
         inc = Pose2.from_array(step) if step is not None else Pose2()
         error = mean_sq_residual(inc.apply(p_k), c_k) if step is not None else float("nan")
+        error_sum = error * n_kept  # the C code's error: the ratio compares sums
         new_est = inc @ est
         if observer is not None:
             observer(IterationEvent(
@@ -108,9 +116,9 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
         last = FinalSystem(A, error, c_k, pairs.ref_index[kept, 0], n_kept, len(status) - n_kept)
         # MbICP's counted convergence: error ratio OR every increment component small.
         small_ratio = prev_error is not None and (
-            abs(1.0 - error / prev_error) <= params.errorRatio if prev_error > 0 else error == 0.0)
+            abs(1.0 - error_sum / prev_error) <= params.errorRatio if prev_error > 0 else error_sum == 0.0)
         n_conv = n_conv + 1 if (small_ratio or params.small(inc)) else 0
-        prev_error = error
+        prev_error = error_sum
         if n_conv > params.IterSmoothConv:
             reason = Termination.CONVERGED
             break

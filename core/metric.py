@@ -53,24 +53,6 @@ def metric_exact_sq(p1: np.ndarray, p2: np.ndarray, L: float, max_theta: float =
     return float(minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}).fun)
 
 
-def metric_project_on_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray, L: float) -> np.ndarray:
-    """Parameter t in [0, 1] of the point of segment a->b metrically closest to p (row-wise).
-
-    Minimises (a + t e - p)^T M(p) (a + t e - p), e = b - a, with M(p) = I - r r^T / (|p|^2 + L^2),
-    r = (p_y, -p_x): the original code's interpolation, with the object point in the metric.
-    """
-    e = b - a
-    u = a - p
-    r = np.column_stack((p[:, 1], -p[:, 0]))
-    k = np.einsum("ij,ij->i", p, p) + L * L
-    er = np.einsum("ij,ij->i", e, r)
-    ur = np.einsum("ij,ij->i", u, r)
-    eMe = np.einsum("ij,ij->i", e, e) - er * er / k
-    uMe = np.einsum("ij,ij->i", u, e) - ur * er / k
-    t = np.where(eMe > 1e-18, -uMe / np.maximum(eMe, 1e-18), 0.0)
-    return np.clip(t, 0.0, 1.0)
-
-
 def _median(x: np.ndarray) -> float:
     """Median by one sort: np.median's dispatch costs more than the sort on scan-sized arrays."""
     s = np.sort(x)

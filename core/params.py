@@ -118,31 +118,57 @@ class IcpParams(StopParams):
 
 @dataclass(frozen=True)
 class MbicpParams(StopParams):
-    """MbICP (Minguez, Lamiraux & Montesano, T-RO 2006). Names as in the original C code."""
+    """MbICP (Minguez, Lamiraux & Montesano, T-RO 2006). Names and defaults as in the original C
+    code with the defaults of Player's ``mbicp`` driver, which it reproduces."""
 
+    MaxIter: int = param(50, unit="count", lo=1, hi=10000, help="maximum number of iterations")
+    max_range: float = param(7.9, unit="m", lo=0.01, hi=1000.0,
+        help="readings at or beyond this range are not used (Player's mbicp driver: max_laser_range)")
     L: float = param(3.0, unit="m", lo=1e-3, hi=100.0,
         help="metric length: ||q|| = sqrt(x^2 + y^2 + L^2 theta^2); large L tends to plain ICP")
-    Bw: float = param(math.radians(45.0), unit="rad", lo=math.radians(0.1), hi=math.pi,
+    Bw: float = param(1.57 / 3.0, unit="rad", lo=math.radians(0.1), hi=math.pi,
         help="angular window: reference points within +/-Bw of an object point's bearing are candidates")
-    Br: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
+    Br: float = param(0.3, unit="m", lo=1e-3, hi=100.0,
         help="radial window: pairs with a metric distance above Br are discarded")
     laserStep: int = param(1, unit="count", lo=1, hi=100, help="use every laserStep-th object point")
     MaxDistInter: float = param(0.5, unit="m", lo=0.0, hi=100.0,
-        help="interpolate only between consecutive reference points closer than this")
-    filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
+        help="interpolate only on reference segments shorter than this; MbICP compares the segment's squared "
+             "length with it, as the original code does (0.5: segments up to 0.71 m), improved MbICP's "
+             "point-to-line pairs its length")
+    filter: float = param(0.85, unit="1", lo=0.05, hi=1.0,
         help="fraction of the best pairs kept each iteration (trimmed estimator)")
     ProjectionFilter: bool = param(True, unit="bool",
         help="drop object points hidden from the reference viewpoint (Lu & Milios)")
+    projection_zbuffer: bool = param(False, unit="bool",
+        help="the projection filter as a z-buffer over bearing bins (hides what lies behind a nearer surface, "
+             "whatever the order; needed for 360-degree scans) instead of the original's rule (a point whose "
+             "bearing falls below the last kept one's is hidden)")
     errorRatio: float = param(1e-4, unit="1", lo=0.0, hi=1.0,
-        help="an iteration also counts as converged when |1 - error/previous error| is below this")
+        help="an iteration also counts as converged when |1 - error/previous error| is below this (error: the "
+             "summed squared residual of the kept pairs, as the original code sums it)")
     IterSmoothConv: int = param(2, unit="count", lo=0, hi=100,
         help="stop after more than this many consecutive converged iterations")
 
 
 @dataclass(frozen=True)
 class ImprovedParams(MbicpParams):
-    """Improved MbICP (Li et al. 2018, paper 000): MbICP plus three switchable additions."""
+    """Improved MbICP (Li et al. 2018, paper 000): MbICP plus three switchable additions. The paper
+    gives no parameter values; these defaults are this project's (docs/results.md measures them):
+    wider windows than Player's MbICP, every reading, and the z-buffer projection filter."""
 
+    MaxIter: int = param(100, unit="count", lo=1, hi=10000, help="maximum number of iterations")
+    max_range: float = param(1000.0, unit="m", lo=0.01, hi=1000.0,
+        help="readings at or beyond this range are not used (1000: every valid reading)")
+    Bw: float = param(math.radians(45.0), unit="rad", lo=math.radians(0.1), hi=math.pi,
+        help="angular window: reference points within +/-Bw of an object point's bearing are candidates")
+    Br: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
+        help="radial window: pairs with a metric distance above Br are discarded")
+    filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
+        help="fraction of the best pairs kept each iteration (trimmed estimator; unused while mad_rejection)")
+    projection_zbuffer: bool = param(True, unit="bool",
+        help="the projection filter as a z-buffer over bearing bins (hides what lies behind a nearer surface, "
+             "whatever the order; needed for 360-degree scans) instead of the original's rule (a point whose "
+             "bearing falls below the last kept one's is hidden)")
     resample: bool = param(True, unit="bool", help="grid resampling of the object scan (paper 000 §2.3)")
     cell_size: float = param(0.1, unit="m", lo=0.005, hi=10.0, help="grid cell side for resampling (§2.3)")
     point_line: bool = param(True, unit="bool",
