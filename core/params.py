@@ -107,13 +107,40 @@ class StopParams(Params):
 
 
 @dataclass(frozen=True)
-class IcpParams(StopParams):
-    """Point-to-point ICP with Euclidean closest points and the closed-form SVD fit (paper 000 §2.1)."""
+class IcpParams(Params):
+    """ICP as Censi's CSM runs it (``sm_icp``; names and defaults of its options as its ``sm2``
+    program sets them): pairs to the segment between the nearest reference ray and its nearer
+    neighbour, adaptive trimming, the exact closed-form pose, restarts (core/icp.py)."""
 
-    max_correspondence_dist: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
-        help="pairs farther apart than this are not used")
-    filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
-        help="fraction of the closest pairs kept each iteration (trimmed ICP)")
+    max_iterations: int = param(1000, unit="count", lo=1, hi=100000, help="maximum number of iterations")
+    epsilon_xy: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="stop when the step moves less than this ...")
+    epsilon_theta: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="... and turns less than this")
+    max_correspondence_dist: float = param(2.0, unit="m", lo=1e-3, hi=100.0,
+        help="an object point farther than this from its nearest reference point gets no pair")
+    outliers_maxPerc: float = param(0.95, unit="1", lo=0.0, hi=1.0,
+        help="keep at most this share of the pairs (the nearest to their segments)")
+    outliers_adaptive_order: float = param(0.7, unit="1", lo=0.0, hi=1.0,
+        help="adaptive trimming: the quantile of the segment distances that ...")
+    outliers_adaptive_mult: float = param(2.0, unit="1", lo=0.0, hi=100.0,
+        help="... times this is the largest distance kept (1 and 1 with outliers_maxPerc 1: no trimming)")
+    outliers_remove_doubles: bool = param(True, unit="bool",
+        help="of several object points paired with one reference point, drop those 3x farther than the nearest")
+    restart: bool = param(True, unit="bool",
+        help="restart six times from the result moved by restart_dt / restart_dtheta when its mean distance "
+             "exceeds restart_threshold_mean_error, keeping the run of smallest total distance")
+    restart_threshold_mean_error: float = param(0.01, unit="m", lo=0.0, hi=100.0,
+        help="mean distance of the kept pairs above which the restarts run")
+    restart_dt: float = param(0.01, unit="m", lo=0.0, hi=10.0, help="restarts move the result by this in x and in y")
+    restart_dtheta: float = param(math.radians(1.5), unit="rad", lo=0.0, hi=math.pi,
+        help="restarts turn the result by this")
+    min_reading: float = param(0.0, unit="m", lo=0.0, hi=1000.0, help="readings at or below this are not used")
+    max_reading: float = param(1000.0, unit="m", lo=0.0, hi=1000.0, help="readings beyond this are not used")
+
+
+@dataclass(frozen=True)
+class PlIcpParams(IcpParams):
+    """PL-ICP (Censi, ICRA 2008) as CSM runs it: the point-to-line distance to the line through the
+    nearest reference ray and its nearer neighbour; it also stops when the pairs repeat."""
 
 
 @dataclass(frozen=True)
