@@ -6,7 +6,9 @@ min over (t, theta) of sum_k (R(theta) p_k + t - q_k)^T C_k (R(theta) p_k + t - 
 the quadratic x^T A x - 2 b^T x, minimised on the constraint x_3^2 + x_4^2 = 1: with a Lagrange
 multiplier l, (A + l W) x = b, W = diag(0, 0, 1, 1). Eliminating t leaves (S + l I) r = h for the
 rotation part r, and |r| = 1 is a quartic in l whose largest real root is the global minimum (the
-one for which S + l I is positive definite).
+one for which S + l I is positive definite). Above -lambda_min(S), |(S + l I)^-1 h| falls from
+infinity to 0, so that root is found by bisection (numba compiles a polynomial solver's
+eigenvalue routine for seconds; the bisection is exact to the last bit all the same).
 """
 
 from __future__ import annotations
@@ -35,9 +37,35 @@ def normal_terms(p, q, C):
 
 
 @njit(cache=True)
+def _norm2(s00, s01, s11, h0, h1, lam):
+    """|(S + lam I)^-1 h|^2 for the symmetric 2x2 S."""
+    k00, k11 = s00 + lam, s11 + lam
+    det = k00 * k11 - s01 * s01
+    r0, r1 = (k11 * h0 - s01 * h1) / det, (-s01 * h0 + k00 * h1) / det
+    return r0 * r0 + r1 * r1
+
+
+@njit(cache=True)
+def _largest_root(s00, s01, s11, h0, h1):
+    """The multiplier at which |(S + lam I)^-1 h| = 1, lam > -lambda_min(S): bisection between
+    -lambda_min (norm infinite) and -lambda_min + |h| (norm at most 1)."""
+    lam_min = 0.5 * (s00 + s11) - np.sqrt(0.25 * (s00 - s11) ** 2 + s01 * s01)
+    lo, hi = -lam_min, -lam_min + np.hypot(h0, h1) + 1e-300
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if _norm2(s00, s01, s11, h0, h1, mid) > 1.0:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+@njit(cache=True)
 def solve(A, b):
     """(t_x, t_y, theta) minimising x^T A x - 2 b^T x on the circle; ok False when the
-    translation is unconstrained (A's translation block singular) or no root is real."""
+    translation is unconstrained (A's translation block singular) or nothing fixes the rotation (h = 0)."""
     a00, a01, a11 = A[0, 0], A[0, 1], A[1, 1]
     det_a = a00 * a11 - a01 * a01
     if not abs(det_a) > 1e-12 * max(1.0, abs(a00) + abs(a11)) ** 2:
@@ -52,21 +80,10 @@ def solve(A, b):
     s01 = 0.5 * (A[2, 3] + A[3, 2]) - 0.5 * (b00 * g01 + b10 * g11 + b01 * g00 + b11 * g10)
     h0 = b[2] - (g00 * b[0] + g10 * b[1])
     h1 = b[3] - (g01 * b[0] + g11 * b[1])
-    tr, det_s = s00 + s11, s00 * s11 - s01 * s01
-    ah0, ah1 = s11 * h0 - s01 * h1, -s01 * h0 + s00 * h1  # adj(S) h
-    # (l^2 + tr l + det)^2 - (|h|^2 l^2 + 2 h.adj(S)h l + |adj(S) h|^2) = 0
-    coeffs = np.empty(5, dtype=np.complex128)
-    coeffs[0], coeffs[1] = 1.0, 2.0 * tr
-    coeffs[2] = tr * tr + 2.0 * det_s - (h0 * h0 + h1 * h1)
-    coeffs[3] = 2.0 * tr * det_s - 2.0 * (h0 * ah0 + h1 * ah1)
-    coeffs[4] = det_s * det_s - (ah0 * ah0 + ah1 * ah1)
-    best = -np.inf
-    for z in np.roots(coeffs):
-        if abs(z.imag) <= 1e-9 * max(1.0, abs(z.real)) and z.real > best:
-            best = z.real
-    k00, k11 = s00 + best, s11 + best
+    lam = _largest_root(s00, s01, s11, h0, h1)
+    k00, k11 = s00 + lam, s11 + lam
     det_k = k00 * k11 - s01 * s01
-    if best == -np.inf or det_k == 0.0:
+    if not det_k > 0.0:
         return 0.0, 0.0, 0.0, False
     r0, r1 = (k11 * h0 - s01 * h1) / det_k, (-s01 * h0 + k00 * h1) / det_k
     c0, c1 = b[0] - (b00 * r0 + b01 * r1), b[1] - (b10 * r0 + b11 * r1)

@@ -25,6 +25,7 @@ from numba import njit
 
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, StartEvent
 from .gpc import normal_terms, solve
+from .metric import kth_smallest
 from .params import IcpParams, PlIcpParams
 from .result import MatchResult, Termination
 from .scan import Scan
@@ -163,9 +164,9 @@ def _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, max_dis
             k += status[i] == _KEPT
     limit = np.inf
     if k > 0:
-        ordered = np.sort(dist[status == _KEPT])
-        lim1 = ordered[max(0, min(int(np.floor(k * max_perc)), k - 1))]
-        lim2 = mult * ordered[max(0, min(int(np.floor(k * order)), k - 1))]
+        kept = dist[status == _KEPT]
+        lim1 = kth_smallest(kept, max(0, min(int(np.floor(k * max_perc)), k - 1)))
+        lim2 = mult * kth_smallest(kept, max(0, min(int(np.floor(k * order)), k - 1)))
         limit = min(lim1, lim2)
         for i in range(n):
             if status[i] == _KEPT and dist[i] > limit:

@@ -28,6 +28,14 @@ def param(default, *, unit: str, lo: float | None = None, hi: float | None = Non
     return dataclasses.field(default=default, metadata={"unit": unit, "lo": lo, "hi": hi, "help": help})
 
 
+def redefault(cls, name: str, default, help: str | None = None):
+    """The field ``name`` of the parameter dataclass ``cls`` with another default (a subclass's
+    own value: improved MbICP's windows), its unit, bounds and help kept (or the help replaced)."""
+    f = next(f for f in dataclasses.fields(cls) if f.name == name)
+    m = f.metadata
+    return param(default, unit=m["unit"], lo=m["lo"], hi=m["hi"], help=help or m["help"])
+
+
 @dataclass(frozen=True)
 class FieldSpec:
     name: str
@@ -183,19 +191,13 @@ class ImprovedParams(MbicpParams):
     gives no parameter values; these defaults are this project's (docs/results.md measures them):
     wider windows than Player's MbICP, every reading, and the z-buffer projection filter."""
 
-    MaxIter: int = param(100, unit="count", lo=1, hi=10000, help="maximum number of iterations")
-    max_range: float = param(1000.0, unit="m", lo=0.01, hi=1000.0,
-        help="readings at or beyond this range are not used (1000: every valid reading)")
-    Bw: float = param(math.radians(45.0), unit="rad", lo=math.radians(0.1), hi=math.pi,
-        help="angular window: reference points within +/-Bw of an object point's bearing are candidates")
-    Br: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
-        help="radial window: pairs with a metric distance above Br are discarded")
-    filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
-        help="fraction of the best pairs kept each iteration (trimmed estimator; unused while mad_rejection)")
-    projection_zbuffer: bool = param(True, unit="bool",
-        help="the projection filter as a z-buffer over bearing bins (hides what lies behind a nearer surface, "
-             "whatever the order; needed for 360-degree scans) instead of the original's rule (a point whose "
-             "bearing falls below the last kept one's is hidden)")
+    MaxIter: int = redefault(MbicpParams, "MaxIter", 100)
+    max_range: float = redefault(MbicpParams, "max_range", 1000.0,
+                                 "readings at or beyond this range are not used (1000: every valid reading)")
+    Bw: float = redefault(MbicpParams, "Bw", math.radians(45.0))
+    Br: float = redefault(MbicpParams, "Br", 1.0)
+    filter: float = redefault(MbicpParams, "filter", 0.95)
+    projection_zbuffer: bool = redefault(MbicpParams, "projection_zbuffer", True)
     resample: bool = param(True, unit="bool", help="grid resampling of the object scan (paper 000 §2.3)")
     cell_size: float = param(0.1, unit="m", lo=0.005, hi=10.0, help="grid cell side for resampling (§2.3)")
     point_line: bool = param(True, unit="bool",
