@@ -17,7 +17,7 @@ _EXPORTS = {
     "events": ("Correspondences", "Event", "FinishEvent", "IterationEvent", "Observer", "PairKind", "PairStatus",
                "PolarStep", "Recorder", "Resampling", "StartEvent", "broadcast"),
     "matchers": ("MATCHERS", "Matcher", "match", "matcher_for"),
-    "params": ("FieldSpec", "IcpParams", "ImprovedParams", "MbicpParams", "ParamError", "Params", "PmwnParams", "SearchParams",
+    "params": ("FieldSpec", "IcpParams", "ImprovedParams", "MbicpParams", "ParamError", "Params", "PlIcpParams", "PmwnParams", "SearchParams",
                "PsmParams", "field_specs"),
     "result": ("Degeneracy", "MatchResult", "Termination"),
     "errors": ("ScanError", "ScanSource", "UnusableScan"),

@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from .events import PairKind
-from .metric import metric_distance_sq, metric_project_on_segment, metric_sq
+from .metric import metric_sq
 from .scan import Scan
 
 
@@ -32,6 +32,8 @@ class ReferenceIndex:
     ext_x: np.ndarray  # (3N,) x, y and |q|^2 + L^2 (the metric's denominator) of ``ext_map``'s
     ext_y: np.ndarray  # points: the search reads them without a second gather
     ext_sq_norm_L2: np.ndarray
+    ext_ux: np.ndarray  # (3N,) the unit direction of each bearing
+    ext_uy: np.ndarray
     max_factor: float  # sqrt(max|q|^2 + L^2) / L: the Euclidean radius per unit of metric distance
     max_step: float  # the widest bearing gap between consecutive reference points [rad]
     full_circle: bool
@@ -50,7 +52,9 @@ class ReferenceIndex:
         nb = np.arange(n)[:, None] + np.array([-1, 1])
         nb = nb % n if full else np.where((nb >= 0) & (nb < n), nb, -1)
         return ReferenceIndex(pts, b, ext_b, ext_map, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
-                              float(np.sqrt(k.max()) / L), float(np.diff(ext_b).max()), full, nb)
+                              np.cos(ext_b), np.sin(ext_b),
+                              float(np.sqrt(k.max()) / L) if n else 1.0,
+                              float(np.diff(ext_b).max()) if n else 2 * np.pi, full, nb)
 
 
 # Candidates tried first around each point's bearing: the K reference beams on either side.
@@ -89,8 +93,17 @@ def _window_min(px: float, py: float, ex, ey, ek, lo: int, hi: int):
     return best, d_best
 
 
+@njit(cache=True, inline="always")
+def _reaches(px, py, r, ux, uy, rho):
+    """Whether the ray of direction u passes within rho of p (of range r)."""
+    if r <= rho:
+        return True
+    c = px * uy - py * ux
+    return px * ux + py * uy > 0.0 and c * c <= rho * rho
+
+
 @njit(cache=True)
-def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, ext_map, n_ref: int, Bw: float, Br: float, L: float,
+def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int, Bw: float, Br: float, L: float,
                     max_factor: float, max_step: float):
     """The loop of ``nearest`` over the moved points (compiled: a handful of candidates per point,
     where numpy paid a call per step for all points at once)."""
@@ -104,14 +117,18 @@ def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, ext_map, n_ref: int, Bw: floa
         if clip_to_bw:
             lo = max(lo, _first_at_least(eb, a - Bw, False))
             hi = max(min(hi, _first_at_least(eb, a + Bw, True)), lo)
-        best, d2 = _window_min(px, py, ex, ey, ek, lo, min(hi, len(eb)))
-        # the window that can hold anything closer (see ``nearest``), never wider than +/-Bw
+        lo, hi = max(lo, 0), min(hi, len(eb))
+        best, d2 = _window_min(px, py, ex, ey, ek, lo, hi)
+        # the window that can hold anything closer (see ``nearest``), never wider than +/-Bw: only
+        # when a ray just outside the 2K beams passes within rho of the point is it searched
         d0 = np.sqrt(min(max(d2, 0.0), Br * Br))
         rho = d0 * min((r + L) / max(L - d0, 1e-12), max_factor)
-        half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw) + 1e-12
-        wlo = _first_at_least(eb, a - half, False)
-        whi = min(_first_at_least(eb, a + half, True), wlo + n_ref)  # a point once
-        if wlo < lo or whi > hi:
+        reach = Bw + 1e-12  # the bounded window's own slack: a beam at +/-Bw by round-off is in
+        if (lo > 0 and a - eb[lo - 1] <= reach and _reaches(px, py, r, eux[lo - 1], euy[lo - 1], rho)) or \
+                (hi < len(eb) and eb[hi] - a <= reach and _reaches(px, py, r, eux[hi], euy[hi], rho)):
+            half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw) + 1e-12
+            wlo = _first_at_least(eb, a - half, False)
+            whi = min(_first_at_least(eb, a + half, True), wlo + n_ref)  # a point once
             b, d = _window_min(px, py, ex, ey, ek, wlo, min(whi, len(eb)))
             if d < d2:
                 best, d2 = b, d
@@ -131,14 +148,15 @@ def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: flo
     (|q|^2 + L^2), any q with d(p, q) <= d0 has |p - q| <= d0 sqrt(|q|^2 + L^2) / L
     <= d0 (|p| + |p - q| + L) / L, i.e. |p - q| <= d0 (|p| + L) / (L - d0) when d0 < L (and
     always <= d0 sqrt(max|q|^2 + L^2) / L): within the smaller radius rho of the two, so within
-    asin(rho / |p|) of p's bearing. Points whose bounded window reaches beyond the 2K beams are
-    searched again over the whole bounded window. A point with no candidate gets index -1 and
+    asin(rho / |p|) of p's bearing. Points whose bounded window reaches beyond the 2K beams (a ray
+    just outside them passes within rho of the point) are searched again over the whole bounded
+    window. A point with no candidate gets index -1 and
     distance inf. ``moved_polar``: ``polar(moved)`` when the caller has it. Returns (index, squared
     metric distance).
     """
     alpha, rng = moved_polar if moved_polar is not None else polar(moved)
     return _nearest_kernel(moved, alpha, rng, ref.ext_bearings, ref.ext_x, ref.ext_y, ref.ext_sq_norm_L2,
-                           ref.ext_map, len(ref.points), float(Bw), float(Br), float(L), ref.max_factor,
+                           ref.ext_ux, ref.ext_uy, ref.ext_map, len(ref.points), float(Bw), float(Br), float(L), ref.max_factor,
                            ref.max_step)
 
 
@@ -153,46 +171,145 @@ class Pairs:
     dist: np.ndarray  # (K,) metric distance [m]
 
 
-def _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L):
-    """Rows of ``moved`` that found a metric-nearest point, their points, the point, and d^2."""
-    p = moved[rows]
-    best, d2 = nearest(ref, p, Bw, Br, L, (moved_polar[0][rows], moved_polar[1][rows]))
-    found = best >= 0
-    return rows[found], p[found], best[found], d2[found]
+@njit(cache=True, inline="always")
+def _segment_candidate(px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter):
+    """The C code's candidate on segment (J - 1, J): (d^2, x, y, j, other). lambda minimises the
+    metric of the object point (MbICP §IV-B); the candidate is scored in the reference point's."""
+    q1x, q1y, q2x, q2y = ex[J - 1], ey[J - 1], ex[J], ey[J]
+    dqx, dqy = q1x - q2x, q1y - q2y
+    dqpx, dqpy = q1x - px, q1y - py
+    den = B * dqx * dqx + C * dqy * dqy + 2.0 * D * dqx * dqy
+    lam = (D * (dqx * dqpy + dqy * dqpx) + B * dqx * dqpx + C * dqy * dqpy) / den if den > 0.0 else 0.0
+    j1, j2 = ext_map[J - 1], ext_map[J]
+    if lam < 0.0:
+        qx, qy, k, j, other = q1x, q1y, ek[J - 1], j1, -1
+    elif lam > 1.0:
+        qx, qy, k, j, other = q2x, q2y, ek[J], j2, -1
+    elif dqx * dqx + dqy * dqy < max_inter:  # the C code compares the squared length
+        qx, qy = (1.0 - lam) * q1x + lam * q2x, (1.0 - lam) * q1y + lam * q2y
+        k, j, other = qx * qx + qy * qy + L2, j1, j2
+    elif lam < 0.5:  # too long to interpolate: the nearer end
+        qx, qy, k, j, other = q1x, q1y, ek[J - 1], j1, -1
+    else:
+        qx, qy, k, j, other = q2x, q2y, ek[J], j2, -1
+    return metric_sq(px, py, qx, qy, k), qx, qy, j, other
 
 
-def _segment_candidate(ref, p, j, other, L, max_len):
-    """Metric projection of p onto segment (j, other) where it exists and is short enough."""
-    ok = other >= 0
-    a = ref.points[j]
-    b = ref.points[np.where(ok, other, j)]
-    ok &= np.einsum("ij,ij->i", b - a, b - a) <= max_len * max_len
-    t = metric_project_on_segment(p, a, b, L)
-    c = a + t[:, None] * (b - a)
-    d2 = np.where(ok, metric_distance_sq(p, c, L), np.inf)
-    return c, d2, t
+@njit(cache=True, inline="always")
+def _ray_bound(px, py, ux, uy, mf2):
+    """A lower bound of the squared metric distance from p to any reference point on the ray of
+    direction u: Euclidean |p| sin(angle) (|p| past 90 degrees), shrunk by the metric's largest
+    stretch sqrt(max |q|^2 + L^2) / L (``nearest``'s bound)."""
+    if px * ux + py * uy > 0.0:
+        c = px * uy - py * ux
+        return c * c / mf2
+    return (px * px + py * py) / mf2
+
+
+@njit(cache=True)
+def _window_kernel(p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int, full: bool, Bw: float, L: float,
+                   max_inter: float, max_factor: float):
+    """The loop of ``mbicp_pairs``: per object point the target, d^2, kind and reference indices
+    (j, -1) or (j1, j2); d^2 = inf where the window holds no reference point.
+
+    Every segment of the window is a candidate, as in the C code; this walks them outwards from
+    the object point's bearing and stops on each side where a bound shows that no segment beyond
+    can be nearer (the segment's points lie between its ends' bearings). Equal distances go to the
+    lower segment, the first the C code meets: the answer is the C code's.
+    """
+    n = len(alpha)
+    target = np.empty((n, 2))
+    d2 = np.empty(n)
+    kind = np.empty(n, dtype=np.int8)
+    ref_index = np.empty((n, 2), dtype=np.int64)
+    L2, mf2 = L * L, max_factor * max_factor
+    for i in range(n):
+        px, py, a = p[i, 0], p[i, 1], alpha[i]
+        lo = _first_at_least(eb, a - Bw, False)  # the C code's L
+        hi = min(_first_at_least(eb, a + Bw, False) - 1, lo + n_ref - 1)  # its R: a point once
+        d2[i], kind[i], ref_index[i, 0], ref_index[i, 1] = np.inf, PairKind.POINT, -1, -1
+        target[i, 0], target[i, 1] = 0.0, 0.0
+        if hi < lo:  # no reference point within +/-Bw (the C code pairs it with the origin)
+            continue
+        if hi == lo:
+            target[i, 0], target[i, 1] = ex[lo], ey[lo]
+            d2[i], ref_index[i, 0] = metric_sq(px, py, ex[lo], ey[lo], ek[lo]), ext_map[lo]
+            continue
+        A = 1.0 / (px * px + py * py + L2)
+        B, C, D = 1.0 - A * py * py, 1.0 - A * px * px, A * px * py
+        start = min(max(_first_at_least(eb, a, False), lo + 1), hi)  # the segment across the point's bearing
+        best_J = -1
+        for J in range(start, hi + 1):  # up, then down
+            if J > start and _ray_bound(px, py, eux[J - 1], euy[J - 1], mf2) > d2[i] * (1.0 + 1e-12):
+                break
+            if not full and ext_map[J] == 0:  # a partial scan has no segment from its last point to its first
+                continue
+            d, qx, qy, j, other = _segment_candidate(px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter)
+            if d < d2[i] or (d == d2[i] and J < best_J):
+                d2[i], target[i, 0], target[i, 1], ref_index[i, 0], ref_index[i, 1], best_J = d, qx, qy, j, other, J
+        for J in range(start - 1, lo, -1):
+            if _ray_bound(px, py, eux[J], euy[J], mf2) > d2[i] * (1.0 + 1e-12):
+                break
+            if not full and ext_map[J] == 0:
+                continue
+            d, qx, qy, j, other = _segment_candidate(px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter)
+            if d < d2[i] or (d == d2[i] and J < best_J):
+                d2[i], target[i, 0], target[i, 1], ref_index[i, 0], ref_index[i, 1], best_J = d, qx, qy, j, other, J
+        kind[i] = PairKind.INTERPOLATED if ref_index[i, 1] >= 0 else PairKind.POINT
+    return target, d2, kind, ref_index
+
+
+@njit(cache=True)
+def candidates(point_line: bool, p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, points, neighbours, full: bool,
+               max_factor: float, max_step: float, Bw: float, Br: float, L: float, max_inter: float):
+    """The pairs of the points p (moved into the reference frame, with their bearings and ranges)
+    that find a target: (rows of p, target, kind, reference indices (K, 2), squared metric
+    distance). ``point_line``: paper 000 §2.4.1 (``point_line_pairs``), else MbICP's
+    (``mbicp_pairs``). The reference's arrays are ``ReferenceIndex``'s."""
+    n_ref = len(points)
+    if point_line:
+        best, d2 = _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref, Bw, Br, L, max_factor,
+                                   max_step)
+        rows = np.flatnonzero(best >= 0)
+        target, kind, second, d2f = _share_targets(p[rows], best[rows], d2[rows], points, ek, neighbours, L, max_inter)
+        ref_index = np.empty((len(rows), 2), dtype=np.int64)
+        for k in range(len(rows)):  # element by element: slice assignments are slow to compile
+            ref_index[k, 0], ref_index[k, 1] = best[rows[k]], second[k]
+        return rows, target, kind, ref_index, d2f
+    target, d2, kind, ref_index = _window_kernel(p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref, full, Bw, L,
+                                                 max_inter, max_factor)
+    rows = np.flatnonzero(d2 < np.inf)
+    return rows, target[rows], kind[rows], ref_index[rows], d2[rows]
+
+
+def _pairs(point_line: bool, ref: ReferenceIndex, moved, moved_polar, rows, Bw, Br, L, max_dist_inter) -> Pairs:
+    found, target, kind, ref_index, d2 = candidates(
+        point_line, moved[rows], moved_polar[0][rows], moved_polar[1][rows], ref.ext_bearings, ref.ext_x, ref.ext_y,
+        ref.ext_sq_norm_L2, ref.ext_ux, ref.ext_uy, ref.ext_map, ref.points, ref.neighbours, ref.full_circle, ref.max_factor, ref.max_step,
+        float(Bw), float(Br), float(L), float(max_dist_inter))
+    return Pairs(rows[found], target, kind, ref_index, np.sqrt(np.maximum(d2, 0.0)))
 
 
 def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float, Br: float,
                 L: float, max_dist_inter: float) -> Pairs:
-    """MbICP correspondences: metric-nearest reference point, or a point interpolated on a segment.
+    """MbICP's correspondences as the original C code makes them (Minguez et al. 2006, §IV).
 
-    The original searches every segment in the window; here the two segments adjacent to the
-    metric-nearest point are tried, which is where the nearest segment lies except at folds.
-    Segments longer than MaxDistInter bridge a gap between surfaces and are not interpolated.
+    The window of an object point holds the reference points whose bearing lies in
+    [alpha - Bw, alpha + Bw), bearings compared modulo 2 pi. With one point there, that point;
+    with more, every segment between consecutive window points is tried: its point metrically
+    closest to the object point (the metric of the object point, as the code's lambda), clamped
+    to the segment, or the nearer end when the segment's *squared* length is MaxDistInter or
+    more (the code compares it so); the candidate of smallest metric distance (the reference
+    point's metric) wins. A 360-degree reference is searched across its seam, a partial one has
+    no segment from its last point to its first.
+
+    Where this departs from the code, the code is wrong: its atan2 angles wrap at +/-pi (a
+    window there misses half its points); a point more than Bw past the scan's end is paired
+    with the scan's last point (beyond Br at any range that matters); a window without
+    reference points pairs its point with the origin at distance Br. Here such a point gets no
+    pair. Pairs at a metric distance above Br are cut later (``rejection.reject``).
     """
-    rows, p, best, d2 = _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L)
-    target = ref.points[best].copy()
-    kind = np.full(len(rows), PairKind.POINT, dtype=np.int8)
-    ref_index = np.column_stack((best, np.full(len(best), -1)))
-    for other in ref.neighbours[best].T:
-        c, ds, t = _segment_candidate(ref, p, best, other, L, max_dist_inter)
-        better = (ds < d2) & (t > 0.0) & (t < 1.0)
-        target[better] = c[better]
-        d2 = np.where(better, ds, d2)
-        kind[better] = PairKind.INTERPOLATED
-        ref_index[better, 1] = other[better]
-    return Pairs(rows, target, kind, ref_index, np.sqrt(d2))
+    return _pairs(False, ref, moved, moved_polar, rows, Bw, Br, L, max_dist_inter)
 
 
 def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float,
@@ -206,10 +323,7 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: 
     it lies but at occlusion edges. Segments longer than MaxDistInter would bridge two surfaces:
     such a point keeps m_j.
     """
-    rows, p, best, d2 = _nearest_found(ref, moved, moved_polar, rows, Bw, Br, L)
-    target, kind, second, d2 = _share_targets(p, best, d2, ref.points, ref.ext_sq_norm_L2, ref.neighbours,
-                                              float(L), float(max_dist_inter))
-    return Pairs(rows, target, kind, np.column_stack((best, second)), np.sqrt(d2))
+    return _pairs(True, ref, moved, moved_polar, rows, Bw, Br, L, max_dist_inter)
 
 
 @njit(cache=True)
@@ -259,16 +373,39 @@ def _share_targets(p, best, d2, points, sq_norm_L2, neighbours, L: float, max_le
     return target, kind, second, d2
 
 
-def visible_from_reference(moved_polar, bin_start: float, bin_width: float, margin: float) -> np.ndarray:
+@njit(cache=True)
+def visible_in_order(alpha: np.ndarray) -> np.ndarray:
+    """The original MbICP's projection filter: walking the object points in scan order, a point
+    whose bearing ``alpha`` falls below that of the last point kept is hidden (it went behind a
+    surface seen before it). Bearings are unwrapped along the scan (the code's atan2 angles jump
+    at +/-pi, which it warns about); a 360-degree scanner still wants the z-buffer
+    (``visible_from_reference``)."""
+    vis = np.empty(len(alpha), dtype=np.bool_)
+    a_prev, unwrapped, highest = 0.0, 0.0, -np.inf
+    for i in range(len(alpha)):
+        step = alpha[i] - a_prev if i > 0 else 0.0
+        unwrapped = unwrapped + ((step + np.pi) % (2.0 * np.pi) - np.pi) if i > 0 else alpha[i]
+        a_prev = alpha[i]
+        vis[i] = unwrapped >= highest
+        highest = max(highest, unwrapped)
+    return vis
+
+
+@njit(cache=True)
+def visible_from_reference(alpha: np.ndarray, r: np.ndarray, bin_start: float, bin_width: float,
+                           margin: float) -> np.ndarray:
     """Projection filter (Lu & Milios 1997, used by MbICP): which moved points the reference sees.
 
     A z-buffer over bearing bins of the reference viewpoint: in each bin only points within
     ``margin`` of the nearest one are visible; points behind a closer surface are hidden. Bins
     start at the reference scan's first bearing so that turning the scanner turns the bins.
-    ``moved_polar``: ``polar`` of the moved points.
     """
-    alpha, r = moved_polar
-    bins = ((alpha - bin_start) % (2 * np.pi) / bin_width).astype(np.int64)  # non-negative: truncation floors
     zbuf = np.full(int(2 * np.pi / bin_width) + 2, np.inf)
-    np.minimum.at(zbuf, bins, r)
-    return r <= zbuf[bins] + margin
+    bins = np.empty(len(alpha), dtype=np.int64)
+    for i in range(len(alpha)):
+        bins[i] = int(((alpha[i] - bin_start) % (2 * np.pi)) / bin_width)  # non-negative: truncation floors
+        zbuf[bins[i]] = min(zbuf[bins[i]], r[i])
+    vis = np.empty(len(alpha), dtype=np.bool_)
+    for i in range(len(alpha)):
+        vis[i] = r[i] <= zbuf[bins[i]] + margin
+    return vis

@@ -33,6 +33,7 @@ class PairStatus(enum.IntEnum):
     OUTSIDE_BR = 1  # metric distance above the radial window Br (MbICP) / max distance (ICP)
     TRIMMED = 2  # beyond the best 'filter' fraction (trimmed estimator)
     MAD = 3  # above median + k*MAD (paper 000 §2.4.2)
+    DOUBLE = 4  # one of several object points on one reference point, far beyond the nearest (CSM)
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,6 +150,7 @@ class IterationEvent:
     error: float  # mean squared Euclidean residual of the kept pairs after the step [m^2]
     increment: Pose2  # the step composed this iteration (estimate_after = increment @ estimate_before)
     polar: PolarStep | None = None  # PSM / PMWN only
+    note: str = ""  # what else happened, in words (ICP / PL-ICP: a restart began, the run kept)
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,70 +1,386 @@
-"""Point-to-point ICP: Euclidean closest points (k-d tree) and the closed-form SVD fit (paper 000 §2.1).
+"""ICP and PL-ICP as Censi's CSM runs them (``sm_icp`` with the defaults of its ``sm2`` program).
 
-The baseline the MbICP family is compared with: it has no notion of rotation when pairing, so
-large rotations pull it into local minima.
+One loop serves both (CSM's ``icp_loop``): each object ray in the reference frame takes the
+Euclidean-nearest valid reference ray j1 (within ``max_correspondence_dist``; never the scan's
+first or last ray) and of j1's two valid neighbours the nearer, j2. Pairs several object rays
+share a j1 with are dropped beyond 3x the nearest one's distance; then every pair farther from
+the segment j1-j2 than min(the ``outliers_maxPerc`` quantile, ``outliers_adaptive_mult`` x the
+``outliers_adaptive_order`` quantile) is trimmed. The pose is then solved exactly (``gpc``):
+
+- ICP ("vanilla" in CSM): each ray to its projection on the segment j1-j2, all directions weighed
+  alike; it stops when the step is below ``epsilon_xy`` and ``epsilon_theta``.
+- PL-ICP (Censi, ICRA 2008): each ray to the line through j1 and j2, only the distance along
+  the line's normal counts; it also stops when the pairs repeat those of an earlier iteration.
+
+When the final mean distance exceeds ``restart_threshold_mean_error``, CSM restarts from the
+result moved by +/-``restart_dt`` in x, in y and +/-``restart_dtheta``, and keeps the run of
+smallest total distance. The loop is compiled; with an observer attached, each run is run again
+with its iterations recorded (the same numbers: the loop is deterministic).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
+from numba import njit
 
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, StartEvent
-from .metric import linearised_jacobians, mean_sq_residual, svd_fit
-from .params import IcpParams
-from .rejection import reject
+from .gpc import normal_terms, solve
+from .metric import kth_smallest
+from .params import IcpParams, PlIcpParams
 from .result import MatchResult, Termination
 from .scan import Scan
 from .se2 import Pose2
 from .uncertainty import DEGENERACY_LENGTH_M, FinalSystem, build_result
 
+# CSM's icp_loop: fewer pairs than this share of the object's rays, before or after trimming, fails.
+FAIL_FRACTION = 0.05
+DOUBLES_FACTOR = 3.0  # kill_outliers_double: a pair farther than this times its j1's nearest pair
+
+# Pair statuses as the compiled loop writes them (numba compares plain integers)
+_KEPT, _OUTSIDE, _TRIMMED, _DOUBLE = (int(s) for s in (PairStatus.KEPT, PairStatus.OUTSIDE_BR, PairStatus.TRIMMED,
+                                                     PairStatus.DOUBLE))
+
+# Outcomes of one run of the loop
+_OK, _TOO_FEW, _SINGULAR = 0, 1, 2
+
+
+@njit(cache=True)
+def _nearest(rx, ry, rtheta, rcos, rsin, rvalid, px, py, phi):
+    """The Euclidean-nearest valid reference ray to (px, py): walk outwards from the ray nearest
+    in bearing, up and down, while a ray can still be nearer. Every point of a ray u_j lies at
+    least as far from p as p's distance to the ray, |p x u_j| when p lies ahead of it (p . u_j > 0)
+    and |p| behind it, and that bound grows as the walk moves away from p's bearing."""
+    n = len(rx)
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rtheta[mid] < phi:
+            lo = mid + 1
+        else:
+            hi = mid
+    rho2 = px * px + py * py
+    best, d_best = -1, np.inf
+    up, down = lo, lo - 1
+    while up < n or down >= 0:
+        if up < n:
+            if rvalid[up]:
+                dx, dy = px - rx[up], py - ry[up]
+                d = dx * dx + dy * dy
+                if d < d_best:
+                    best, d_best = up, d
+            up += 1
+            if up < n:
+                ahead = px * rcos[up] + py * rsin[up] > 0.0
+                cross = px * rsin[up] - py * rcos[up]
+                if (cross * cross if ahead else rho2) > d_best:
+                    up = n
+        if down >= 0:
+            if rvalid[down]:
+                dx, dy = px - rx[down], py - ry[down]
+                d = dx * dx + dy * dy
+                if d < d_best:
+                    best, d_best = down, d
+            down -= 1
+            if down >= 0:
+                ahead = px * rcos[down] + py * rsin[down] > 0.0
+                cross = px * rsin[down] - py * rcos[down]
+                if (cross * cross if ahead else rho2) > d_best:
+                    down = -1
+    return best, d_best
+
+
+@njit(cache=True)
+def _on_branch(phi, rtheta):
+    """A bearing turned by whole turns onto the scan's bearings: into [first, first + 2 pi), then
+    back a turn when it lies nearer the first bearing than the last (so CSM's atan2 angle, for a
+    scan whose bearings lie within +/-pi, and every scan turned by any angle, search alike)."""
+    first, last = rtheta[0], rtheta[len(rtheta) - 1]
+    a = first + (phi - first) % (2.0 * np.pi)
+    if a > last and (first + 2.0 * np.pi - a) < (a - last):
+        a -= 2.0 * np.pi
+    return a
+
+
+@njit(cache=True)
+def _segment_foot(ax, ay, bx, by, px, py, clamp: bool):
+    """The point of segment a-b (or of its line, ``clamp`` False) nearest to p."""
+    ex, ey = bx - ax, by - ay
+    ee = ex * ex + ey * ey
+    t = ((px - ax) * ex + (py - ay) * ey) / ee if ee > 0.0 else 0.0
+    if clamp:
+        t = min(max(t, 0.0), 1.0)
+    return ax + t * ex, ay + t * ey
+
+
+@njit(cache=True)
+def _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, max_dist, order, mult, max_perc,
+           doubles: bool):
+    """One iteration's correspondences at the pose (x, y, th): per object ray the moved point,
+    j1, j2 (-1: none), its status and its distance to the segment j1-j2."""
+    n, m = len(sx), len(rx)
+    c, s = np.cos(th), np.sin(th)
+    wx, wy = np.empty(n), np.empty(n)
+    j1, j2 = np.full(n, -1), np.full(n, -1)
+    status = np.full(n, np.int8(_OUTSIDE))
+    d2 = np.full(n, np.inf)
+    for i in range(n):
+        wx[i], wy[i] = c * sx[i] - s * sy[i] + x, s * sx[i] + c * sy[i] + y
+        if not svalid[i]:
+            continue
+        best, d = _nearest(rx, ry, rtheta, rcos, rsin, rvalid, wx[i], wy[i], _on_branch(np.arctan2(wy[i], wx[i]), rtheta))
+        d2[i] = d
+        if best < 0 or d > max_dist * max_dist or best == 0 or best == m - 1:
+            continue
+        up, down = best + 1, best - 1
+        while up < m and not rvalid[up]:
+            up += 1
+        while down >= 0 and not rvalid[down]:
+            down -= 1
+        if up >= m and down < 0:
+            continue
+        if up >= m:
+            other = down
+        elif down < 0:
+            other = up
+        else:
+            du = (wx[i] - rx[up]) ** 2 + (wy[i] - ry[up]) ** 2
+            dd = (wx[i] - rx[down]) ** 2 + (wy[i] - ry[down]) ** 2
+            other = up if du < dd else down
+        j1[i], j2[i], status[i] = best, other, _KEPT
+    if doubles:  # several object rays on one j1: only those near the nearest one stay
+        nearest_d2 = np.full(m, np.inf)
+        for i in range(n):
+            if status[i] == _KEPT:
+                nearest_d2[j1[i]] = min(nearest_d2[j1[i]], d2[i])
+        for i in range(n):
+            if status[i] == _KEPT and d2[i] > DOUBLES_FACTOR * DOUBLES_FACTOR * nearest_d2[j1[i]]:
+                status[i] = _DOUBLE
+    dist = np.full(n, np.inf)
+    k = 0
+    for i in range(n):
+        if status[i] == _KEPT or status[i] == _DOUBLE:
+            fx, fy = _segment_foot(rx[j1[i]], ry[j1[i]], rx[j2[i]], ry[j2[i]], wx[i], wy[i], True)
+            dist[i] = np.hypot(wx[i] - fx, wy[i] - fy)
+            k += status[i] == _KEPT
+    limit = np.inf
+    if k > 0:
+        kept = dist[status == _KEPT]
+        lim1 = kth_smallest(kept, max(0, min(int(np.floor(k * max_perc)), k - 1)))
+        lim2 = mult * kth_smallest(kept, max(0, min(int(np.floor(k * order)), k - 1)))
+        limit = min(lim1, lim2)
+        for i in range(n):
+            if status[i] == _KEPT and dist[i] > limit:
+                status[i] = _TRIMMED
+    return wx, wy, j1, j2, status, dist, limit, k
+
+
+@njit(cache=True)
+def _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line: bool):
+    """The kept pairs as the solver takes them: object point (sensor frame), target and weight.
+    ICP: the foot on the segment, weight I; PL-ICP: the point j1 and n n^T of the segment's normal."""
+    idx = np.flatnonzero(status == _KEPT)
+    K = len(idx)
+    p, q, C = np.empty((K, 2)), np.empty((K, 2)), np.zeros((K, 2, 2))
+    for k in range(K):
+        i = idx[k]
+        p[k, 0], p[k, 1] = sx[i], sy[i]
+        a, b = j1[i], j2[i]
+        if line:
+            q[k, 0], q[k, 1] = rx[a], ry[a]
+            dx, dy = rx[a] - rx[b], ry[a] - ry[b]
+            norm = np.hypot(dx, dy)
+            nx, ny = dy / norm, -dx / norm
+            C[k, 0, 0], C[k, 0, 1], C[k, 1, 0], C[k, 1, 1] = nx * nx, nx * ny, nx * ny, ny * ny
+        else:
+            q[k, 0], q[k, 1] = _segment_foot(rx[a], ry[a], rx[b], ry[b], wx[i], wy[i], True)
+            C[k, 0, 0], C[k, 1, 1] = 1.0, 1.0
+    return p, q, C
+
+
+@njit(cache=True)
+def _hash(j1, j2, status):
+    """A 64-bit fingerprint of the kept pairs (PL-ICP's test for a repeated set of pairs)."""
+    h = np.uint64(1469598103934665603)
+    for i in range(len(j1)):
+        v = np.uint64(i * 1000003 + (j1[i] + 1) * 7919 + (j2[i] + 1)) if status[i] == _KEPT else np.uint64(i)
+        h = (h ^ v) * np.uint64(1099511628211)
+    return h
+
+
+@njit(cache=True)
+def _loop(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, line: bool, max_iter: int, eps_xy: float,
+          eps_th: float, max_dist: float, order: float, mult: float, max_perc: float, doubles: bool, trace):
+    """CSM's icp_loop from (x, y, th): (outcome, x, y, th, total distance, kept pairs, iterations,
+    converged, and the last iteration's pairs: wx, wy, j1, j2, status). ``trace`` (poses (n, 6),
+    statuses, ... for n iterations) records each iteration; an empty one records nothing."""
+    record = len(trace[0]) > 0
+    hashes = np.empty(max_iter, dtype=np.uint64)
+    n = len(sx)
+    total, valid, it, code, converged = 0.0, 0, 0, _OK, False
+    wx, wy, j1, j2 = np.empty(0), np.empty(0), np.empty(0, np.int64), np.empty(0, np.int64)
+    status = np.empty(0, np.int8)
+    for it in range(max_iter):
+        wx, wy, j1, j2, status, dist, limit, k = _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y,
+                                                       th, max_dist, order, mult, max_perc, doubles)
+        kept = np.flatnonzero(status == _KEPT)
+        if k < FAIL_FRACTION * n or len(kept) < FAIL_FRACTION * n or len(kept) < 3:
+            code = _TOO_FEW
+            break
+        total, valid = dist[kept].sum(), len(kept)
+        p, q, C = _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line)
+        A, b = normal_terms(p, q, C)
+        nx, ny, nth, ok = solve(A, b)
+        if not ok:
+            code = _SINGULAR
+            break
+        if record:
+            poses, stat, first, second, dists, limits = trace
+            poses[it, 0], poses[it, 1], poses[it, 2], poses[it, 3], poses[it, 4], poses[it, 5] = x, y, th, nx, ny, nth
+            stat[it], first[it], second[it], dists[it], limits[it] = status, j1, j2, dist, limit
+        # the step as CSM measures it: the new pose seen from the old one
+        c, s = np.cos(th), np.sin(th)
+        dx, dy = c * (nx - x) + s * (ny - y), -s * (nx - x) + c * (ny - y)
+        dth = np.arctan2(np.sin(nth - th), np.cos(nth - th))
+        x, y, th = nx, ny, nth
+        hashes[it] = _hash(j1, j2, status)
+        if line:  # PL-ICP ends when the pairs repeat those of an earlier iteration
+            for a in range(it):
+                if hashes[a] == hashes[it]:
+                    converged = True
+        if converged or (np.hypot(dx, dy) < eps_xy and abs(dth) < eps_th):
+            converged = True
+            break
+    return code, x, y, th, total, valid, it + 1, converged, wx, wy, j1, j2, status
+
+
+def _empty_trace(n_iter: int, n: int):
+    return (np.zeros((n_iter, 6)), np.zeros((n_iter, n), np.int8), np.zeros((n_iter, n), np.int64),
+            np.zeros((n_iter, n), np.int64), np.zeros((n_iter, n)), np.zeros(n_iter))
+
+
+class _Scans:
+    """Both scans as CSM holds them: every ray (valid or not) in scan order, readings outside
+    (min_reading, max_reading] invalid."""
+
+    def __init__(self, ref: Scan, obj: Scan, params: IcpParams):
+        def rays(scan):
+            r = np.where(scan.valid, scan.ranges, 0.0)
+            ok = scan.valid & (r > params.min_reading) & (r <= params.max_reading)
+            return r * np.cos(scan.bearings), r * np.sin(scan.bearings), np.ascontiguousarray(scan.bearings, float), ok
+
+        self.rx, self.ry, self.rtheta, self.rvalid = rays(ref)
+        self.rcos, self.rsin = np.cos(self.rtheta), np.sin(self.rtheta)
+        self.sx, self.sy, _, self.svalid = rays(obj)
+        self.full_circle = ref.is_full_circle()
+
+    def ref_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """The valid reference points, and for each ray the index of its point there."""
+        return np.column_stack((self.rx, self.ry))[self.rvalid], np.cumsum(self.rvalid) - 1
+
+    def run(self, start: Pose2, params: IcpParams, trace=None):
+        p = params
+        return _loop(self.rx, self.ry, self.rtheta, self.rcos, self.rsin, self.rvalid, self.sx, self.sy, self.svalid, start.x, start.y,
+                     start.theta, isinstance(p, PlIcpParams), p.max_iterations, p.epsilon_xy, p.epsilon_theta,
+                     p.max_correspondence_dist, p.outliers_adaptive_order, p.outliers_adaptive_mult,
+                     p.outliers_maxPerc, p.outliers_remove_doubles, trace if trace is not None else _empty_trace(0, 0))
+
+
+def _restarts(params: IcpParams, result: Pose2) -> list[tuple[Pose2, str]]:
+    dt, dth = params.restart_dt, params.restart_dtheta
+    moves = ((dt, 0, 0, "x + dt"), (-dt, 0, 0, "x - dt"), (0, dt, 0, "y + dt"), (0, -dt, 0, "y - dt"),
+             (0, 0, dth, "theta + dtheta"), (0, 0, -dth, "theta - dtheta"))
+    return [(Pose2(result.x + a, result.y + b, result.theta + c), label) for a, b, c, label in moves]
 
 
 def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParams | None = None,
           observer: Observer | None = None) -> MatchResult:
     """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
     params = params if params is not None else IcpParams()
-    ref_pts = ref.points()
-    tree = cKDTree(ref_pts)
-    P = obj.points()
-    used = np.arange(len(P))
-    min_pairs = max(3, int(np.ceil(params.AsocError * len(P))))
-    no_hidden = np.empty(0, dtype=np.int64)
+    line = isinstance(params, PlIcpParams)
+    name = "plicp" if line else "icp"
+    scans = _Scans(ref, obj, params)
+    runs = [(initial_guess, "")]
+    outcomes = [scans.run(initial_guess, params)]
+    code, x, y, th, total, valid = outcomes[0][:6]
+    best = 0
+    if code == _OK and params.restart and total / valid > params.restart_threshold_mean_error:
+        for start, label in _restarts(params, Pose2(x, y, th)):
+            out = scans.run(start, params)
+            if out[0] != _OK:  # CSM stops restarting at the first failure
+                break
+            runs.append((start, f"restart from the first run's result, {label}"))
+            outcomes.append(out)
+            if out[4] < outcomes[best][4]:
+                best = len(outcomes) - 1
     if observer is not None:
-        observer(StartEvent("icp", params, ref_pts, P, used, initial_guess, None))
-
-    est = initial_guess
-    reason = Termination.MAX_ITERATIONS
-    last = None
-    it = 0
-    for it in range(1, params.MaxIter + 1):
-        moved = est.apply(P)
-        dist, j = tree.query(moved, k=1)
-        status, thr = reject(dist, params.max_correspondence_dist, params.filter)
-        kept = status == PairStatus.KEPT
-        n_kept = int(np.count_nonzero(kept))
-        step = svd_fit(moved[kept], ref_pts[j[kept]]) if n_kept >= min_pairs else None
-        inc = Pose2(*step) if step is not None else Pose2()
-        error = float("nan")
-        if step is not None:
-            error = mean_sq_residual(inc.apply(moved[kept]), ref_pts[j[kept]])
-        new_est = inc @ est
-        if observer is not None:
-            pairs = Correspondences(used, ref_pts[j], np.full(len(j), PairKind.POINT, dtype=np.int8),
-                                    np.column_stack((j, np.full(len(j), -1))), dist, status, moved)
-            observer(IterationEvent(it, est, new_est, moved, no_hidden, pairs, thr, error, inc))
-        if step is None:
-            reason = Termination.TOO_FEW_PAIRS
-            break
-        est = new_est
-        J = linearised_jacobians(moved[kept])
-        last = FinalSystem(np.einsum("nij,nik->jk", J, J), error, ref_pts[j[kept]], j[kept], n_kept,
-                           len(status) - n_kept)
-        if abs(inc.x) < params.errx_out and abs(inc.y) < params.erry_out and abs(inc.theta) < params.errt_out:
-            reason = Termination.CONVERGED
-            break
-
-    result = build_result("icp", est, reason, it, last, ref_pts, ref.is_full_circle(), DEGENERACY_LENGTH_M)
+        _replay(observer, name, params, scans, runs, outcomes, best, initial_guess)
+    result = _result(name, scans, params, outcomes, best)
     if observer is not None:
         observer(FinishEvent(result))
     return result
+
+
+def _replay(observer, name, params, scans, runs, outcomes, best, initial_guess) -> None:
+    """The recorded events of every run (the restarts continue the iteration count)."""
+    ref_pts, ref_of_ray = scans.ref_points()
+    obj_valid = np.flatnonzero(scans.svalid)
+    obj_pts = np.column_stack((scans.sx, scans.sy))[obj_valid]
+    used = np.arange(len(obj_pts))
+    observer(StartEvent(name, params, ref_pts, obj_pts, used, initial_guess, None))
+    count = 0
+    for k, ((start, label), out) in enumerate(zip(runs, outcomes)):
+        trace = _empty_trace(out[6], len(scans.sx))
+        scans.run(start, params, trace)
+        poses, stat, first, second, dists, limits = trace
+        recorded = out[6] if out[0] == _OK else out[6] - 1  # a failed iteration computes no pose
+        for it in range(recorded):
+            before, after = Pose2(*poses[it, :3]), Pose2(*poses[it, 3:])
+            st, j1, j2 = stat[it][obj_valid], first[it][obj_valid], second[it][obj_valid]
+            has = st != PairStatus.OUTSIDE_BR
+            moved = before.apply(obj_pts)
+            target = _feet(ref_pts[ref_of_ray[j1[has]]], ref_pts[ref_of_ray[j2[has]]], moved[has],
+                           clamp=not isinstance(params, PlIcpParams))
+            pairs = Correspondences(used[has], target, np.full(len(target), PairKind.INTERPOLATED, np.int8),
+                                    np.column_stack((ref_of_ray[j1[has]], ref_of_ray[j2[has]])),
+                                    dists[it][obj_valid][has], st[has], moved[has])
+            kept = st[has] == PairStatus.KEPT
+            err = float(np.mean(np.sum((after.apply(obj_pts[has][kept]) - target[kept]) ** 2, axis=1)))
+            note = label if it == 0 else ""
+            if k == best and it == recorded - 1 and len(runs) > 1:
+                note = f"the run kept: the smallest total distance of {len(runs)} runs"
+            count += 1
+            observer(IterationEvent(count, before, after, moved, np.empty(0, np.int64), pairs,
+                                    float(limits[it]) if np.isfinite(limits[it]) else None, err,
+                                    after @ before.inverse(), note=note))
+
+
+def _feet(a: np.ndarray, b: np.ndarray, p: np.ndarray, clamp: bool) -> np.ndarray:
+    """Where each pair ends: the foot of p on the segment a-b (``clamp``) or on its line."""
+    e = b - a
+    t = np.einsum("ij,ij->i", p - a, e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300)
+    return a + (np.clip(t, 0.0, 1.0) if clamp else t)[:, None] * e
+
+
+def _result(name, scans, params, outcomes, best) -> MatchResult:
+    """The kept run's pose; its last iteration's kept pairs make the final system (as CSM reports
+    their count), for the covariance and the degeneracy indicator."""
+    code, x, y, th, total, valid, _, converged, wx, wy, j1, j2, status = outcomes[best]
+    iterations = sum(o[6] for o in outcomes)
+    pose = Pose2(x, y, th)
+    ref_pts, ref_of_ray = scans.ref_points()
+    if code != _OK:
+        reason = Termination.TOO_FEW_PAIRS if code == _TOO_FEW else Termination.SINGULAR
+        return build_result(name, pose, reason, iterations, None, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M)
+    reason = Termination.CONVERGED if converged else Termination.MAX_ITERATIONS
+    kept = np.flatnonzero(status == PairStatus.KEPT)
+    p, _, C = _targets(scans.rx, scans.ry, scans.sx, scans.sy, wx, wy, j1, j2, status, isinstance(params, PlIcpParams))
+    moved = pose.apply(p)
+    J = np.zeros((len(p), 2, 3))
+    J[:, 0, 0] = J[:, 1, 1] = 1.0
+    J[:, 0, 2], J[:, 1, 2] = -moved[:, 1], moved[:, 0]
+    A = np.einsum("kji,kjl,klm->im", J, C, J)
+    foot = _feet(ref_pts[ref_of_ray[j1[kept]]], ref_pts[ref_of_ray[j2[kept]]], moved, clamp=True)
+    err = float(np.mean(np.sum((moved - foot) ** 2, axis=1)))
+    n_candidates = int(np.count_nonzero(status != PairStatus.OUTSIDE_BR))
+    last = FinalSystem(A, err, foot, ref_of_ray[j1[kept]], len(kept), n_candidates - len(kept))
+    return build_result(name, pose, reason, iterations, last, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M)

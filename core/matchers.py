@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 
-from .params import IcpParams, ImprovedParams, MbicpParams, Params, PmwnParams, PsmParams
+from .params import IcpParams, ImprovedParams, MbicpParams, Params, PlIcpParams, PmwnParams, PsmParams
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,8 @@ def check_inputs(ref, obj, guess) -> None:
 MATCHERS: dict[str, Matcher] = {
     m.name: m
     for m in (
-        Matcher("icp", "ICP (point-to-point, Euclidean)", IcpParams, "icp"),
+        Matcher("icp", "ICP (CSM's, point to segment)", IcpParams, "icp"),
+        Matcher("plicp", "PL-ICP (Censi 2008, CSM's)", PlIcpParams, "icp"),
         Matcher("mbicp", "MbICP (Minguez et al. 2006)", MbicpParams, "mbicp"),
         Matcher("improved", "Improved MbICP (Li et al. 2018)", ImprovedParams, "mbicp"),
         Matcher("psm", "PSM (Diosi & Kleeman 2007)", PsmParams, "psm"),

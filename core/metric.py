@@ -8,8 +8,7 @@ other (paper 000 eq. 3); linearising the rotation gives the closed form used her
 from __future__ import annotations
 
 import numpy as np
-from numba import vectorize
-from scipy.linalg.lapack import dgesv
+from numba import njit, vectorize
 
 
 def metric_distance_sq(p: np.ndarray, q: np.ndarray, L: float) -> np.ndarray:
@@ -53,35 +52,44 @@ def metric_exact_sq(p1: np.ndarray, p2: np.ndarray, L: float, max_theta: float =
     return float(minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}).fun)
 
 
-def metric_project_on_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray, L: float) -> np.ndarray:
-    """Parameter t in [0, 1] of the point of segment a->b metrically closest to p (row-wise).
+@njit(cache=True)
+def kth_smallest(a: np.ndarray, k: int) -> float:
+    """``np.sort(a)[k]`` by selection (Hoare's quickselect on a copy): linear time, and a loop
+    numba compiles in a tenth of a second where its sort, median and argsort take one each."""
+    b = a.copy()
+    lo, hi = 0, len(b) - 1
+    while lo < hi:
+        pivot = b[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while b[i] < pivot:
+                i += 1
+            while b[j] > pivot:
+                j -= 1
+            if i <= j:
+                b[i], b[j] = b[j], b[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return b[k]
 
-    Minimises (a + t e - p)^T M(p) (a + t e - p), e = b - a, with M(p) = I - r r^T / (|p|^2 + L^2),
-    r = (p_y, -p_x): the original code's interpolation, with the object point in the metric.
-    """
-    e = b - a
-    u = a - p
-    r = np.column_stack((p[:, 1], -p[:, 0]))
-    k = np.einsum("ij,ij->i", p, p) + L * L
-    er = np.einsum("ij,ij->i", e, r)
-    ur = np.einsum("ij,ij->i", u, r)
-    eMe = np.einsum("ij,ij->i", e, e) - er * er / k
-    uMe = np.einsum("ij,ij->i", u, e) - ur * er / k
-    t = np.where(eMe > 1e-18, -uMe / np.maximum(eMe, 1e-18), 0.0)
-    return np.clip(t, 0.0, 1.0)
+
+@njit(cache=True)
+def median(a: np.ndarray) -> float:
+    n = len(a)
+    return 0.5 * (kth_smallest(a, (n - 1) // 2) + kth_smallest(a, n // 2))
 
 
-def _median(x: np.ndarray) -> float:
-    """Median by one sort: np.median's dispatch costs more than the sort on scan-sized arrays."""
-    s = np.sort(x)
-    n = len(s)
-    return 0.5 * float(s[(n - 1) // 2] + s[n // 2])
-
-
+@njit(cache=True)
 def mad_threshold(distances: np.ndarray, k: float = 2.0) -> float:
     """Rejection threshold d_rej = median + k * MAD (paper 000 eq. 5, §2.4.2)."""
-    med = _median(distances)
-    return med + k * _median(np.abs(distances - med))
+    med = median(distances)
+    return med + k * median(np.abs(distances - med))
 
 
 def linearised_jacobians(points: np.ndarray) -> np.ndarray:
@@ -95,58 +103,57 @@ def linearised_jacobians(points: np.ndarray) -> np.ndarray:
     return J
 
 
+@njit(cache=True)
 def metric_normal_equations(p: np.ndarray, c: np.ndarray, L: float) -> tuple[np.ndarray, np.ndarray]:
     """A, b of MbICP's metric least squares: A q = b minimises sum (c_i - q(p_i))^T M(c_i) (...).
 
     Linearised residual e_i = (c_i - p_i) - J_i q with J_i = [[1, 0, -p_iy], [0, 1, p_ix]] and
     M(c) = I - r r^T / (|c|^2 + L^2), r = (c_y, -c_x): the original builds M from the associated
-    reference point (MbICP §III-C). Written out by hand: this is the hot loop.
+    reference point (MbICP §III-C).
     """
-    px, py = p[:, 0], p[:, 1]
-    cx, cy = c[:, 0], c[:, 1]
-    dx, dy = cx - px, cy - py
-    k = cx * cx + cy * cy + L * L
-    # The nine per-pair terms are written into the rows of one array that one reduction sums.
-    X = np.empty((9, len(p)))
-    m11, m12, m22, g1, g2, gt, b1, b2, bt = X  # M = [[m11, m12], [m12, m22]]; (g1, g2): theta column of J^T M
-    np.subtract(1.0, cy * cy / k, out=m11)
-    np.divide(cx * cy, k, out=m12)
-    np.subtract(1.0, cx * cx / k, out=m22)
-    np.subtract(px * m12, py * m11, out=g1)
-    np.subtract(px * m22, py * m12, out=g2)
-    np.subtract(px * g2, py * g1, out=gt)
-    np.add(m11 * dx, m12 * dy, out=b1)
-    np.add(m12 * dx, m22 * dy, out=b2)
-    np.add(g1 * dx, g2 * dy, out=bt)
-    s = X.sum(axis=1)
-    A = np.array([[s[0], s[1], s[3]], [s[1], s[2], s[4]], [s[3], s[4], s[5]]])
-    return A, s[6:]
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    for i in range(len(p)):
+        px, py, cx, cy = p[i, 0], p[i, 1], c[i, 0], c[i, 1]
+        dx, dy = cx - px, cy - py
+        k = cx * cx + cy * cy + L * L
+        m11, m12, m22 = 1.0 - cy * cy / k, cx * cy / k, 1.0 - cx * cx / k
+        g1, g2 = px * m12 - py * m11, px * m22 - py * m12  # the theta column of J^T M
+        A[0, 0] += m11
+        A[0, 1] += m12
+        A[1, 1] += m22
+        A[0, 2] += g1
+        A[1, 2] += g2
+        A[2, 2] += px * g2 - py * g1
+        b[0] += m11 * dx + m12 * dy
+        b[1] += m12 * dx + m22 * dy
+        b[2] += g1 * dx + g2 * dy
+    A[1, 0], A[2, 0], A[2, 1] = A[0, 1], A[0, 2], A[1, 2]
+    return A, b
 
 
-def solve3(A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
-    """x with A x = b for the 3x3 normal equations, None when A is singular or x not finite.
+@njit(cache=True)
+def solve3(A: np.ndarray, b: np.ndarray):
+    """x with A x = b for the 3x3 normal equations (Cramer's rule, as small systems are solved),
+    and whether A was invertible and x finite."""
+    c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+    c01 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+    c02 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+    det = A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02
+    x = np.zeros(3)
+    scale = max(abs(A[0, 0]), abs(A[1, 1]), abs(A[2, 2]), 1e-300)
+    if not abs(det) > 1e-14 * scale ** 3:
+        return x, False
+    inv = np.empty((3, 3))
+    inv[0, 0], inv[1, 0], inv[2, 0] = c00, c01, c02
+    inv[0, 1] = A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]
+    inv[0, 2] = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
+    inv[1, 1] = A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
+    inv[1, 2] = A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]
+    inv[2, 1] = A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]
+    inv[2, 2] = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    for i in range(3):
+        x[i] = (inv[i, 0] * b[0] + inv[i, 1] * b[1] + inv[i, 2] * b[2]) / det
+    return x, bool(np.isfinite(x).all())
 
-    LAPACK's dgesv, as np.linalg.solve calls it, without the generic wrapper (a fifth of the
-    cost: this runs once per iteration).
-    """
-    _, _, x, info = dgesv(A, b)
-    return x if info == 0 and np.isfinite(x).all() else None
 
-
-def mean_sq_residual(moved: np.ndarray, targets: np.ndarray) -> float:
-    """Mean squared Euclidean distance between paired rows [m^2]."""
-    d = moved - targets
-    return float(np.einsum("ij,ij->", d, d)) / len(d)
-
-
-def svd_fit(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, float]:
-    """Closed-form rigid motion (x, y, theta) minimising sum |dst - (R src + t)|^2 (Arun et al. 1987)."""
-    ms, md = src.mean(axis=0), dst.mean(axis=0)
-    H = (src - ms).T @ (dst - md)
-    U, _, Vt = np.linalg.svd(H)
-    R = Vt.T @ U.T
-    if np.linalg.det(R) < 0:  # reflection: flip the weakest axis
-        Vt[1] *= -1.0
-        R = Vt.T @ U.T
-    t = md - R @ ms
-    return float(t[0]), float(t[1]), float(np.arctan2(R[1, 0], R[0, 0]))

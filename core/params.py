@@ -28,6 +28,14 @@ def param(default, *, unit: str, lo: float | None = None, hi: float | None = Non
     return dataclasses.field(default=default, metadata={"unit": unit, "lo": lo, "hi": hi, "help": help})
 
 
+def redefault(cls, name: str, default, help: str | None = None):
+    """The field ``name`` of the parameter dataclass ``cls`` with another default (a subclass's
+    own value: improved MbICP's windows), its unit, bounds and help kept (or the help replaced)."""
+    f = next(f for f in dataclasses.fields(cls) if f.name == name)
+    m = f.metadata
+    return param(default, unit=m["unit"], lo=m["lo"], hi=m["hi"], help=help or m["help"])
+
+
 @dataclass(frozen=True)
 class FieldSpec:
     name: str
@@ -107,42 +115,89 @@ class StopParams(Params):
 
 
 @dataclass(frozen=True)
-class IcpParams(StopParams):
-    """Point-to-point ICP with Euclidean closest points and the closed-form SVD fit (paper 000 §2.1)."""
+class IcpParams(Params):
+    """ICP as Censi's CSM runs it (``sm_icp``; names and defaults of its options as its ``sm2``
+    program sets them): pairs to the segment between the nearest reference ray and its nearer
+    neighbour, adaptive trimming, the exact closed-form pose, restarts (core/icp.py)."""
 
-    max_correspondence_dist: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
-        help="pairs farther apart than this are not used")
-    filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
-        help="fraction of the closest pairs kept each iteration (trimmed ICP)")
+    max_iterations: int = param(1000, unit="count", lo=1, hi=100000, help="maximum number of iterations")
+    epsilon_xy: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="stop when the step moves less than this ...")
+    epsilon_theta: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="... and turns less than this")
+    max_correspondence_dist: float = param(2.0, unit="m", lo=1e-3, hi=100.0,
+        help="an object point farther than this from its nearest reference point gets no pair")
+    outliers_maxPerc: float = param(0.95, unit="1", lo=0.0, hi=1.0,
+        help="keep at most this share of the pairs (the nearest to their segments)")
+    outliers_adaptive_order: float = param(0.7, unit="1", lo=0.0, hi=1.0,
+        help="adaptive trimming: the quantile of the segment distances that ...")
+    outliers_adaptive_mult: float = param(2.0, unit="1", lo=0.0, hi=100.0,
+        help="... times this is the largest distance kept (1 and 1 with outliers_maxPerc 1: no trimming)")
+    outliers_remove_doubles: bool = param(True, unit="bool",
+        help="of several object points paired with one reference point, drop those 3x farther than the nearest")
+    restart: bool = param(True, unit="bool",
+        help="restart six times from the result moved by restart_dt / restart_dtheta when its mean distance "
+             "exceeds restart_threshold_mean_error, keeping the run of smallest total distance")
+    restart_threshold_mean_error: float = param(0.01, unit="m", lo=0.0, hi=100.0,
+        help="mean distance of the kept pairs above which the restarts run")
+    restart_dt: float = param(0.01, unit="m", lo=0.0, hi=10.0, help="restarts move the result by this in x and in y")
+    restart_dtheta: float = param(math.radians(1.5), unit="rad", lo=0.0, hi=math.pi,
+        help="restarts turn the result by this")
+    min_reading: float = param(0.0, unit="m", lo=0.0, hi=1000.0, help="readings at or below this are not used")
+    max_reading: float = param(1000.0, unit="m", lo=0.0, hi=1000.0, help="readings beyond this are not used")
+
+
+@dataclass(frozen=True)
+class PlIcpParams(IcpParams):
+    """PL-ICP (Censi, ICRA 2008) as CSM runs it: the point-to-line distance to the line through the
+    nearest reference ray and its nearer neighbour; it also stops when the pairs repeat."""
 
 
 @dataclass(frozen=True)
 class MbicpParams(StopParams):
-    """MbICP (Minguez, Lamiraux & Montesano, T-RO 2006). Names as in the original C code."""
+    """MbICP (Minguez, Lamiraux & Montesano, T-RO 2006). Names and defaults as in the original C
+    code with the defaults of Player's ``mbicp`` driver, which it reproduces."""
 
+    MaxIter: int = param(50, unit="count", lo=1, hi=10000, help="maximum number of iterations")
+    max_range: float = param(7.9, unit="m", lo=0.01, hi=1000.0,
+        help="readings at or beyond this range are not used (Player's mbicp driver: max_laser_range)")
     L: float = param(3.0, unit="m", lo=1e-3, hi=100.0,
         help="metric length: ||q|| = sqrt(x^2 + y^2 + L^2 theta^2); large L tends to plain ICP")
-    Bw: float = param(math.radians(45.0), unit="rad", lo=math.radians(0.1), hi=math.pi,
+    Bw: float = param(1.57 / 3.0, unit="rad", lo=math.radians(0.1), hi=math.pi,
         help="angular window: reference points within +/-Bw of an object point's bearing are candidates")
-    Br: float = param(1.0, unit="m", lo=1e-3, hi=100.0,
+    Br: float = param(0.3, unit="m", lo=1e-3, hi=100.0,
         help="radial window: pairs with a metric distance above Br are discarded")
     laserStep: int = param(1, unit="count", lo=1, hi=100, help="use every laserStep-th object point")
     MaxDistInter: float = param(0.5, unit="m", lo=0.0, hi=100.0,
-        help="interpolate only between consecutive reference points closer than this")
-    filter: float = param(0.95, unit="1", lo=0.05, hi=1.0,
+        help="interpolate only on reference segments shorter than this; MbICP compares the segment's squared "
+             "length with it, as the original code does (0.5: segments up to 0.71 m), improved MbICP's "
+             "point-to-line pairs its length")
+    filter: float = param(0.85, unit="1", lo=0.05, hi=1.0,
         help="fraction of the best pairs kept each iteration (trimmed estimator)")
     ProjectionFilter: bool = param(True, unit="bool",
         help="drop object points hidden from the reference viewpoint (Lu & Milios)")
+    projection_zbuffer: bool = param(False, unit="bool",
+        help="the projection filter as a z-buffer over bearing bins (hides what lies behind a nearer surface, "
+             "whatever the order; needed for 360-degree scans) instead of the original's rule (a point whose "
+             "bearing falls below the last kept one's is hidden)")
     errorRatio: float = param(1e-4, unit="1", lo=0.0, hi=1.0,
-        help="an iteration also counts as converged when |1 - error/previous error| is below this")
+        help="an iteration also counts as converged when |1 - error/previous error| is below this (error: the "
+             "summed squared residual of the kept pairs, as the original code sums it)")
     IterSmoothConv: int = param(2, unit="count", lo=0, hi=100,
         help="stop after more than this many consecutive converged iterations")
 
 
 @dataclass(frozen=True)
 class ImprovedParams(MbicpParams):
-    """Improved MbICP (Li et al. 2018, paper 000): MbICP plus three switchable additions."""
+    """Improved MbICP (Li et al. 2018, paper 000): MbICP plus three switchable additions. The paper
+    gives no parameter values; these defaults are this project's (docs/results.md measures them):
+    wider windows than Player's MbICP, every reading, and the z-buffer projection filter."""
 
+    MaxIter: int = redefault(MbicpParams, "MaxIter", 100)
+    max_range: float = redefault(MbicpParams, "max_range", 1000.0,
+                                 "readings at or beyond this range are not used (1000: every valid reading)")
+    Bw: float = redefault(MbicpParams, "Bw", math.radians(45.0))
+    Br: float = redefault(MbicpParams, "Br", 1.0)
+    filter: float = redefault(MbicpParams, "filter", 0.95)
+    projection_zbuffer: bool = redefault(MbicpParams, "projection_zbuffer", True)
     resample: bool = param(True, unit="bool", help="grid resampling of the object scan (paper 000 §2.3)")
     cell_size: float = param(0.1, unit="m", lo=0.005, hi=10.0, help="grid cell side for resampling (§2.3)")
     point_line: bool = param(True, unit="bool",

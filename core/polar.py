@@ -18,6 +18,7 @@ from numba import njit
 
 from .events import (Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, PolarStep,
                      StartEvent)
+from .metric import kth_smallest
 from .result import MatchResult, Termination
 from .scan import Scan, ScanError
 from .se2 import Pose2
@@ -301,23 +302,6 @@ def translation_residuals(ref: PolarScan, proj_r: np.ndarray, max_error: float, 
 
 
 @njit(cache=True)
-def _kth_smallest(a, k: int) -> float:
-    """``np.sort(a)[k - 1]`` by keeping the k smallest in order (numba's sort costs most of a second
-    to compile; k is a few dozen)."""
-    buf = np.empty(k)
-    n = 0
-    for v in a:
-        if n < k or v < buf[n - 1]:
-            j = min(n, k - 1)
-            while j > 0 and buf[j - 1] > v:
-                buf[j] = buf[j - 1]
-                j -= 1
-            buf[j] = v
-            n = min(n + 1, k)
-    return buf[k - 1]
-
-
-@njit(cache=True)
 def _residuals_kernel(ref_r, valid, proj_r, max_error: float, C: float, min_pairs: int):
     """``translation_residuals`` as one loop (min_pairs 0: no relaxed cut)."""
     i = np.empty(len(ref_r), dtype=np.int64)
@@ -330,7 +314,7 @@ def _residuals_kernel(ref_r, valid, proj_r, max_error: float, C: float, min_pair
     e = ref_r[i] - proj_r[i]
     a = np.abs(e)
     if 0 < min_pairs <= m:
-        max_error = max(max_error, _kth_smallest(a, min_pairs))
+        max_error = max(max_error, kth_smallest(a, min_pairs - 1))
     w = C / (C + e * e)
     used = a <= max_error
     return i, e, w, used, i[used], e[used], w[used]

@@ -6,7 +6,7 @@ never turned into points. Bearings are in the sensor frame, strictly increasing,
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -38,6 +38,11 @@ class Scan:
         """(M, 2) Cartesian points of the valid readings, in scan order, sensor frame."""
         r, b = self.ranges[self.valid], self.bearings[self.valid]
         return np.column_stack((r * np.cos(b), r * np.sin(b)))
+
+    def within(self, max_range: float) -> "Scan":
+        """This scan without the readings at or beyond ``max_range`` (a matcher's range limit)."""
+        keep = self.valid & (self.ranges < max_range)
+        return self if np.array_equal(keep, self.valid) else replace(self, valid=keep)
 
     def valid_indices(self) -> np.ndarray:
         return np.flatnonzero(self.valid)

@@ -1,38 +1,67 @@
-"""A stopping test every iterative matcher shares: the estimate caught in a short cycle."""
+"""A stopping test every iterative matcher shares: the estimate caught in a short cycle.
+
+Pairs that flip in and out in turn (the projection filter hiding one point every other
+iteration, a threshold admitting a pair every third, a range comparison that comes and goes)
+make the estimate cycle by millimetres: no counted rule of the matchers ever fires, and the
+match would run to MaxIter although nothing changes any more. A match that settles also returns
+to where it was; the matchers test their own rule first, so this one only fires when that rule
+cannot.
+"""
 
 from __future__ import annotations
 
-from collections import deque
+import numpy as np
+from numba import njit
 
 from .params import Params
-from .se2 import Pose2, relative, relative_theta
+from .se2 import Pose2
 
 # Cycles of the estimate up to this period (in iterations) are recognised.
 CYCLE_PERIOD_MAX = 4
 
 
+@njit(cache=True)
+def returned(recent: np.ndarray, n: int, x: float, y: float, th: float, errx: float, erry: float,
+             errt: float) -> bool:
+    """Whether the estimate (x, y, th) lies within the stopping thresholds of one of the ``n``
+    estimates in ``recent`` (rows x, y, theta), measured in that estimate's frame."""
+    for k in range(n):
+        ex, ey, et = recent[k, 0], recent[k, 1], recent[k, 2]
+        dth = ((th - et) + np.pi) % (2.0 * np.pi) - np.pi
+        if abs(dth) >= errt:  # the rotation first: most estimates fail there already
+            continue
+        c, s = np.cos(et), np.sin(et)
+        dx, dy = c * (x - ex) + s * (y - ey), -s * (x - ex) + c * (y - ey)
+        if abs(dx) < errx and abs(dy) < erry:
+            return True
+    return False
+
+
+@njit(cache=True)
+def remember(recent: np.ndarray, n: int, x: float, y: float, th: float) -> int:
+    """Push (x, y, th) in front of ``recent`` (the oldest falls off); the new count."""
+    for k in range(len(recent) - 1, 0, -1):
+        for c in range(3):  # element by element: a row assignment costs a second of compilation
+            recent[k, c] = recent[k - 1, c]
+    recent[0, 0], recent[0, 1], recent[0, 2] = x, y, th
+    return n + 1 if n + 1 < len(recent) else len(recent)
+
+
 class CycleWatch:
     """Counts the consecutive steps in which the estimate came back to where it was 2 to
-    CYCLE_PERIOD_MAX iterations before, within the stopping thresholds.
-
-    Pairs that flip in and out in turn (the projection filter hiding one point every other
-    iteration, a threshold admitting a pair every third, a range comparison that comes and goes)
-    make the estimate cycle by millimetres: no counted rule of the matchers ever fires, and the
-    match would run to MaxIter although nothing changes any more. A match that settles also
-    returns to where it was; the matchers test their own rule first, so this one only fires when
-    that rule cannot.
-    """
+    CYCLE_PERIOD_MAX iterations before, within the stopping thresholds (the Python matchers'
+    form of ``returned``; the compiled loops call it directly)."""
 
     def __init__(self, params: Params):
         self.params = params
-        self.recent: deque[Pose2] = deque(maxlen=CYCLE_PERIOD_MAX - 1)
+        self.recent = np.zeros((CYCLE_PERIOD_MAX - 1, 3))
+        self.n = 0
         self.count = 0
 
     def step(self, before: Pose2, after: Pose2) -> int:
         """Record one iteration's move from ``before`` to ``after``; the current count."""
         p = self.params
-        # the rotation first (the same number relative() gives): most estimates fail there already
-        returned = any(abs(relative_theta(e, after)) < p.errt_out and p.small(relative(e, after)) for e in self.recent)
-        self.recent.appendleft(before)
-        self.count = self.count + 1 if returned else 0
+        back = returned(self.recent, self.n, after.x, after.y, after.theta, p.errx_out, p.erry_out, p.errt_out)
+        self.n = remember(self.recent, self.n, before.x, before.y, before.theta)
+        self.count = self.count + 1 if back else 0
         return self.count

@@ -97,8 +97,8 @@ def test_point_line_pairs_follow_paper_000(scans, which, k, x, y, t, max_len):
 
 def test_rejection_floor_shrinks_from_br_to_the_floor():
     p = ImprovedParams(Br=1.0, mad_floor=0.1, mad_anneal=0.5)
-    assert [rejection_floor(p, i) for i in (1, 2, 3, 4, 5)] == [1.0, 0.5, 0.25, 0.125, 0.1]
-    assert rejection_floor(p.replace(mad_anneal=0.0), 1) == 0.1  # as published: MAD from the start
+    assert [rejection_floor(p.Br, p.mad_floor, p.mad_anneal, i) for i in range(1, 6)] == [1.0, 0.5, 0.25, 0.125, 0.1]
+    assert rejection_floor(p.Br, p.mad_floor, 0.0, 1) == 0.1  # as published: MAD from the start
 
 
 def test_annealed_rejection_widens_the_basin(intel):

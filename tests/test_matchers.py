@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mbicp_viz.core import (MATCHERS, IcpParams, ImprovedParams, MbicpParams, PmwnParams, Pose2, PsmParams, Termination,
+from mbicp_viz.core import (MATCHERS, IcpParams, ImprovedParams, MbicpParams, PlIcpParams, PmwnParams, Pose2, PsmParams,
+                            Termination,
                   make_scan, match, pose_error)
 from mbicp_viz.readers.params_toml import load_params
 from mbicp_viz.evaluation.protocols import displaced_self_matches
@@ -57,7 +58,8 @@ def rotated(scan, phi):
     return make_scan(scan.ranges, scan.bearings + phi, valid=scan.valid)
 
 
-EQUIVARIANT = {"icp": IcpParams(), "mbicp": MbicpParams(),
+EQUIVARIANT = {# CSM's restarts move the result along the reference frame's axes: equivariant without them
+               "icp": IcpParams(restart=False), "plicp": PlIcpParams(restart=False), "mbicp": MbicpParams(),
                # the resampling grid is aligned with the sensor axes: rotation-invariant only without it
                "improved": ImprovedParams(resample=False), "psm": PsmParams(), "pmwn": PmwnParams()}
 
@@ -158,5 +160,5 @@ def test_params_validate_bounds_and_types():
         MbicpParams(Br=-1.0)
     with pytest.raises(ParamError, match="L"):
         MbicpParams(L=float("nan"))
-    with pytest.raises(ParamError, match="MaxIter"):
-        IcpParams(MaxIter=2.5)
+    with pytest.raises(ParamError, match="max_iterations"):
+        IcpParams(max_iterations=2.5)

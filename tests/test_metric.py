@@ -1,4 +1,4 @@
-"""MbICP's metric distance and least squares; paper 000's MAD rejection; the SVD fit."""
+"""MbICP's metric distance and least squares; paper 000's MAD rejection; CSM's exact pose solver (GPC)."""
 
 import numpy as np
 import pytest
@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mbicp_viz.core import PairStatus
-from mbicp_viz.core.metric import (mad_threshold, metric_distance_sq, metric_exact_sq, metric_normal_equations,
-                         svd_fit)
+from mbicp_viz.core.gpc import normal_terms, solve
+from mbicp_viz.core.metric import mad_threshold, metric_distance_sq, metric_exact_sq, metric_normal_equations, solve3
 from mbicp_viz.core.rejection import reject
 
 # Paper 000 §2.4.2, Figure 9: 21 correspondence distances.
@@ -17,7 +17,7 @@ PAPER_DISTANCES = np.array([12.281, 12.270, 12.712, 11.932, 11.053, 10.768, 11.0
 
 def test_paper_mad_example():
     assert np.median(PAPER_DISTANCES) == pytest.approx(11.07, abs=0.01)
-    status, thr = reject(PAPER_DISTANCES, max_dist=1e9, keep_fraction=1.0, mad_k=2.0)
+    status, thr = reject(PAPER_DISTANCES, 1e9, 1.0, True, 2.0, 0.0)
     rejected = PAPER_DISTANCES[status == PairStatus.MAD]
     assert sorted(rejected) == [34.497, 38.760, 86.305]
     assert thr == pytest.approx(mad_threshold(PAPER_DISTANCES, 2.0))
@@ -31,13 +31,13 @@ def test_mean_plus_two_sigma_rejects_only_the_largest():
 
 def test_mad_floor_never_rejects_close_pairs():
     d = np.array([0.0, 0.0, 0.0, 0.0, 0.05])
-    status, thr = reject(d, 1.0, 1.0, mad_k=2.0, mad_floor=0.1)
+    status, thr = reject(d, 1.0, 1.0, True, 2.0, 0.1)
     assert thr == pytest.approx(0.1) and np.all(status == PairStatus.KEPT)
 
 
 def test_trimming_keeps_the_best_fraction():
     d = np.arange(20, dtype=float)
-    status, thr = reject(d, max_dist=100.0, keep_fraction=0.75)
+    status, thr = reject(d, 100.0, 0.75, False, 0.0, 0.0)
     assert np.count_nonzero(status == PairStatus.KEPT) == 15
     assert np.all(status[15:] == PairStatus.TRIMMED) and thr == 15.0
 
@@ -75,14 +75,45 @@ def test_metric_least_squares_recovers_a_small_motion(x, y, t):
     c, s = np.cos(t), np.sin(t)
     target = p @ np.array([[c, -s], [s, c]]).T + [x, y]
     A, b = metric_normal_equations(p, target, 3.0)
-    q = np.linalg.solve(A, b)
+    q, ok = solve3(A, b)
+    assert ok
+    np.testing.assert_allclose(q, np.linalg.solve(A, b), rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(q, [x, y, t], atol=5e-4)
 
 
+def rotation(t):
+    return np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+
+
+@settings(max_examples=40, deadline=None)
 @given(st.floats(-3, 3), st.floats(-3, 3), st.floats(-np.pi + 0.01, np.pi - 0.01))
-def test_svd_fit_recovers_any_motion(x, y, t):
+def test_gpc_point_to_point_recovers_any_motion(x, y, t):
     rng = np.random.default_rng(1)
     p = rng.uniform(-5, 5, (30, 2))
-    c, s = np.cos(t), np.sin(t)
-    q = p @ np.array([[c, -s], [s, c]]).T + [x, y]
-    np.testing.assert_allclose(svd_fit(p, q), [x, y, t], atol=1e-8)
+    q = p @ rotation(t).T + [x, y]
+    tx, ty, th, ok = solve(*normal_terms(p, q, np.tile(np.eye(2), (30, 1, 1))))
+    assert ok
+    np.testing.assert_allclose([tx, ty, (th - t + np.pi) % (2 * np.pi) - np.pi], [x, y, 0.0], atol=1e-8)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000))
+def test_gpc_point_to_line_is_the_global_minimum(seed):
+    """For any rotation the best translation is closed-form; the cost over the rotation is then
+    one-dimensional: a fine grid finds its global minimum, which GPC's pose must match."""
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(-5, 5, (25, 2))
+    q = p @ rotation(rng.uniform(-np.pi, np.pi)).T + rng.uniform(-2, 2, 2) + rng.normal(0, 0.05, (25, 2))
+    n = rng.normal(size=(25, 2))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    C = n[:, :, None] * n[:, None, :]
+    tx, ty, th, ok = solve(*normal_terms(p, q, C))
+
+    def cost(theta):
+        r = p @ rotation(theta).T - q
+        t_best = np.linalg.solve(C.sum(axis=0), -np.einsum("kij,kj->i", C, r))
+        e = r + t_best
+        return np.einsum("ki,kij,kj->", e, C, e)
+
+    grid = np.linspace(-np.pi, np.pi, 20001)
+    assert ok and cost(th) <= min(cost(g) for g in grid) + 1e-9

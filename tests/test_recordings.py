@@ -51,7 +51,7 @@ def test_scenarios_show_what_their_notes_promise(tmp_path):
     error_mm = {m: float(partial[m].split("; ")[1].split(" mm")[0]) for m in ("mbicp", "improved")}
     assert error_mm["improved"] < 2.0 and error_mm["mbicp"] > 100.0  # improved lands, standard does not
     rotation = summary("large-rotation", tmp_path)
-    assert "37.064 deg from the known answer" in rotation["icp"]
+    assert "1950.0 mm, 61.248 deg from the known answer" in rotation["icp"]
     assert "; 0.0 mm, 0.001 deg from the known answer" in rotation["mbicp"]
 
 

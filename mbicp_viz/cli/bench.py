@@ -8,6 +8,8 @@ from typing import Annotated, Optional
 
 import typer
 
+from mbicp_viz.errors import InputError
+
 from .options import DEFAULT_ALGO, AlgoOpt, PairOpt, ParamsOpt, TeachOpt, user_errors
 from .serve import DEMO_PAIR
 
@@ -17,8 +19,12 @@ def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt 
             limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs to time")] = 50,
             repeat: Annotated[int, typer.Option("--repeat", min=1, help="runs per pair")] = 3,
             rrd: Annotated[bool, typer.Option("--rrd", help="also time writing each match to an .rrd")] = False,
-            teach: TeachOpt = False):
-    """Time per match on consecutive pairs: median, p90, matches per second; events off and on."""
+            teach: TeachOpt = False,
+            perturb: Annotated[Optional[tuple[float, float]], typer.Option(
+                "--perturb", metavar="XY_M THETA_DEG", help="move each stored guess uniformly within +/-XY_M in x "
+                "and y and +/-THETA_DEG (seeded)")] = None,
+            seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0):
+    """Time per match on consecutive pairs: mean, median, p90, matches per second; events off and on."""
     import numpy as np
 
     from mbicp_viz.evaluation.bench import bench, machine_line, speed_probe_us
@@ -29,7 +35,15 @@ def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt 
     p = make_params(algo.value, params)
     typer.echo(f"{algo.value} on {log}: {len(lg.scans[0].ranges)} beams; {machine_line()}")
     before = speed_probe_us()
-    timings = bench(lg, p, limit, repeat)
+    moved = None
+    if perturb is not None:
+        import math
+
+        if not all(math.isfinite(v) and v >= 0 for v in perturb):
+            raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+        moved = (perturb[0], math.radians(perturb[1]))
+        typer.echo(f"guesses: the stored ones moved within +/-{perturb[0]:g} m, +/-{perturb[1]:g} deg (seed {seed})")
+    timings = bench(lg, p, limit, repeat, moved, seed)
     after = speed_probe_us()
     for t in timings:
         typer.echo(t.line())

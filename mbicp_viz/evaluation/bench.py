@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mbicp_viz.core import Params, Recorder, match
+from mbicp_viz.core import Params, Pose2, Recorder, match
 from mbicp_viz.readers import ScanLog
 
 from .pairs import stored_guess
@@ -29,16 +29,30 @@ class Timing:
         return float(np.percentile(self.times_ms, 90))
 
     def line(self) -> str:
-        return (f"{self.label:<22} median {self.median:7.2f} ms   p90 {self.p90:7.2f} ms   "
+        return (f"{self.label:<22} mean {np.mean(self.times_ms):7.2f} ms   median {self.median:7.2f} ms   "
+                f"p90 {self.p90:7.2f} ms   "
                 f"p95 {np.percentile(self.times_ms, 95):7.2f} ms   "
                 f"{1000.0 / self.median:8.1f} {self.what}/s   ({len(self.times_ms)} {self.what})")
 
 
-def time_matches(log: ScanLog, params: Params, pairs, observe: bool, repeat: int) -> np.ndarray:
+def bench_guesses(log: ScanLog, pairs, perturb: tuple[float, float] | None, seed: int) -> list[Pose2]:
+    """The guess of each pair: the stored one, or moved uniformly within +/-perturb (metres in x
+    and y, radians in theta) as the issues' comparisons with the original implementations do."""
+    rng = np.random.default_rng(seed)
     out = []
     for i, j in pairs:
+        g, _ = stored_guess(log.scan(i), log.scan(j))
+        if perturb is not None:
+            dx, dy, dth = rng.uniform(-1.0, 1.0, 3) * (perturb[0], perturb[0], perturb[1])
+            g = Pose2(g.x + dx, g.y + dy, g.theta + dth)
+        out.append(g)
+    return out
+
+
+def time_matches(log: ScanLog, params: Params, pairs, guesses, observe: bool, repeat: int) -> np.ndarray:
+    out = []
+    for (i, j), guess in zip(pairs, guesses):
         ref, obj = log.scan(i), log.scan(j)
-        guess, _ = stored_guess(ref, obj)
         for _ in range(repeat):
             obs = Recorder() if observe else None
             t0 = time.perf_counter()
@@ -47,11 +61,13 @@ def time_matches(log: ScanLog, params: Params, pairs, observe: bool, repeat: int
     return np.array(out)
 
 
-def bench(log: ScanLog, params: Params, limit: int | None, repeat: int) -> list[Timing]:
+def bench(log: ScanLog, params: Params, limit: int | None, repeat: int, perturb: tuple[float, float] | None = None,
+          seed: int = 0) -> list[Timing]:
     pairs = log.consecutive_pairs(limit)
-    time_matches(log, params, pairs[:3], False, 1)  # warm caches and imports
-    return [Timing("events off", time_matches(log, params, pairs, False, repeat)),
-            Timing("recording observer", time_matches(log, params, pairs, True, repeat))]
+    guesses = bench_guesses(log, pairs, perturb, seed)
+    time_matches(log, params, pairs[:3], guesses[:3], False, 1)  # warm caches and imports
+    return [Timing("events off", time_matches(log, params, pairs, guesses, False, repeat)),
+            Timing("recording observer", time_matches(log, params, pairs, guesses, True, repeat))]
 
 
 def machine_line() -> str:

@@ -219,6 +219,13 @@ def _walk_ros1(p: Path, notes: list[str], why: str):
 
 def _chunk(data: bytes, p: Path, store, conns: dict, out: list) -> None:
     """The messages of one chunk's records (connections registered as they come)."""
+    try:
+        _chunk_records(data, p, store, conns, out)
+    except KeyError as e:
+        raise InputError(f"a damaged record: its header has no {e} field", str(p)) from None
+
+
+def _chunk_records(data: bytes, p: Path, store, conns: dict, out: list) -> None:
     for op, h, d in _records(data, 0, p):
         if op == _OP_CONN:
             conn = _header(d, p)

@@ -66,6 +66,10 @@ def threshold_style(params) -> Style:
                                         f"{params.mad_floor:g} m [m]")
     if hasattr(params, "max_error"):
         return replace(THRESHOLD, label="max_error: residuals beyond are not used [m]")
+    if hasattr(params, "outliers_maxPerc"):
+        return replace(THRESHOLD, label=f"trim limit: the {100 * params.outliers_maxPerc:g} % quantile or "
+                                        f"{params.outliers_adaptive_mult:g} x the {100 * params.outliers_adaptive_order:g} % "
+                                        "quantile of the segment distances, the smaller [m]")
     return replace(THRESHOLD, label=f"trim cut: the best {100 * params.filter:g} % of the pairs kept [m]")
 
 

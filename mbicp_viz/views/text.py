@@ -82,7 +82,8 @@ def iteration_text(ev: IterationEvent) -> str:
     thr = f"{ev.threshold:.3f} m" if ev.threshold is not None else "-"
     return (f"iteration {ev.iteration}: {len(p.kind)} pairs ({p.count(kind=PairKind.INTERPOLATED)} interpolated), "
             f"{n_kept} kept, rejected: {rej}; threshold {thr}; error {ev.error:.3e} m^2; "
-            f"step ({ev.increment.x:+.4f} m, {ev.increment.y:+.4f} m, {math.degrees(ev.increment.theta):+.3f} deg)")
+            f"step ({ev.increment.x:+.4f} m, {ev.increment.y:+.4f} m, {math.degrees(ev.increment.theta):+.3f} deg)"
+            + (f"; {ev.note}" if ev.note else ""))
 
 
 def match_report(label: str, setup, outcome, result: MatchResult, frame: str, truth: Pose2 | None) -> list[str]:
