@@ -14,7 +14,7 @@ if __name__ != "mbicp_viz.core":  # a checkout's folder on sys.path must not pos
     raise ImportError("the matchers of mbicp-viz are imported as mbicp_viz.core, not as 'core'")
 
 _EXPORTS = {
-    "events": ("Correspondences", "Event", "FinishEvent", "IterationEvent", "Observer", "PairKind", "PairStatus",
+    "events": ("Correspondences", "Event", "FinishEvent", "HeldDirection", "IterationEvent", "Observer", "PairKind", "PairStatus",
                "PolarStep", "Recorder", "Resampling", "StartEvent", "broadcast"),
     "matchers": ("MATCHERS", "Matcher", "match", "matcher_for"),
     "params": ("FieldSpec", "IcpParams", "ImprovedParams", "MbicpParams", "ParamError", "Params", "PlIcpParams", "PmwnParams", "SearchParams",

@@ -11,6 +11,7 @@ Every pose is the pose of the object frame in the reference frame.
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 from typing import Callable, Union
 
@@ -138,6 +139,22 @@ class PolarStep:
     circle_centre: np.ndarray | None
 
 
+@dataclass(frozen=True)
+class HeldDirection:
+    """Improved MbICP with ``hold_weak``: the direction an iteration's step left alone because the
+    surfaces its pairs lie on barely fix the motion there (a corridor's axis), and why."""
+
+    condition_number: float  # of the pairs' point-to-line information in (x, y, L theta), above hold_weak
+    direction: tuple[float, float, float]  # unit vector in (x, y, L theta)
+    length: float  # L [m]
+
+    @property
+    def heading_deg(self) -> float:
+        """Heading of the direction's translational part, degrees in (-90, 90]."""
+        a = math.degrees(math.atan2(self.direction[1], self.direction[0]))
+        return a - 180.0 if a > 90.0 else a + 180.0 if a <= -90.0 else a
+
+
 @dataclass(frozen=True, eq=False)
 class IterationEvent:
     iteration: int  # 1-based
@@ -151,6 +168,7 @@ class IterationEvent:
     increment: Pose2  # the step composed this iteration (estimate_after = increment @ estimate_before)
     polar: PolarStep | None = None  # PSM / PMWN only
     note: str = ""  # what else happened, in words (ICP / PL-ICP: a restart began, the run kept)
+    held: HeldDirection | None = None  # improved MbICP with hold_weak: the direction its step left alone
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,8 +15,8 @@ import numpy as np
 from numba import njit
 
 from .correspondence import ReferenceIndex, candidates, visible_from_reference, visible_in_order
-from .events import Correspondences, FinishEvent, IterationEvent, Observer, StartEvent
-from .metric import metric_normal_equations, solve3
+from .events import Correspondences, FinishEvent, HeldDirection, IterationEvent, Observer, StartEvent
+from .metric import metric_normal_equations, solve3, weakest_direction
 from .params import ImprovedParams, MbicpParams
 from .rejection import KEPT, OUTSIDE_BR, reject
 from .resample import grid_resample
@@ -24,7 +24,7 @@ from .result import MatchResult, Termination
 from .scan import Scan
 from .se2 import Pose2
 from .stopping import CYCLE_PERIOD_MAX, remember, returned
-from .uncertainty import FinalSystem, build_result
+from .uncertainty import FinalSystem, build_result, surface_tangents
 
 # Projection filter: a point more than this behind the nearest one in its bearing bin is hidden.
 PROJECTION_MARGIN_M = 0.2
@@ -61,13 +61,14 @@ def rejection_floor(Br: float, mad_floor: float, mad_anneal: float, iteration: i
 
 @njit(cache=True)
 def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours, full, max_factor, max_step, bin_start,
-          bin_width, projection, zbuffer, point_line, mad, p, trace):
+          bin_width, projection, zbuffer, point_line, mad, p, ref_tangents, trace):
     """The iterations from (x, y, th). ``p``: (MaxIter, L, Bw, Br, MaxDistInter, filter, AsocError,
-    errorRatio, IterSmoothConv, errx, erry, errt, mad_k, mad_floor, mad_anneal). Returns the
+    errorRatio, IterSmoothConv, errx, erry, errt, mad_k, mad_floor, mad_anneal, hold_weak). Returns the
     estimate, how it ended, the iterations run and the last solved system. ``trace`` records each
     iteration when it has rows (see ``_trace``)."""
     max_iter, L, Bw, Br, max_inter, keep, asoc = int(p[0]), p[1], p[2], p[3], p[4], p[5], p[6]
     ratio, smooth, errx, erry, errt, mad_k, mad_floor, mad_anneal = p[7], p[8], p[9], p[10], p[11], p[12], p[13], p[14]
+    hold = p[15]
     record = len(trace[0]) > 0
     n = len(P)
     recent = np.zeros((CYCLE_PERIOD_MAX - 1, 3))
@@ -97,11 +98,14 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
         # the C code's association test: pairs within Br against the points the filter left
         step_ok = False
         ix, iy, ith, error = 0.0, 0.0, 0.0, np.nan
+        held = np.zeros(4)
         A = np.zeros((3, 3))
         if n_within >= asoc * len(rows) and len(kept) >= 3:
             pk, ck = moved[obj_rows[kept]], target[kept]
             A, b = metric_normal_equations(pk, ck, L)
             step, step_ok = solve3(A, b)
+            if step_ok and hold > 0.0:
+                held = _hold_weak(ck, ref_index[kept, 0], ref_tangents, L, hold, step)
             if step_ok:
                 ix, iy, ith = step[0], step[1], (step[2] + np.pi) % (2.0 * np.pi) - np.pi
                 ci, si = np.cos(ith), np.sin(ith)
@@ -119,7 +123,7 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
         nth = (ith + th + np.pi) % (2.0 * np.pi) - np.pi
         if record:
             _record(trace, it - 1, (x, y, th, nx, ny, nth, ix, iy, ith), vis, obj_rows, target, kind, ref_index, dist,
-                    status, thr, error)
+                    status, thr, error, held)
         if not step_ok:
             break
         bx, by, bth = x, y, th
@@ -146,9 +150,37 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
 
 
 @njit(cache=True)
-def _record(trace, k, poses_k, vis, rows, target, kind, ref_index, dist, status, thr, error):
+def _hold_weak(targets, ref, ref_tangents, L, hold, step):
+    """Solution remapping (Zhang, Kaess & Singh, ICRA 2016): when the pairs' point-to-line
+    information (the surfaces they lie on, as the degeneracy indicator measures it) has a
+    condition number above ``hold`` in (x, y, L theta), remove from ``step`` (in place) its
+    component along the weakest direction, where the surfaces do not fix the motion (a corridor's
+    axis, paper 000 §3.3): the estimate keeps its value there. MbICP's point pairs constrain every
+    direction, wrongly where a wall offers no point opposite: they are why a corridor shortens.
+    (condition, direction) when held, else zeros."""
+    H = np.zeros((3, 3))
+    for k in range(len(targets)):
+        nx, ny = -ref_tangents[ref[k], 1], ref_tangents[ref[k], 0]
+        row = (nx, ny, (nx * -targets[k, 1] + ny * targets[k, 0]) / L)  # n^T J in (x, y, L theta)
+        for i in range(3):
+            for j in range(3):
+                H[i, j] += row[i] * row[j]
+    cond, v = weakest_direction(H, 1.0)
+    out = np.zeros(4)
+    if cond > hold:
+        s = np.array([step[0], step[1], L * step[2]])
+        along = s @ v
+        step[0], step[1], step[2] = s[0] - along * v[0], s[1] - along * v[1], (s[2] - along * v[2]) / L
+        out[0], out[1], out[2], out[3] = cond, v[0], v[1], v[2]
+    return out
+
+
+@njit(cache=True)
+def _record(trace, k, poses_k, vis, rows, target, kind, ref_index, dist, status, thr, error, held):
     """Iteration ``k`` into the trace, element by element (slice assignments are slow to compile)."""
-    poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors = trace
+    poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors, holds = trace
+    for c in range(4):
+        holds[k, c] = held[c]
     for c in range(9):
         poses[k, c] = poses_k[c]
     for i in range(len(vis)):
@@ -166,7 +198,7 @@ def _trace(iterations: int, n: int):
     return (np.zeros((iterations, 9)), np.zeros((iterations, n), np.bool_), np.zeros(iterations, np.int64),
             np.zeros((iterations, n), np.int64), np.zeros((iterations, n, 2)), np.zeros((iterations, n), np.int8),
             np.zeros((iterations, n, 2), np.int64), np.zeros((iterations, n)), np.zeros((iterations, n), np.int8),
-            np.zeros(iterations), np.zeros(iterations))
+            np.zeros(iterations), np.zeros(iterations), np.zeros((iterations, 4)))
 
 
 def _run(R: ReferenceIndex, P: np.ndarray, guess: Pose2, params: MbicpParams, improved: bool, trace):
@@ -175,12 +207,14 @@ def _run(R: ReferenceIndex, P: np.ndarray, guess: Pose2, params: MbicpParams, im
     p = np.array([params.MaxIter, params.L, params.Bw, params.Br, params.MaxDistInter, params.filter,
                   params.AsocError, params.errorRatio, params.IterSmoothConv, params.errx_out, params.erry_out,
                   params.errt_out, params.mad_k if improved else 0.0, params.mad_floor if improved else 0.0,
-                  params.mad_anneal if improved else 0.0])
+                  params.mad_anneal if improved else 0.0, params.hold_weak if improved else 0.0])
     bin_start = float(R.bearings[0]) if len(R.bearings) else 0.0
+    hold = improved and params.hold_weak > 0
+    tangents = surface_tangents(R.points, R.full_circle, np.arange(len(R.points))) if hold else np.zeros((0, 2))
     return _loop(np.ascontiguousarray(P, float), guess.x, guess.y, guess.theta, R.ext_bearings, R.ext_x, R.ext_y,
                  R.ext_sq_norm_L2, R.ext_ux, R.ext_uy, R.ext_map, R.points, R.neighbours, R.full_circle, R.max_factor, R.max_step,
                  bin_start, projection_bin_width(R.bearings), params.ProjectionFilter, params.projection_zbuffer,
-                 point_line, mad, p, trace)
+                 point_line, mad, p, tangents, trace)
 
 
 def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpParams | None = None,
@@ -215,7 +249,7 @@ def _replay(observer, R, P, used, guess, params, improved, iterations) -> None:
     """The loop again, recorded, as one IterationEvent per iteration."""
     trace = _trace(iterations, len(P))
     _run(R, P, guess, params, improved, trace)
-    poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors = trace
+    poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors, holds = trace
     for k in range(iterations):
         before, after, inc = Pose2(*poses[k, :3]), Pose2(*poses[k, 3:6]), Pose2(*poses[k, 6:])
         moved = before.apply(P)
@@ -223,5 +257,7 @@ def _replay(observer, R, P, used, guess, params, improved, iterations) -> None:
         rows = prow[k, :m]
         pairs = Correspondences(used[rows], ptarget[k, :m], pkind[k, :m], pref[k, :m], pdist[k, :m], pstatus[k, :m],
                                 moved[rows])
+        held = HeldDirection(float(holds[k, 0]), tuple(float(c) for c in holds[k, 1:]), params.L) if holds[k, 0] else None
         observer(IterationEvent(k + 1, before, after, moved, used[~visible[k]], pairs,
-                                None if np.isnan(thresholds[k]) else float(thresholds[k]), float(errors[k]), inc))
+                                None if np.isnan(thresholds[k]) else float(thresholds[k]), float(errors[k]), inc,
+                                held=held))

@@ -157,3 +157,35 @@ def solve3(A: np.ndarray, b: np.ndarray):
     return x, bool(np.isfinite(x).all())
 
 
+@njit(cache=True)
+def weakest_direction(A: np.ndarray, L: float):
+    """The condition number of the normal matrix A (in x, y, theta) in the coordinates
+    (x, y, L theta), where translation and rotation share a unit, and its weakest direction
+    there (unit vector; eigenvalues of the symmetric 3x3 in closed form, Smith 1961)."""
+    d = np.array([1.0, 1.0, 1.0 / L])
+    M = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = A[i, j] * d[i] * d[j]
+    q = (M[0, 0] + M[1, 1] + M[2, 2]) / 3.0
+    p1 = M[0, 1] ** 2 + M[0, 2] ** 2 + M[1, 2] ** 2
+    p2 = (M[0, 0] - q) ** 2 + (M[1, 1] - q) ** 2 + (M[2, 2] - q) ** 2 + 2.0 * p1
+    p = np.sqrt(p2 / 6.0)
+    if p == 0.0:  # a multiple of the identity: no direction is weaker
+        return 1.0, np.array([1.0, 0.0, 0.0])
+    B = (M - q * np.eye(3)) / p
+    r = 0.5 * (B[0, 0] * (B[1, 1] * B[2, 2] - B[1, 2] * B[2, 1]) - B[0, 1] * (B[1, 0] * B[2, 2] - B[1, 2] * B[2, 0])
+               + B[0, 2] * (B[1, 0] * B[2, 1] - B[1, 1] * B[2, 0]))
+    phi = np.arccos(min(max(r, -1.0), 1.0)) / 3.0
+    largest = q + 2.0 * p * np.cos(phi)
+    smallest = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    # the eigenvector of the smallest: the longest cross product of two rows of M - smallest I
+    N = M - smallest * np.eye(3)
+    best, v = -1.0, np.zeros(3)
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        c = np.cross(N[a], N[b])
+        n = np.sqrt(c @ c)
+        if n > best:
+            best, v = n, c / n if n > 0.0 else c
+    cond = largest / smallest if smallest > 1e-12 * largest else np.inf
+    return cond, v

@@ -210,6 +210,10 @@ class ImprovedParams(MbicpParams):
     mad_anneal: float = param(0.0, unit="1", lo=0.0, hi=0.999,
         help="0: MAD from the first iteration, as published; else the rejection floor starts at Br and shrinks by "
              "this factor each iteration down to mad_floor (a wider basin from a poor guess, more iterations)")
+    hold_weak: float = param(0.0, unit="1", lo=0.0, hi=1e9,
+        help="0: off; else, when the condition number of an iteration's normal equations (in x, y, L theta) exceeds "
+             "this, its step leaves the weakest direction alone, so that the estimate keeps the guess's value "
+             "along a corridor instead of sliding (Zhang, Kaess & Singh, ICRA 2016: solution remapping)")
 
 
 @dataclass(frozen=True)

@@ -183,6 +183,33 @@ def ceiling(log: Annotated[str, typer.Argument(help="scan log whose scan poses a
     typer.echo("\n".join(ceiling_summary(list(by_name), found, kept, doubted, n)))
 
 
+def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
+             algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None,
+             perturb: Annotated[tuple[float, float], typer.Option(
+                 "--perturb", metavar="XY_M THETA_DEG", help="guesses: the stored pose moved uniformly within "
+                 "+/-XY_M in x and y and +/-THETA_DEG (seeded)")] = (0.3, 15.0),
+             seed: Annotated[int, typer.Option("--seed", help="seed of the guesses")] = 0,
+             condition: Annotated[float, typer.Option("--condition", min=1.0, callback=finite,
+                                                      help="a pair is degenerate above this surface condition "
+                                                           "number at its true pose")] = 30.0,
+             workers: WorkersOpt = None):
+    """Successes where the scene leaves a direction free (corridors) and elsewhere, from perturbed guesses."""
+    from mbicp_viz.evaluation.corridor import corridor as corridor_of, corridor_summary
+
+    if not all(math.isfinite(v) and v >= 0 for v in perturb):
+        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+    ps = params_for(algos, params)
+    lg = _read(log)
+    t0 = time.perf_counter()
+    with Progress(len(lg.consecutive_pairs(None))) as bar:
+        rows = corridor_of(lg, ps, (perturb[0], math.radians(perturb[1])), seed, workers, on_row=lambda _: bar.update(1))
+    if not rows:
+        raise InputError("interrupted before the first pair was matched", log)
+    typer.echo("\n".join(corridor_summary(rows, condition)))
+    say(f"{len(rows) * len(ps)} matches in {time.perf_counter() - t0:.1f} s; guesses within +/-{perturb[0]:g} m, "
+        f"+/-{perturb[1]:g} deg, seed {seed}")
+
+
 def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps")],
               relations_file: Annotated[str, typer.Argument(metavar="RELATIONS",
                                                             help="relations file (t1 t2 x y z roll pitch yaw)")],
@@ -244,6 +271,6 @@ def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
 def register(app: typer.Typer) -> None:
     group = typer.Typer(no_args_is_help=True, help="Evaluate matchers on whole logs.")
     for name, fn in (("sequence", sequence), ("protocol", protocol), ("overlap", overlap), ("ceiling", ceiling),
-                     ("relations", relations), ("basin", basin)):
+                     ("relations", relations), ("basin", basin), ("corridor", corridor)):
         group.command(name)(user_errors(fn))
     app.add_typer(group, name="eval")

@@ -48,9 +48,10 @@ GRID = Style("resampling grid (pale: thinned, blue: kept)", (110, 140, 225), -1.
 ISO_METRIC = Style("MbICP iso-distance ellipse", (130, 60, 200), 4.5, on=False)
 ISO_EUCLID = Style("Euclidean circle through the same target", (150, 130, 0), 4.5, on=False)
 CIRCLE = Style("PMWN projected circle and its centre", (210, 0, 130), 4.2)
+HELD = Style("held direction: left to the guess, the surfaces barely fix it", (120, 0, 60), 4.6)
 ESTIMATE = Style("estimate: object frame (x red, y green)", (40, 90, 220), 5.0)
 STYLES = (REFERENCE, TRUTH, INITIAL, ODOMETRY, OBJECT, OBJECT_AFTER, HIDDEN, PAIR_POINT, PAIR_INTERPOLATED, PAIR_REJECTED,
-          GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, ESTIMATE)
+          GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, HELD, ESTIMATE)
 
 # Plot series: the legend of the plots.
 ERROR = Style("mean squared residual [m²]", (90, 90, 90))
@@ -241,7 +242,18 @@ def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
     ]
     if ev.threshold is not None:
         layers.append(Scalar(f"{PLOTS}/threshold", ev.threshold, threshold_style(start.params)))
+    if ev.held is not None:
+        layers.append(held_layer(ev, s))
     return layers + polar_layers(ev, s)
+
+
+def held_layer(ev: IterationEvent, s: float) -> Segments:
+    """The axis an iteration's step left alone (improved MbICP's ``hold_weak``), through the object
+    frame's origin where the step took it, along the translational part of the direction."""
+    d = np.array(ev.held.direction[:2])
+    u = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else np.array([1.0, 0.0])
+    o = np.array([ev.estimate_after.x, ev.estimate_after.y])
+    return Segments(f"{SCANS}/held", (o - 1.5 * s * u)[None], (o + 1.5 * s * u)[None], HELD, 0.012 * s)
 
 
 def finish_layers(result) -> list[Layer]:

@@ -83,6 +83,8 @@ def iteration_text(ev: IterationEvent) -> str:
     return (f"iteration {ev.iteration}: {len(p.kind)} pairs ({p.count(kind=PairKind.INTERPOLATED)} interpolated), "
             f"{n_kept} kept, rejected: {rej}; threshold {thr}; error {ev.error:.3e} m^2; "
             f"step ({ev.increment.x:+.4f} m, {ev.increment.y:+.4f} m, {math.degrees(ev.increment.theta):+.3f} deg)"
+            + (f"; held along heading {ev.held.heading_deg:+.0f} deg (surface condition number "
+               f"{ev.held.condition_number:.0f}): the step left the guess's value there" if ev.held else "")
             + (f"; {ev.note}" if ev.note else ""))
 
 
