@@ -23,17 +23,21 @@ class ParamError(ValueError):
         return type(self), (self.name, self.message)
 
 
-def param(default, *, unit: str, lo: float | None = None, hi: float | None = None, help: str):
-    """A dataclass field with unit ('m', 'rad', '1', 'count', 'bool'), closed bounds and a help line."""
-    return dataclasses.field(default=default, metadata={"unit": unit, "lo": lo, "hi": hi, "help": help})
+def param(default, *, unit: str, lo: float | None = None, hi: float | None = None, help: str,
+          tune: tuple[float, float, bool] | None = None):
+    """A dataclass field with unit ('m', 'rad', '1', 'count', 'bool'), closed bounds and a help line;
+    ``tune``: the range (lo, hi, log scale) ``mbicp-viz tune`` searches by default."""
+    return dataclasses.field(default=default, metadata={"unit": unit, "lo": lo, "hi": hi, "help": help, "tune": tune})
 
 
-def redefault(cls, name: str, default, help: str | None = None):
+def redefault(cls, name: str, default, help: str | None = None, tuned: bool = True):
     """The field ``name`` of the parameter dataclass ``cls`` with another default (a subclass's
-    own value: improved MbICP's windows), its unit, bounds and help kept (or the help replaced)."""
+    own value: improved MbICP's windows), its unit, bounds, help and tuning range kept (or the
+    help replaced, or the range dropped: a field the subclass does not use by default)."""
     f = next(f for f in dataclasses.fields(cls) if f.name == name)
     m = f.metadata
-    return param(default, unit=m["unit"], lo=m["lo"], hi=m["hi"], help=help or m["help"])
+    return param(default, unit=m["unit"], lo=m["lo"], hi=m["hi"], help=help or m["help"],
+                 tune=m["tune"] if tuned else None)
 
 
 @dataclass(frozen=True)
@@ -45,6 +49,7 @@ class FieldSpec:
     lo: float | None
     hi: float | None
     help: str
+    tune: tuple[float, float, bool] | None = None  # (lo, hi, log) searched by ``mbicp-viz tune`` by default
 
 
 def field_specs(cls) -> list[FieldSpec]:
@@ -52,7 +57,7 @@ def field_specs(cls) -> list[FieldSpec]:
     out = []
     for f in dataclasses.fields(cls):
         m = f.metadata
-        out.append(FieldSpec(f.name, type(f.default), f.default, m["unit"], m["lo"], m["hi"], m["help"]))
+        out.append(FieldSpec(f.name, type(f.default), f.default, m["unit"], m["lo"], m["hi"], m["help"], m.get("tune")))
     return out
 
 
@@ -123,13 +128,13 @@ class IcpParams(Params):
     max_iterations: int = param(1000, unit="count", lo=1, hi=100000, help="maximum number of iterations")
     epsilon_xy: float = param(1e-4, unit="m", lo=0.0, hi=1.0, help="stop when the step moves less than this ...")
     epsilon_theta: float = param(1e-4, unit="rad", lo=0.0, hi=1.0, help="... and turns less than this")
-    max_correspondence_dist: float = param(2.0, unit="m", lo=1e-3, hi=100.0,
+    max_correspondence_dist: float = param(2.0, unit="m", lo=1e-3, hi=100.0, tune=(0.1, 3.0, True),
         help="an object point farther than this from its nearest reference point gets no pair")
-    outliers_maxPerc: float = param(0.95, unit="1", lo=0.0, hi=1.0,
+    outliers_maxPerc: float = param(0.95, unit="1", lo=0.0, hi=1.0, tune=(0.5, 1.0, False),
         help="keep at most this share of the pairs (the nearest to their segments)")
-    outliers_adaptive_order: float = param(0.7, unit="1", lo=0.0, hi=1.0,
+    outliers_adaptive_order: float = param(0.7, unit="1", lo=0.0, hi=1.0, tune=(0.5, 1.0, False),
         help="adaptive trimming: the quantile of the segment distances that ...")
-    outliers_adaptive_mult: float = param(2.0, unit="1", lo=0.0, hi=100.0,
+    outliers_adaptive_mult: float = param(2.0, unit="1", lo=0.0, hi=100.0, tune=(1.0, 5.0, False),
         help="... times this is the largest distance kept (1 and 1 with outliers_maxPerc 1: no trimming)")
     outliers_remove_doubles: bool = param(True, unit="bool",
         help="of several object points paired with one reference point, drop those 3x farther than the nearest")
@@ -159,18 +164,19 @@ class MbicpParams(StopParams):
     MaxIter: int = param(50, unit="count", lo=1, hi=10000, help="maximum number of iterations")
     max_range: float = param(7.9, unit="m", lo=0.01, hi=1000.0,
         help="readings at or beyond this range are not used (Player's mbicp driver: max_laser_range)")
-    L: float = param(3.0, unit="m", lo=1e-3, hi=100.0,
+    L: float = param(3.0, unit="m", lo=1e-3, hi=100.0, tune=(0.3, 10.0, True),
         help="metric length: ||q|| = sqrt(x^2 + y^2 + L^2 theta^2); large L tends to plain ICP")
     Bw: float = param(1.57 / 3.0, unit="rad", lo=math.radians(0.1), hi=math.pi,
+        tune=(math.radians(10.0), math.radians(90.0), False),
         help="angular window: reference points within +/-Bw of an object point's bearing are candidates")
-    Br: float = param(0.3, unit="m", lo=1e-3, hi=100.0,
+    Br: float = param(0.3, unit="m", lo=1e-3, hi=100.0, tune=(0.05, 3.0, True),
         help="radial window: pairs with a metric distance above Br are discarded")
     laserStep: int = param(1, unit="count", lo=1, hi=100, help="use every laserStep-th object point")
-    MaxDistInter: float = param(0.5, unit="m", lo=0.0, hi=100.0,
+    MaxDistInter: float = param(0.5, unit="m", lo=0.0, hi=100.0, tune=(0.1, 2.0, True),
         help="interpolate only on reference segments shorter than this; MbICP compares the segment's squared "
              "length with it, as the original code does (0.5: segments up to 0.71 m), improved MbICP's "
              "point-to-line pairs its length")
-    filter: float = param(0.85, unit="1", lo=0.05, hi=1.0,
+    filter: float = param(0.85, unit="1", lo=0.05, hi=1.0, tune=(0.5, 1.0, False),
         help="fraction of the best pairs kept each iteration (trimmed estimator)")
     ProjectionFilter: bool = param(True, unit="bool",
         help="drop object points hidden from the reference viewpoint (Lu & Milios)")
@@ -196,18 +202,20 @@ class ImprovedParams(MbicpParams):
                                  "readings at or beyond this range are not used (1000: every valid reading)")
     Bw: float = redefault(MbicpParams, "Bw", math.radians(45.0))
     Br: float = redefault(MbicpParams, "Br", 1.0)
-    filter: float = redefault(MbicpParams, "filter", 0.95)
+    filter: float = redefault(MbicpParams, "filter", 0.95, tuned=False)  # unused while mad_rejection
     projection_zbuffer: bool = redefault(MbicpParams, "projection_zbuffer", True)
     resample: bool = param(True, unit="bool", help="grid resampling of the object scan (paper 000 §2.3)")
-    cell_size: float = param(0.1, unit="m", lo=0.005, hi=10.0, help="grid cell side for resampling (§2.3)")
+    cell_size: float = param(0.1, unit="m", lo=0.005, hi=10.0,
+        tune=(0.02, 0.5, True), help="grid cell side for resampling (§2.3)")
     point_line: bool = param(True, unit="bool",
         help="point-to-point + point-to-line correspondences for shared targets (§2.4.1)")
     mad_rejection: bool = param(True, unit="bool",
         help="reject pairs above median + k*MAD of the distances (§2.4.2); replaces 'filter' when on")
-    mad_k: float = param(2.0, unit="1", lo=0.0, hi=100.0, help="k in the rejection threshold median + k*MAD (eq. 5)")
-    mad_floor: float = param(0.1, unit="m", lo=0.0, hi=100.0,
+    mad_k: float = param(2.0, unit="1", lo=0.0, hi=100.0,
+        tune=(1.0, 5.0, False), help="k in the rejection threshold median + k*MAD (eq. 5)")
+    mad_floor: float = param(0.1, unit="m", lo=0.0, hi=100.0, tune=(0.01, 0.5, True),
         help="never reject a pair closer than this (0: the paper's rule as published)")
-    mad_anneal: float = param(0.0, unit="1", lo=0.0, hi=0.999,
+    mad_anneal: float = param(0.0, unit="1", lo=0.0, hi=0.999, tune=(0.0, 0.95, False),
         help="0: MAD from the first iteration, as published; else the rejection floor starts at Br and shrinks by "
              "this factor each iteration down to mad_floor (a wider basin from a poor guess, more iterations)")
     hold_weak: float = param(0.0, unit="1", lo=0.0, hi=1e9,
@@ -223,12 +231,13 @@ class PolarParams(Params):
     median_window: int = param(5, unit="count", lo=1, hi=21, help="median filter window on ranges (PSM §3.1)")
     min_range: float = param(0.1, unit="m", lo=0.0, hi=100.0, help="readings closer than this are ignored")
     max_range: float = param(30.0, unit="m", lo=0.1, hi=1000.0, help="readings farther than this are ignored")
-    max_jump: float = param(0.2, unit="m", lo=0.001, hi=100.0,
+    max_jump: float = param(0.2, unit="m", lo=0.001, hi=100.0, tune=(0.05, 1.0, True),
         help="a new segment starts where consecutive ranges differ by more (scan projection interpolates "
              "only inside segments)")
-    max_error: float = param(1.0, unit="m", lo=0.001, hi=100.0,
+    max_error: float = param(1.0, unit="m", lo=0.001, hi=100.0, tune=(0.1, 3.0, True),
         help="range residuals larger than this are excluded from the translation step")
     search_window: float = param(math.radians(20.0), unit="rad", lo=0.0, hi=math.pi,
+        tune=(math.radians(5.0), math.radians(45.0), False),
         help="the orientation step tries rotations within +/- this")
     min_pairs: int = param(40, unit="count", lo=3, hi=100000, help="fail with fewer range comparisons than this")
     MaxIter: int = param(50, unit="count", lo=1, hi=10000, help="maximum number of iterations")
@@ -248,7 +257,7 @@ class PolarParams(Params):
     # The translation weights w = C / (C + e^2) of Diosi's code (after Dudek 2000), which paper 003
     # §4.2 takes over for its projected circle (its ref. [22]), with the code's schedule: C is
     # lowered after 10 iterations so that only the closest residuals steer the end of the match.
-    C: float = param(0.49, unit="m^2", lo=1e-6, hi=100.0,
+    C: float = param(0.49, unit="m^2", lo=1e-6, hi=100.0, tune=(0.01, 2.0, True),
         help="weight constant w = C / (C + e^2) of the translation step (Diosi: 70 cm squared)")
     C_late: float = param(0.01, unit="m^2", lo=1e-6, hi=100.0, help="weight constant after C_switch iterations")
     C_switch: int = param(10, unit="count", lo=0, hi=10000, help="iteration from which C_late is used")
@@ -273,7 +282,7 @@ class PmwnParams(PolarParams):
 
     lambda0: float = param(0.0, unit="m/rad", lo=0.0, hi=1000.0,
         help="metric weight of the first iteration (0: the first rotation is free)")
-    lambda_max: float = param(0.5, unit="m/rad", lo=0.0, hi=1e6,
+    lambda_max: float = param(0.5, unit="m/rad", lo=0.0, hi=1e6, tune=(0.05, 5.0, True),
         help="upper bound of the adaptive metric weight (larger values lock the rotation when the translation is far off)")
 
 

@@ -51,7 +51,7 @@ def run(command: str, tmp_path=None) -> str:
 def test_the_doc_lists_every_evaluation():
     assert len(list(overlap_blocks())) == 7
     kinds = {shlex.split(c)[2] for c, _ in console_commands()}
-    assert kinds == {"protocol", "sequence", "ceiling", "relations", "basin", "corridor"}
+    assert kinds == {"protocol", "sequence", "ceiling", "relations", "basin", "corridor", "covariance"}
 
 
 @pytest.mark.parametrize("command, table", list(overlap_blocks()))

@@ -12,7 +12,7 @@ import sys
 import typer
 from typer.core import TyperGroup, TyperOption
 
-from . import bench, evaluate, files, match, serve
+from . import bench, evaluate, files, match, serve, tune
 
 
 class OneLineErrors(TyperGroup):
@@ -43,9 +43,9 @@ _display_type = TyperOption.display_type_rich
 TyperOption.display_type_rich = lambda self, ctx: None if self.is_flag else _display_type(self, ctx)
 
 app = typer.Typer(cls=OneLineErrors, no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
-                  help="Visual debugger and teaching tool for 2-D laser scan matching (ICP, MbICP, improved MbICP, "
-                       "PSM, PMWN).")
-for group in (match, serve, evaluate, bench, files):
+                  help="Visual debugger and teaching tool for 2-D laser scan matching (ICP, PL-ICP, MbICP, improved "
+                       "MbICP, PSM, PMWN).")
+for group in (match, serve, evaluate, bench, files, tune):
     group.register(app)
 
 

@@ -210,6 +210,56 @@ def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses 
         f"+/-{perturb[1]:g} deg, seed {seed}")
 
 
+def covariance(log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
+               algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None,
+               truth: Annotated[str, typer.Option("--truth", help="'pose': the log's scan poses; 'relations': "
+                                                  "Kümmerle's (--relations)")] = "pose",
+               relations_file: Annotated[Optional[str], typer.Option("--relations", help="relations file (--truth "
+                                                                     "relations)")] = None,
+               offset: Annotated[float, typer.Option("--offset", callback=finite, help="seconds added to the log's "
+                                                     "stamps (Intel corrected: 976052857.337)")] = 0.0,
+               tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
+                                                        help="largest stamp mismatch [s]")] = 0.025,
+               guess: Annotated[str, typer.Option("--guess", help="'perturb': the stored pose moved within --perturb "
+                                                  "(seeded); or identity, odometry, search")] = "perturb",
+               perturb: Annotated[tuple[float, float], typer.Option(
+                   "--perturb", metavar="XY_M THETA_DEG", help="the perturbed guesses' bounds")] = (0.3, 15.0),
+               seed: Annotated[int, typer.Option("--seed", help="seed of the perturbed guesses")] = 0,
+               limit: LimitOpt = None,
+               png: Annotated[Optional[Path], typer.Option("--png", help="the NEES distributions against chi2(3)")]
+               = None,
+               workers: WorkersOpt = None):
+    """Whether each matcher's reported covariance fits its errors against the truth (NEES, chi2 bounds)."""
+    from mbicp_viz.evaluation.covariance import consistency_lines, covariance_consistency, nees_png
+    from mbicp_viz.evaluation.tune import pose_cases, relation_cases
+    from mbicp_viz.readers.params_toml import load_search
+    from mbicp_viz.readers.relations import read_relations
+
+    if truth not in ("pose", "relations") or (truth == "relations") != (relations_file is not None):
+        raise InputError("expected pose, or relations with --relations FILE", field="--truth")
+    if guess not in ("perturb", "identity", "odometry", "search"):
+        raise InputError("expected perturb, identity, odometry or search (the truth cannot be the guess)",
+                         field="--guess")
+    if not all(math.isfinite(v) and v >= 0 for v in perturb):
+        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+    ps = params_for(algos, params)
+    lg = _read(log)
+    moved = (perturb[0], math.radians(perturb[1]))
+    if truth == "pose":
+        cases = pose_cases(0, lg, guess, moved, seed, load_search(params), limit)
+    else:
+        cases = relation_cases(0, lg, read_relations(relations_file), offset, tolerance, guess, moved, seed,
+                               load_search(params))
+    results = {}
+    with Progress(len(cases) * len(ps)) as bar:
+        for name, p in ps.items():
+            results[name] = covariance_consistency(lg, cases, p, workers, on_row=lambda _: bar.update(1))
+    for name, c in results.items():
+        typer.echo("\n".join(consistency_lines(name, c)))
+    if png:
+        nees_png(results, str(png))
+
+
 def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps")],
               relations_file: Annotated[str, typer.Argument(metavar="RELATIONS",
                                                             help="relations file (t1 t2 x y z roll pitch yaw)")],
@@ -271,6 +321,6 @@ def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
 def register(app: typer.Typer) -> None:
     group = typer.Typer(no_args_is_help=True, help="Evaluate matchers on whole logs.")
     for name, fn in (("sequence", sequence), ("protocol", protocol), ("overlap", overlap), ("ceiling", ceiling),
-                     ("relations", relations), ("basin", basin), ("corridor", corridor)):
+                     ("relations", relations), ("basin", basin), ("corridor", corridor), ("covariance", covariance)):
         group.command(name)(user_errors(fn))
     app.add_typer(group, name="eval")

@@ -8,7 +8,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterable
 
 
-def _ignore_interrupts() -> None:
+def ignore_interrupts() -> None:
     # Ctrl-C reaches every process of the terminal's group: only the parent should react to it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
@@ -26,7 +26,7 @@ def ordered_map(fn: Callable, jobs: list, workers: int | None = None, on_result:
         if workers == 1 or len(jobs) <= 1:
             results: Iterable = map(fn, jobs)
         else:
-            pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_interrupts)
+            pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts)
             results = pool.map(fn, jobs, chunksize=max(1, min(16, len(jobs) // (8 * workers))))
         for r in results:
             out.append(r)

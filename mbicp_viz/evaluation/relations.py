@@ -24,20 +24,29 @@ def nearest_scan(stamps: np.ndarray, t: float, tolerance: float) -> int | None:
     return k if abs(stamps[k] - t) <= tolerance else None
 
 
+def relation_pairs(log: ScanLog, relations: list[Relation], offset: float,
+                   tolerance: float) -> tuple[list[tuple[int, int, Relation]], int]:
+    """(i, j, relation) for the relations whose both ends have a scan (indices into ``log.scans``),
+    and how many relations had none."""
+    stamps = np.array([s.stamp if s.stamp is not None else np.nan for s in log.scans]) + offset
+    if np.all(np.isnan(stamps)):
+        raise InputError("the log's scans carry no time stamps", log.path, field="stamps")
+    out = []
+    for rel in relations:
+        i, j = nearest_scan(stamps, rel.t1, tolerance), nearest_scan(stamps, rel.t2, tolerance)
+        if i is not None and j is not None and i != j:
+            out.append((i, j, rel))
+    return out, len(relations) - len(out)
+
+
 def match_relations(log: ScanLog, relations: list[Relation], params: Params, offset: float, tolerance: float,
                     guess: Guess | str = Guess.identity, search: SearchParams | None = None) -> tuple[list[dict], int]:
     """Rows for the relations whose both ends have a scan; and how many relations had none.
     ``ref`` and ``obj`` of a row are scan record numbers."""
     records = log.record_numbers()
-    stamps = np.array([s.stamp if s.stamp is not None else np.nan for s in log.scans]) + offset
-    if np.all(np.isnan(stamps)):
-        raise InputError("the log's scans carry no time stamps", log.path, field="stamps")
-    rows, missing = [], 0
-    for rel in relations:
-        i, j = nearest_scan(stamps, rel.t1, tolerance), nearest_scan(stamps, rel.t2, tolerance)
-        if i is None or j is None or i == j:
-            missing += 1
-            continue
+    found, missing = relation_pairs(log, relations, offset, tolerance)
+    rows = []
+    for i, j, rel in found:
         ref, obj = log.scans[i], log.scans[j]
         g, _ = pair_guess(ref, obj, guess, search)
         t0 = time.perf_counter()

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from mbicp_viz.core import MatchResult, Params, Scan, SearchParams, match, pose_error, relative
+from mbicp_viz.core import MatchResult, Params, Pose2, Scan, SearchParams, match, pose_error, relative
 from mbicp_viz.core.agreement import inlier_fraction
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
@@ -68,27 +68,39 @@ def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess
 
 
 def _match_row(job) -> dict:
-    from .single import Setup, reported, run
-
     path, i, j, ref, obj, params, guess, truth, search, frames, base = job
     t0 = time.perf_counter()
     g, source = pair_guess(ref, obj, guess, search)
     guess_ms = 1000.0 * (time.perf_counter() - t0)
-    o = run(ref, obj, g, params)
-    r = reported(o.result, frames, base)
-    row = result_row(i, j, r, o.time_ms) | r.as_dict() | {
-        "guess": source, "guess_pose": [g.x, g.y, g.theta], "on_ref": o.on_ref, "frame": frames.frame_name(base),
-        "params": params.as_dict()}  # guess_pose (laser frame) and params: the pair reopens exactly as it ran
-    if guess is Guess.search:
-        row["guess_ms"] = guess_ms
-    if ref.odometry is not None and obj.odometry is not None:  # how far the match is from the odometry
-        et, er = pose_error(r.pose, frames.reported(relative(ref.odometry, obj.odometry), base))
-        row |= {"odometry_xy": et, "odometry_theta": er}
+    answer = None
     if truth == "pose":
         answer = stored_truth(ref, obj)
         if answer is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
-        row |= scored(ref, obj, o.result.pose, answer)
+    row = pair_row(i, j, ref, obj, params, g, source, answer, frames, base)
+    if guess is Guess.search:
+        row["guess_ms"] = guess_ms
+    return row
+
+
+def pair_row(i: int, j: int, ref: Scan, obj: Scan, params: Params, guess: Pose2, source: str, truth: Pose2 | None,
+             frames, base: bool) -> dict:
+    """The row of one pair (``eval sequence``, ``tune``'s worst pairs): the match from ``guess`` (laser
+    frame; ``source`` says where it came from) reported in the frame ``base`` chooses, its distance
+    from the log's odometry when it has some, and with ``truth`` (laser frame) its error. The guess
+    and every parameter are kept: the pair reopens exactly as it ran (``serve LOG --rows``)."""
+    from .single import reported, run
+
+    o = run(ref, obj, guess, params)
+    r = reported(o.result, frames, base)
+    row = result_row(i, j, r, o.time_ms) | r.as_dict() | {
+        "guess": source, "guess_pose": [guess.x, guess.y, guess.theta], "on_ref": o.on_ref,
+        "frame": frames.frame_name(base), "params": params.as_dict()}
+    if ref.odometry is not None and obj.odometry is not None:  # how far the match is from the odometry
+        et, er = pose_error(r.pose, frames.reported(relative(ref.odometry, obj.odometry), base))
+        row |= {"odometry_xy": et, "odometry_theta": er}
+    if truth is not None:
+        row |= scored(ref, obj, o.result.pose, truth)
     return row
 
 

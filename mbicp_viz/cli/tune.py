@@ -1,0 +1,163 @@
+"""``tune``: search a matcher's parameters against ground truth (Optuna), check them on a held-out log."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from mbicp_viz.errors import InputError
+
+from .options import (DEFAULT_ALGO, AlgoOpt, MountOpt, ParamsOpt, Progress, TopicOpt, TypestoreOpt, UpsideDownOpt,
+                      WorkersOpt, finite, read_options, say, user_errors)
+
+
+def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="training logs with a truth")],
+         algo: AlgoOpt = DEFAULT_ALGO,
+         params: ParamsOpt = None,
+         truth: Annotated[str, typer.Option("--truth", help="'pose': the logs' scan poses (corrected logs); "
+                                                            "'relations': Kümmerle's relations (--relations)")] = "pose",
+         relations: Annotated[Optional[Path], typer.Option("--relations", help="the relations file of the one "
+                                                           "training log (--truth relations)")] = None,
+         offset: Annotated[float, typer.Option("--offset", callback=finite, help="seconds added to the logs' stamps "
+                                               "to meet the relations' (Intel corrected: 976052857.337)")] = 0.0,
+         tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
+                                                  help="largest stamp mismatch [s]")] = 0.025,
+         guess: Annotated[str, typer.Option("--guess", help="'perturb': the stored pose moved within --perturb "
+                                                            "(seeded); or identity, odometry, search")] = "perturb",
+         perturb: Annotated[tuple[float, float], typer.Option("--perturb", metavar="XY_M THETA_DEG",
+                                                              help="the perturbed guesses' bounds")] = (0.3, 15.0),
+         seed: Annotated[int, typer.Option("--seed", help="seed of the perturbed guesses")] = 0,
+         limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="the first N pairs of each log")] = None,
+         trials: Annotated[int, typer.Option("--trials", min=1, help="trials to run now")] = 100,
+         holdout: Annotated[Optional[str], typer.Option("--holdout", help="a log kept out of the search: the honest "
+                                                        "figure")] = None,
+         fields: Annotated[Optional[str], typer.Option("--fields", help="comma-separated parameters to search "
+                                                       "(default: those with a tuning range)")] = None,
+         storage: Annotated[str, typer.Option("--storage", help="Optuna storage: a SQLite file (default) or a "
+                                              "postgresql:// URL shared by several machines")] = "sqlite:///tune.db",
+         study: Annotated[Optional[str], typer.Option("--study", help="study name (default: ALGO-FIRSTLOG); an "
+                                                      "existing study resumes")] = None,
+         out: Annotated[Path, typer.Option("--out", help="the best parameters as a --params TOML")] = Path("tuned.toml"),
+         png_dir: Annotated[Optional[Path], typer.Option("--png-dir", help="optimisation history and parameter "
+                                                         "importance as PNGs here")] = None,
+         rows_dir: Annotated[Optional[Path], typer.Option("--rows-dir", help="each training log's pairs under the "
+                                                          "best parameters as a rows file (serve LOG --rows)")] = None,
+         workers: WorkersOpt = None, topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE",
+         mount: MountOpt = None, upside_down: UpsideDownOpt = False):
+    """Search a matcher's parameters on training logs against their truth; defaults and best side by side."""
+    from mbicp_viz.evaluation import tune as t
+    from mbicp_viz.readers import read_log
+    from mbicp_viz.readers.params_toml import load_search, make_params, params_to_toml
+
+    if truth not in ("pose", "relations"):
+        raise InputError("expected pose or relations", field="--truth")
+    if guess not in ("perturb", "identity", "odometry", "search"):
+        raise InputError("expected perturb, identity, odometry or search (the truth cannot be the guess)",
+                         field="--guess")
+    if not all(math.isfinite(v) and v >= 0 for v in perturb):
+        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+    if truth == "relations" and (relations is None or len(logs) != 1):
+        raise InputError("--truth relations takes one log and its --relations file", field="--truth")
+    base = make_params(algo.value, params)
+    space = t.search_space(type(base), [f.strip() for f in fields.split(",")] if fields else None)
+    if not space:
+        raise InputError(f"{algo.value} has no parameter with a tuning range: name some", field="--fields")
+    reading = read_options(topic, typestore, mount, upside_down)
+    search = load_search(params)
+    moved = (perturb[0], math.radians(perturb[1]))
+
+    def cases_of(paths: list[str]):
+        cases = []
+        for k, path in enumerate(paths):
+            lg = read_log(path, reading)
+            if truth == "pose":
+                cases += t.pose_cases(k, lg, guess, moved, seed, search, limit)
+            else:
+                from mbicp_viz.readers.relations import read_relations
+
+                cases += t.relation_cases(k, lg, read_relations(str(relations)), offset, tolerance, guess, moved, seed,
+                                          search)
+        return cases
+
+    cases = cases_of(logs)
+    name = study or f"{algo.value}-{Path(logs[0]).name.split('.')[0]}"
+    st = t.open_study(storage, name)
+    before = len(st.trials)
+    guesses = (f"the stored pose moved within +/-{perturb[0]:g} m, +/-{perturb[1]:g} deg (seed {seed})"
+               if guess == "perturb" else guess)
+    typer.echo(f"tuning {algo.value} on {len(logs)} log(s), {len(cases)} pairs; truth: "
+               f"{'scan poses' if truth == 'pose' else 'relations'}; guesses: {guesses}")
+    typer.echo(f"searching {', '.join(d.spec.name for d in space)}; study {name!r} in {storage} "
+               f"({before} trials before)")
+    if before == 0:  # the defaults are the first trial: the best is never worse on the training pairs
+        st.enqueue_trial({d.spec.name: getattr(base, d.spec.name) for d in space})
+    scorer = t.Scorer(logs, reading, cases, workers)
+    try:
+        with Progress(trials, "trials") as bar:
+            ran = t.optimise(st, scorer, base, space, trials, on_trial=lambda _: bar.update(1))
+        if not any(tr.value is not None for tr in st.trials):
+            raise InputError("interrupted before the first trial finished", field="--trials")
+        best = t.best_params(st, base, space)
+        rows = [("training", len(cases), t.Score.of(scorer.errors(base)), t.Score.of(scorer.errors(best)))]
+    finally:
+        scorer.close()
+    if holdout:
+        held = cases_of([holdout])
+        check = t.Scorer([holdout], reading, held, workers)
+        try:
+            rows.append(("holdout", len(held), t.Score.of(check.errors(base)), t.Score.of(check.errors(best))))
+        finally:
+            check.close()
+    typer.echo(f"{ran} trials ran now, {len(st.trials)} in the study; best: trial {st.best_trial.number}")
+    typer.echo(f"{'':<22}{'defaults':<46}best")
+    for label, n, a, b in rows:
+        typer.echo(f"{label + f' ({n} pairs)':<22}{a.text():<46}{b.text()}")
+    typer.echo("best parameters: " + ", ".join(_shown(d.spec, getattr(best, d.spec.name)) for d in space))
+    out.write_text(params_to_toml(best, search))
+    typer.echo(f"written to {out} (read it back with --params {out})")
+    shares = t.importance(st)
+    if shares:
+        typer.echo("importance: " + ", ".join(f"{k} {v:.2f}" for k, v in shares.items()))
+    if png_dir:
+        png_dir.mkdir(parents=True, exist_ok=True)
+        t.history_png(st, str(png_dir / "history.png"))
+        if shares:
+            t.importance_png(shares, name, str(png_dir / "importance.png"))
+        say(f"pictures in {png_dir}: history.png" + (", importance.png" if shares else ""))
+    if rows_dir:
+        _worst_rows(rows_dir, logs, cases, best, reading)
+
+
+def _shown(spec, value) -> str:
+    if spec.unit == "rad":
+        return f"{spec.name}_deg {math.degrees(value):.4g}"
+    return f"{spec.name} {value:.4g}" if isinstance(value, float) else f"{spec.name} {value}"
+
+
+def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
+    """Each training log's pairs under the best parameters, as rows: the debugger lists their
+    failures worst first and opens each as it ran."""
+    from mbicp_viz.evaluation.failures import worst_first
+    from mbicp_viz.evaluation.sequence import pair_row
+    from mbicp_viz.readers import read_log
+    from mbicp_viz.readers.rows import read_rows
+
+    rows_dir.mkdir(parents=True, exist_ok=True)
+    for k, path in enumerate(logs):
+        lg = read_log(path, reading)
+        records = lg.record_numbers()
+        rows = [pair_row(records[c.i], records[c.j], lg.scans[c.i], lg.scans[c.j], best, c.guess, "tune's guess",
+                         c.truth, lg.frames, False) for c in cases if c.log == k]
+        target = rows_dir / f"{Path(path).name.split('.')[0]}-rows.json"
+        target.write_text(json.dumps(rows, indent=1) + "\n")
+        bad = worst_first(read_rows(target))
+        typer.echo(f"{len(bad)} failures of {len(rows)} pairs in {target}: open them with "
+                   f"mbicp-viz serve {path} --rows {target}")
+
+
+def register(app: typer.Typer) -> None:
+    app.command("tune")(user_errors(tune))

@@ -1,0 +1,307 @@
+"""``tune``: the parameters that work for a robot, found against ground truth with Optuna.
+
+A study searches a matcher's parameter dataclass: the fields named (default: those with a tuning
+range in their metadata, ``core/params.py``), each within its tuning range or, for a field
+without one, its validation bounds (log scale when they span two decades or more). Each trial
+matches every case — a pair of scans of the training logs, its guess and its truth (the logs'
+scan poses, or Kümmerle's relations) — spread over the local cores, whose processes read the
+logs once. The objective ranks trials by successes (within 0.1 m and 3 deg of the truth), then by
+the median translation error. Trials live in Optuna's RDB storage: a SQLite file by default; a
+PostgreSQL URL shares one study between processes on any number of machines (Optuna's documented
+way to distribute), and a study is resumed by its name.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from mbicp_viz.core import FieldSpec, ParamError, Params, Pose2, SearchParams, field_specs, match, pose_error
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers import ReadOptions, ScanLog, read_log
+
+from .bench import bench_guesses
+from .criteria import CONSECUTIVE
+from .pairs import Guess, pair_guess, stored_truth
+from .pool import ignore_interrupts
+
+
+@dataclass(frozen=True)
+class Case:
+    """One pair to score: indices into its log's scans, the guess (laser frame) and the truth."""
+
+    log: int
+    i: int
+    j: int
+    guess: Pose2
+    truth: Pose2
+
+
+def pose_cases(k: int, log: ScanLog, guesses: str, perturb: tuple[float, float] | None, seed: int,
+               search: SearchParams | None, limit: int | None) -> list[Case]:
+    """The consecutive pairs of a corrected log, scored against its scan poses. ``guesses``: a
+    ``Guess`` kind (not the poses themselves), or "perturb": the stored pose moved within ``perturb``."""
+    pairs = log.consecutive_pairs(limit)
+    scans = {r: n for n, r in enumerate(log.record_numbers())}
+    out = []
+    moved = bench_guesses(log, pairs, perturb, seed) if guesses == "perturb" else None
+    for n, (i, j) in enumerate(pairs):
+        ref, obj = log.scan(i), log.scan(j)
+        truth = stored_truth(ref, obj)
+        if truth is None:
+            raise InputError(f"scan {i} or {j} has no pose: --truth pose needs a corrected log", log.path,
+                             field="--truth")
+        g = moved[n] if moved is not None else pair_guess(ref, obj, guesses, search)[0]
+        out.append(Case(k, scans[i], scans[j], g, truth))
+    return out
+
+
+def relation_cases(k: int, log: ScanLog, relations, offset: float, tolerance: float, guesses: str,
+                   perturb: tuple[float, float] | None, seed: int, search: SearchParams | None) -> list[Case]:
+    """The relations whose two ends have a scan (Kümmerle et al. 2009), from a ``Guess`` kind or,
+    with "perturb", from the relation moved within ``perturb``."""
+    from .relations import relation_pairs
+
+    found, _ = relation_pairs(log, relations, offset, tolerance)
+    if not found:
+        raise InputError("no relation has a scan at both ends: check --offset and --tolerance", log.path,
+                         field="--relations")
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, j, rel in found:
+        if guesses == "perturb":
+            dx, dy, dth = rng.uniform(-1.0, 1.0, 3) * (perturb[0], perturb[0], perturb[1])
+            g = Pose2(rel.pose.x + dx, rel.pose.y + dy, rel.pose.theta + dth)
+        else:
+            g = pair_guess(log.scans[i], log.scans[j], guesses, search)[0]
+        out.append(Case(k, i, j, g, rel.pose))
+    return out
+
+
+@dataclass(frozen=True)
+class Score:
+    """How a parameter set did on the cases."""
+
+    successes: int
+    n: int
+    median_xy: float  # [m]
+    median_theta: float  # [rad]
+
+    @staticmethod
+    def of(errors: np.ndarray) -> "Score":
+        ok = sum(CONSECUTIVE.correct(e, r) for e, r in errors)
+        return Score(int(ok), len(errors), float(np.median(errors[:, 0])), float(np.median(errors[:, 1])))
+
+    @property
+    def value(self) -> float:
+        """Successes first; below one success, the median error (0.1 m or more adds nothing)."""
+        return self.successes + 0.5 * (1.0 - min(self.median_xy / CONSECUTIVE.max_error_m, 1.0))
+
+    def text(self) -> str:
+        return (f"{self.successes}/{self.n} ({100 * self.successes / self.n:.1f} %), median {1000 * self.median_xy:.1f} mm, "
+                f"{math.degrees(self.median_theta):.2f} deg")
+
+
+STUDY_ATTEMPTS = 10  # opening a study that other workers are creating at the same moment
+
+# The logs and cases of a pool's processes, read once when the process starts.
+_LOGS: list[ScanLog] = []
+_CASES: list[Case] = []
+
+
+def _load(paths: list[str], options: ReadOptions | None, cases: list[Case]) -> None:
+    global _LOGS, _CASES
+    _LOGS, _CASES = [read_log(p, options) for p in paths], cases
+
+
+def _start_worker(paths: list[str], options: ReadOptions | None, cases: list[Case]) -> None:
+    ignore_interrupts()  # Ctrl-C is the parent's to handle: it keeps the finished trials
+    _load(paths, options, cases)
+
+
+def _errors(job) -> np.ndarray:
+    """(translation, rotation) error of each case in [start, stop); a failed match counts as far off."""
+    params, start, stop = job
+    out = np.empty((stop - start, 2))
+    for n, c in enumerate(_CASES[start:stop]):
+        log = _LOGS[c.log]
+        try:
+            out[n] = pose_error(match(log.scans[c.i], log.scans[c.j], c.guess, params).pose, c.truth)
+        except (ValueError, FloatingPointError):  # a scan error or a parameter set the matcher refuses
+            out[n] = (math.inf, math.inf)
+    return out
+
+
+class Scorer:
+    """Scores parameter sets on the cases over ``workers`` processes that read the logs once."""
+
+    def __init__(self, paths: list[str], options: ReadOptions | None, cases: list[Case], workers: int | None):
+        self.n, self.workers = len(cases), workers or os.cpu_count() or 1
+        self.pool = None
+        if self.workers > 1:
+            self.pool = ProcessPoolExecutor(self.workers, initializer=_start_worker, initargs=(paths, options, cases))
+        else:
+            _load(paths, options, cases)
+
+    def errors(self, params: Params) -> np.ndarray:
+        if self.pool is None:
+            return _errors((params, 0, self.n))
+        bounds = np.linspace(0, self.n, 4 * self.workers + 1).astype(int)
+        jobs = [(params, a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+        return np.vstack(list(self.pool.map(_errors, jobs)))
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(cancel_futures=True)
+
+
+@dataclass(frozen=True)
+class Dimension:
+    """One searched field: its range and scale in the field's own unit (radians stay radians)."""
+
+    spec: FieldSpec
+    lo: float
+    hi: float
+    log: bool
+
+
+def search_space(params_type: type, fields: list[str] | None) -> list[Dimension]:
+    """The fields named, else the ones with a tuning range: each within that range, or within its
+    validation bounds (log scale when they span two decades); a refusal names the field."""
+    specs = {s.name: s for s in field_specs(params_type)}
+    names = fields if fields else [n for n, s in specs.items() if s.tune is not None]
+    out = []
+    for name in names:
+        spec = specs.get(name)
+        if spec is None:
+            raise InputError(f"unknown parameter {name!r}; known: {', '.join(specs)}", field="--fields")
+        if spec.type is bool:
+            out.append(Dimension(spec, 0.0, 1.0, False))
+            continue
+        lo, hi, log = spec.tune if spec.tune is not None else (spec.lo, spec.hi, None)
+        if lo is None or hi is None or not hi > lo:
+            raise InputError(f"{name} has no bounded range to search", field="--fields")
+        out.append(Dimension(spec, lo, hi, log if log is not None else lo > 0 and hi / lo >= 100))
+    return out
+
+
+def suggested(trial, base: Params, space: list[Dimension]) -> Params:
+    """The trial's parameter set: ``base`` with each searched field drawn from its dimension."""
+    values = {}
+    for d in space:
+        if d.spec.type is bool:
+            values[d.spec.name] = trial.suggest_categorical(d.spec.name, [False, True])
+        elif d.spec.type is int:
+            values[d.spec.name] = trial.suggest_int(d.spec.name, int(d.lo), int(d.hi), log=d.log)
+        else:
+            values[d.spec.name] = trial.suggest_float(d.spec.name, d.lo, d.hi, log=d.log)
+    return base.replace(**values)
+
+
+def open_study(storage: str, name: str):
+    """The study ``name`` in ``storage`` (an Optuna RDB URL), created if new, resumed if not."""
+    import optuna
+
+    import sqlalchemy.exc
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    if storage.startswith(("postgresql://", "postgres://")):  # the driver installed with the tool
+        storage = "postgresql+psycopg://" + storage.split("://", 1)[1]
+    for attempt in range(STUDY_ATTEMPTS):
+        try:
+            return optuna.create_study(storage=storage, study_name=name, direction="maximize", load_if_exists=True)
+        except sqlalchemy.exc.IntegrityError:
+            # workers started together race to create the tables or the study: the loser tries again
+            time.sleep(0.2 * (attempt + 1))
+        except Exception as e:  # a URL nothing answers at, a driver missing, a file that is no database
+            raise InputError(f"cannot open the study {name!r} there: {type(e).__name__}: "
+                             f"{str(e).splitlines()[0][:200]}", field="--storage") from None
+    raise InputError(f"cannot open the study {name!r} there: other workers kept creating it", field="--storage")
+
+
+def optimise(study, scorer: Scorer, base: Params, space: list[Dimension], trials: int, on_trial=None) -> int:
+    """Run ``trials`` more trials; Ctrl-C stops after the running one is dropped (the finished
+    ones are stored). Returns how many finished here."""
+    import optuna
+
+    worker = f"{socket.gethostname()}:{os.getpid()}"
+    done = 0
+
+    def objective(trial) -> float:
+        params = suggested(trial, base, space)
+        score = Score.of(scorer.errors(params))
+        trial.set_user_attr("successes", score.successes)
+        trial.set_user_attr("pairs", score.n)
+        trial.set_user_attr("median_xy", score.median_xy)
+        trial.set_user_attr("worker", worker)
+        return score.value
+
+    def finished(study, trial) -> None:
+        nonlocal done
+        done += trial.state == optuna.trial.TrialState.COMPLETE
+        if on_trial is not None:
+            on_trial(trial)
+
+    try:
+        study.optimize(objective, n_trials=trials, callbacks=[finished], catch=(ParamError,))
+    except KeyboardInterrupt:
+        pass
+    return done
+
+
+def best_params(study, base: Params, space: list[Dimension]) -> Params:
+    names = {d.spec.name for d in space}
+    return base.replace(**{k: v for k, v in study.best_trial.params.items() if k in names})
+
+
+def history_png(study, path: str) -> None:
+    """Each trial's success rate, and the best so far."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    done = [t for t in study.trials if t.value is not None]
+    x = [t.number for t in done]
+    rate = [100.0 * t.user_attrs["successes"] / t.user_attrs["pairs"] for t in done]
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=100)
+    ax.plot(x, rate, "o", ms=3, color="#888888", label="trial")
+    ax.plot(x, np.maximum.accumulate(rate), "-", color="#cc3333", label="best so far")
+    ax.set_xlabel("trial")
+    ax.set_ylabel(f"pairs within {CONSECUTIVE.text()} [%]")
+    ax.set_title(f"study {study.study_name}: optimisation history")
+    ax.legend(loc="lower right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def importance(study) -> dict[str, float]:
+    """Each searched field's share of the objective's variance (Optuna's fANOVA)."""
+    import optuna
+
+    return optuna.importance.get_param_importances(study) if len(study.trials) >= 2 else {}
+
+
+def importance_png(shares: dict[str, float], study_name: str, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(shares)[::-1]
+    fig, ax = plt.subplots(figsize=(7, 0.4 * len(names) + 1.5), dpi=100)
+    ax.barh(names, [shares[n] for n in names], color="#3366aa")
+    ax.set_xlabel("share of the objective's variance (fANOVA)")
+    ax.set_title(f"study {study_name}: parameter importance")
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
