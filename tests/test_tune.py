@@ -7,6 +7,7 @@ import shutil
 import signal
 import socket
 import sqlite3
+from contextlib import closing
 import subprocess
 import sys
 import tempfile
@@ -64,8 +65,8 @@ def test_ctrl_c_keeps_the_finished_trials(tmp_path):
 
     def finished() -> int:
         try:
-            with sqlite3.connect(db) as con:
-                return con.execute("select count(*) from trials where state = 'COMPLETE'").fetchone()[0]
+            with closing(sqlite3.connect(db)) as con:
+                return con.execute("select count(*) from trials where state = 'COMPLETE'").fetchall()[0][0]
         except sqlite3.Error:
             return 0
 

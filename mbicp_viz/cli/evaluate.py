@@ -13,9 +13,10 @@ import typer
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.choices import Removal, Thin
 
-from .options import (ALL_ALGOS, DEFAULT_ALGO, SEARCH, AlgoOpt, AlgosOpt, FirstArg, Frame, FrameOpt, Guess, GuessOpt,
-                      MountOpt, PairOpt, ParamsOpt, Progress, RrdOpt, SecondArg, TopicOpt, TypestoreOpt,
-                      UpsideDownOpt, WorkersOpt, finite, number_list, params_for, pose_from_deg, read_options, say,
+from .options import (ALL_ALGOS, DEFAULT_ALGO, SEARCH, AlgoOpt, AlgosOpt, CaseGuessOpt, CaseTruthOpt, FirstArg, Frame,
+                      FrameOpt, Guess, GuessOpt, MountOpt, OffsetOpt, PairOpt, ParamsOpt, PerturbOpt, Progress,
+                      RelationsOpt, RrdOpt, SecondArg, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt, UpsideDownOpt,
+                      WorkersOpt, cases_options, finite, number_list, params_for, pose_from_deg, read_options, say,
                       user_errors)
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
@@ -210,46 +211,25 @@ def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses 
         f"+/-{perturb[1]:g} deg, seed {seed}")
 
 
-def covariance(log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
-               algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None,
-               truth: Annotated[str, typer.Option("--truth", help="'pose': the log's scan poses; 'relations': "
-                                                  "Kümmerle's (--relations)")] = "pose",
-               relations_file: Annotated[Optional[str], typer.Option("--relations", help="relations file (--truth "
-                                                                     "relations)")] = None,
-               offset: Annotated[float, typer.Option("--offset", callback=finite, help="seconds added to the log's "
-                                                     "stamps (Intel corrected: 976052857.337)")] = 0.0,
-               tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
-                                                        help="largest stamp mismatch [s]")] = 0.025,
-               guess: Annotated[str, typer.Option("--guess", help="'perturb': the stored pose moved within --perturb "
-                                                  "(seeded); or identity, odometry, search")] = "perturb",
-               perturb: Annotated[tuple[float, float], typer.Option(
-                   "--perturb", metavar="XY_M THETA_DEG", help="the perturbed guesses' bounds")] = (0.3, 15.0),
-               seed: Annotated[int, typer.Option("--seed", help="seed of the perturbed guesses")] = 0,
+def covariance(log: Annotated[str, typer.Argument(help="scan log with a truth (its scan poses, or --relations)")],
+               algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, truth: CaseTruthOpt = "pose",
+               relations_file: RelationsOpt = None, offset: OffsetOpt = 0.0, tolerance: ToleranceOpt = 0.025,
+               guess: CaseGuessOpt = "perturb", perturb: PerturbOpt = (0.3, 15.0), seed: SeedOpt = 0,
                limit: LimitOpt = None,
                png: Annotated[Optional[Path], typer.Option("--png", help="the NEES distributions against chi2(3)")]
                = None,
                workers: WorkersOpt = None):
     """Whether each matcher's reported covariance fits its errors against the truth (NEES, chi2 bounds)."""
+    from mbicp_viz.evaluation.cases import cases_for
     from mbicp_viz.evaluation.covariance import consistency_lines, covariance_consistency, nees_png
-    from mbicp_viz.evaluation.tune import pose_cases, relation_cases
     from mbicp_viz.readers.params_toml import load_search
     from mbicp_viz.readers.relations import read_relations
 
-    if truth not in ("pose", "relations") or (truth == "relations") != (relations_file is not None):
-        raise InputError("expected pose, or relations with --relations FILE", field="--truth")
-    if guess not in ("perturb", "identity", "odometry", "search"):
-        raise InputError("expected perturb, identity, odometry or search (the truth cannot be the guess)",
-                         field="--guess")
-    if not all(math.isfinite(v) and v >= 0 for v in perturb):
-        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+    moved = cases_options(truth, relations_file, guess, perturb)
     ps = params_for(algos, params)
     lg = _read(log)
-    moved = (perturb[0], math.radians(perturb[1]))
-    if truth == "pose":
-        cases = pose_cases(0, lg, guess, moved, seed, load_search(params), limit)
-    else:
-        cases = relation_cases(0, lg, read_relations(relations_file), offset, tolerance, guess, moved, seed,
-                               load_search(params))
+    cases = cases_for(0, lg, truth, read_relations(relations_file) if relations_file else None, offset, tolerance,
+                      guess, moved, seed, load_search(params), limit)
     results = {}
     with Progress(len(cases) * len(ps)) as bar:
         for name, p in ps.items():
@@ -264,11 +244,7 @@ def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps
               relations_file: Annotated[str, typer.Argument(metavar="RELATIONS",
                                                             help="relations file (t1 t2 x y z roll pitch yaw)")],
               algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None,
-              offset: Annotated[float, typer.Option("--offset", callback=finite,
-                                                    help="seconds added to the log's stamps (Intel corrected: "
-                                                         "976052857.337)")] = 0.0,
-              tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
-                                                       help="largest stamp mismatch [s]")] = 0.025,
+              offset: OffsetOpt = 0.0, tolerance: ToleranceOpt = 0.025,
               guess: Annotated[Guess, typer.Option("--guess", help="identity, pose, odometry or search (a correlative "
                                                    f"search within {SEARCH} of the identity)")] = Guess.identity,
               out: Annotated[Optional[Path], typer.Option("--out", help="JSON file: one object per matched relation")]

@@ -78,6 +78,36 @@ def finite(value: float) -> float:
     return value
 
 
+# The cases an evaluation scores (tune, eval covariance; evaluation/cases.py)
+CaseTruthOpt = Annotated[str, typer.Option("--truth", help="'pose': the logs' scan poses (corrected logs); "
+                                                        "'relations': Kümmerle's (--relations)")]
+RelationsOpt = Annotated[Optional[str], typer.Option("--relations", help="relations file of the (one) log "
+                                                                         "(--truth relations)")]
+CaseGuessOpt = Annotated[str, typer.Option("--guess", help="'perturb': the truth moved within --perturb (seeded); or "
+                                                        "identity, odometry, search")]
+PerturbOpt = Annotated[tuple[float, float], typer.Option("--perturb", metavar="XY_M THETA_DEG",
+                                                         help="bounds of the perturbed guesses")]
+SeedOpt = Annotated[int, typer.Option("--seed", help="seed of the perturbed guesses")]
+OffsetOpt = Annotated[float, typer.Option("--offset", callback=finite, help="seconds added to the log's stamps to "
+                                          "meet the relations' (Intel corrected: 976052857.337)")]
+ToleranceOpt = Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
+                                             help="largest stamp mismatch [s]")]
+
+
+def cases_options(truth: str, relations: str | None, guess: str, perturb: tuple[float, float], logs: int = 1):
+    """The checked case options: the perturbation in metres and radians."""
+    from mbicp_viz.evaluation.cases import GUESSES
+
+    if truth not in ("pose", "relations") or (truth == "relations") != (relations is not None) or \
+            (truth == "relations" and logs != 1):
+        raise InputError("expected pose, or relations with one log and its --relations FILE", field="--truth")
+    if guess not in GUESSES:
+        raise InputError(f"expected one of {', '.join(GUESSES)} (the truth cannot be the guess)", field="--guess")
+    if not all(math.isfinite(v) and v >= 0 for v in perturb):
+        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+    return perturb[0], math.radians(perturb[1])
+
+
 # Options that name a file a command writes, by the same names in every command.
 OUTPUT_FILES = ("rrd", "out", "png", "tum", "tum_ref", "csv")
 

@@ -11,26 +11,15 @@ import typer
 
 from mbicp_viz.errors import InputError
 
-from .options import (DEFAULT_ALGO, AlgoOpt, MountOpt, ParamsOpt, Progress, TopicOpt, TypestoreOpt, UpsideDownOpt,
-                      WorkersOpt, finite, read_options, say, user_errors)
+from .options import (DEFAULT_ALGO, AlgoOpt, CaseGuessOpt, CaseTruthOpt, MountOpt, OffsetOpt, ParamsOpt, PerturbOpt,
+                      Progress, RelationsOpt, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt, UpsideDownOpt, WorkersOpt,
+                      cases_options, read_options, say, user_errors)
 
 
 def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="training logs with a truth")],
-         algo: AlgoOpt = DEFAULT_ALGO,
-         params: ParamsOpt = None,
-         truth: Annotated[str, typer.Option("--truth", help="'pose': the logs' scan poses (corrected logs); "
-                                                            "'relations': Kümmerle's relations (--relations)")] = "pose",
-         relations: Annotated[Optional[Path], typer.Option("--relations", help="the relations file of the one "
-                                                           "training log (--truth relations)")] = None,
-         offset: Annotated[float, typer.Option("--offset", callback=finite, help="seconds added to the logs' stamps "
-                                               "to meet the relations' (Intel corrected: 976052857.337)")] = 0.0,
-         tolerance: Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
-                                                  help="largest stamp mismatch [s]")] = 0.025,
-         guess: Annotated[str, typer.Option("--guess", help="'perturb': the stored pose moved within --perturb "
-                                                            "(seeded); or identity, odometry, search")] = "perturb",
-         perturb: Annotated[tuple[float, float], typer.Option("--perturb", metavar="XY_M THETA_DEG",
-                                                              help="the perturbed guesses' bounds")] = (0.3, 15.0),
-         seed: Annotated[int, typer.Option("--seed", help="seed of the perturbed guesses")] = 0,
+         algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None, truth: CaseTruthOpt = "pose",
+         relations: RelationsOpt = None, offset: OffsetOpt = 0.0, tolerance: ToleranceOpt = 0.025,
+         guess: CaseGuessOpt = "perturb", perturb: PerturbOpt = (0.3, 15.0), seed: SeedOpt = 0,
          limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="the first N pairs of each log")] = None,
          trials: Annotated[int, typer.Option("--trials", min=1, help="trials to run now")] = 100,
          holdout: Annotated[Optional[str], typer.Option("--holdout", help="a log kept out of the search: the honest "
@@ -50,38 +39,23 @@ def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="train
          mount: MountOpt = None, upside_down: UpsideDownOpt = False):
     """Search a matcher's parameters on training logs against their truth; defaults and best side by side."""
     from mbicp_viz.evaluation import tune as t
+    from mbicp_viz.evaluation.cases import cases_for
     from mbicp_viz.readers import read_log
     from mbicp_viz.readers.params_toml import load_search, make_params, params_to_toml
+    from mbicp_viz.readers.relations import read_relations
 
-    if truth not in ("pose", "relations"):
-        raise InputError("expected pose or relations", field="--truth")
-    if guess not in ("perturb", "identity", "odometry", "search"):
-        raise InputError("expected perturb, identity, odometry or search (the truth cannot be the guess)",
-                         field="--guess")
-    if not all(math.isfinite(v) and v >= 0 for v in perturb):
-        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
-    if truth == "relations" and (relations is None or len(logs) != 1):
-        raise InputError("--truth relations takes one log and its --relations file", field="--truth")
+    moved = cases_options(truth, relations, guess, perturb, len(logs))
     base = make_params(algo.value, params)
     space = t.search_space(type(base), [f.strip() for f in fields.split(",")] if fields else None)
     if not space:
         raise InputError(f"{algo.value} has no parameter with a tuning range: name some", field="--fields")
     reading = read_options(topic, typestore, mount, upside_down)
     search = load_search(params)
-    moved = (perturb[0], math.radians(perturb[1]))
+    rels = read_relations(relations) if relations else None
 
     def cases_of(paths: list[str]):
-        cases = []
-        for k, path in enumerate(paths):
-            lg = read_log(path, reading)
-            if truth == "pose":
-                cases += t.pose_cases(k, lg, guess, moved, seed, search, limit)
-            else:
-                from mbicp_viz.readers.relations import read_relations
-
-                cases += t.relation_cases(k, lg, read_relations(str(relations)), offset, tolerance, guess, moved, seed,
-                                          search)
-        return cases
+        return [c for k, path in enumerate(paths) for c in cases_for(k, read_log(path, reading), truth, rels, offset,
+                                                                      tolerance, guess, moved, seed, search, limit)]
 
     cases = cases_of(logs)
     name = study or f"{algo.value}-{Path(logs[0]).name.split('.')[0]}"

@@ -15,73 +15,22 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import socket
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from mbicp_viz.core import FieldSpec, ParamError, Params, Pose2, SearchParams, field_specs, match, pose_error
+from mbicp_viz.core import FieldSpec, ParamError, Params, field_specs, match, pose_error
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 
-from .bench import bench_guesses
+from .cases import Case
 from .criteria import CONSECUTIVE
-from .pairs import Guess, pair_guess, stored_truth
 from .pool import ignore_interrupts
-
-
-@dataclass(frozen=True)
-class Case:
-    """One pair to score: indices into its log's scans, the guess (laser frame) and the truth."""
-
-    log: int
-    i: int
-    j: int
-    guess: Pose2
-    truth: Pose2
-
-
-def pose_cases(k: int, log: ScanLog, guesses: str, perturb: tuple[float, float] | None, seed: int,
-               search: SearchParams | None, limit: int | None) -> list[Case]:
-    """The consecutive pairs of a corrected log, scored against its scan poses. ``guesses``: a
-    ``Guess`` kind (not the poses themselves), or "perturb": the stored pose moved within ``perturb``."""
-    pairs = log.consecutive_pairs(limit)
-    scans = {r: n for n, r in enumerate(log.record_numbers())}
-    out = []
-    moved = bench_guesses(log, pairs, perturb, seed) if guesses == "perturb" else None
-    for n, (i, j) in enumerate(pairs):
-        ref, obj = log.scan(i), log.scan(j)
-        truth = stored_truth(ref, obj)
-        if truth is None:
-            raise InputError(f"scan {i} or {j} has no pose: --truth pose needs a corrected log", log.path,
-                             field="--truth")
-        g = moved[n] if moved is not None else pair_guess(ref, obj, guesses, search)[0]
-        out.append(Case(k, scans[i], scans[j], g, truth))
-    return out
-
-
-def relation_cases(k: int, log: ScanLog, relations, offset: float, tolerance: float, guesses: str,
-                   perturb: tuple[float, float] | None, seed: int, search: SearchParams | None) -> list[Case]:
-    """The relations whose two ends have a scan (Kümmerle et al. 2009), from a ``Guess`` kind or,
-    with "perturb", from the relation moved within ``perturb``."""
-    from .relations import relation_pairs
-
-    found, _ = relation_pairs(log, relations, offset, tolerance)
-    if not found:
-        raise InputError("no relation has a scan at both ends: check --offset and --tolerance", log.path,
-                         field="--relations")
-    rng = np.random.default_rng(seed)
-    out = []
-    for i, j, rel in found:
-        if guesses == "perturb":
-            dx, dy, dth = rng.uniform(-1.0, 1.0, 3) * (perturb[0], perturb[0], perturb[1])
-            g = Pose2(rel.pose.x + dx, rel.pose.y + dy, rel.pose.theta + dth)
-        else:
-            g = pair_guess(log.scans[i], log.scans[j], guesses, search)[0]
-        out.append(Case(k, i, j, g, rel.pose))
-    return out
 
 
 @dataclass(frozen=True)
@@ -113,6 +62,7 @@ STUDY_ATTEMPTS = 10  # opening a study that other workers are creating at the sa
 # The logs and cases of a pool's processes, read once when the process starts.
 _LOGS: list[ScanLog] = []
 _CASES: list[Case] = []
+_STOP = threading.Event()  # set by Ctrl-C while optimising
 
 
 def _load(paths: list[str], options: ReadOptions | None, cases: list[Case]) -> None:
@@ -130,6 +80,8 @@ def _errors(job) -> np.ndarray:
     params, start, stop = job
     out = np.empty((stop - start, 2))
     for n, c in enumerate(_CASES[start:stop]):
+        if _STOP.is_set():  # Ctrl-C: drop this trial here, between two matches
+            raise KeyboardInterrupt
         log = _LOGS[c.log]
         try:
             out[n] = pose_error(match(log.scans[c.i], log.scans[c.j], c.guess, params).pose, c.truth)
@@ -154,7 +106,10 @@ class Scorer:
             return _errors((params, 0, self.n))
         bounds = np.linspace(0, self.n, 4 * self.workers + 1).astype(int)
         jobs = [(params, a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
-        return np.vstack(list(self.pool.map(_errors, jobs)))
+        out = np.vstack(list(self.pool.map(_errors, jobs)))
+        if _STOP.is_set():
+            raise KeyboardInterrupt
+        return out
 
     def close(self) -> None:
         if self.pool is not None:
@@ -204,6 +159,9 @@ def suggested(trial, base: Params, space: list[Dimension]) -> Params:
     return base.replace(**values)
 
 
+SQLITE_WAIT_S = 60.0
+
+
 def open_study(storage: str, name: str):
     """The study ``name`` in ``storage`` (an Optuna RDB URL), created if new, resumed if not."""
     import optuna
@@ -215,7 +173,11 @@ def open_study(storage: str, name: str):
         storage = "postgresql+psycopg://" + storage.split("://", 1)[1]
     for attempt in range(STUDY_ATTEMPTS):
         try:
-            return optuna.create_study(storage=storage, study_name=name, direction="maximize", load_if_exists=True)
+            # SQLite: a writer waits up to SQLITE_WAIT_S for a reader (another worker, a progress
+            # query) to let go of the file instead of failing at once with "database is locked"
+            engine = {"connect_args": {"timeout": SQLITE_WAIT_S}} if storage.startswith("sqlite") else {}
+            rdb = optuna.storages.RDBStorage(storage, engine_kwargs=engine)
+            return optuna.create_study(storage=rdb, study_name=name, direction="maximize", load_if_exists=True)
         except sqlalchemy.exc.IntegrityError:
             # workers started together race to create the tables or the study: the loser tries again
             time.sleep(0.2 * (attempt + 1))
@@ -248,10 +210,19 @@ def optimise(study, scorer: Scorer, base: Params, space: list[Dimension], trials
         if on_trial is not None:
             on_trial(trial)
 
+    # Ctrl-C only sets a flag, read between two matches: a KeyboardInterrupt raised inside a
+    # compiled loop would surface as a SystemError and fail the trial instead of stopping
+    _STOP.clear()
+    previous = signal.signal(signal.SIGINT, lambda *_: _STOP.set()) \
+        if threading.current_thread() is threading.main_thread() else None
     try:
         study.optimize(objective, n_trials=trials, callbacks=[finished], catch=(ParamError,))
     except KeyboardInterrupt:
         pass
+    finally:
+        _STOP.clear()  # the scores computed after the study (defaults, best, holdout) run in full
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
     return done
 
 
