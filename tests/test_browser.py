@@ -245,3 +245,58 @@ def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
         page.close()
     finally:
         application.stop()
+
+
+def test_the_lesson_step_by_step(browser, tmp_path):
+    """A student takes the lesson: every step opens with its text, matchers, layers (the legend says
+    which) and iteration, and its picture draws the reference scan; back returns; a live change of
+    L re-runs the step's matcher while its text keeps the step's own numbers."""
+    from PIL import Image
+
+    from mbicp_viz.lesson.steps import load_lesson, run_step
+    from mbicp_viz.views.debugger.lesson import step_source
+
+    steps = tuple(load_lesson())
+    app = App(step_source(steps[0], steps), "127.0.0.1", 0)
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(f"http://127.0.0.1:{app.port}")
+        for k, step in enumerate(steps):
+            if k:
+                page.get_by_role("button", name="next step").click()
+            page.get_by_text(f"Step {step.number} of {len(steps)}: {step.title}").first.wait_for(timeout=60000)
+            session = next(iter(app.sessions.values()))
+            sr = run_step(step)
+            page.get_by_text(sr.text[:60]).first.wait_for(timeout=30000)  # the text, with its numbers
+            state = session.state
+            assert state.algorithms == list(step.scenario.params) and state.iteration == sr.iteration
+            own = {s.label for s in step.layers} | {f"{r}: object scan" for r in state.algorithms}
+
+            def legend_is_the_steps() -> bool:  # what the legend lists: the step's layers, and the grid
+                legend = page.locator(".mbicp-legend .legend-entry").all_inner_texts()
+                return REFERENCE.label in legend and all(e in own or e.startswith("grid:") for e in legend)
+
+            assert wait_for(legend_is_the_steps), page.locator(".mbicp-legend .legend-entry").all_inner_texts()
+            shot = tmp_path / f"step{step.number}.png"
+
+            def reference_drawn() -> bool:  # the canvas draws once the scene has arrived
+                page.screenshot(path=str(shot))
+                img = np.asarray(Image.open(shot).convert("RGB")).astype(int)[:, :1000]  # the view, not the panel
+                return np.count_nonzero(np.abs(img - np.array(REFERENCE.color)).max(axis=2) < 45) > 100
+
+            assert wait_for(reference_drawn), step.title
+        page.get_by_role("button", name="previous step").click()
+        page.get_by_text(f"Step {steps[-2].number} of {len(steps)}").first.wait_for(timeout=30000)
+        page.get_by_role("combobox", name="step").click()  # the step list
+        assert page.get_by_role("option").all_inner_texts() == [f"{s.number}. {s.title}" for s in steps]
+        page.get_by_role("option", name=f"3. {steps[2].title}").click()
+        page.get_by_text(f"Step 3 of {len(steps)}").first.wait_for(timeout=30000)
+        session = next(iter(app.sessions.values()))
+        before = session.state.runs[0].result.pose
+        type_into(page, "L [m]", "0.5")
+        assert wait_for(lambda: session.state.params["mbicp"].L == 0.5 and session.state.runs[0].result.pose != before)
+        page.get_by_text(run_step(steps[2]).text[:60]).first.wait_for(timeout=10000)  # the step's own numbers
+        page.close()
+    finally:
+        app.stop()
+

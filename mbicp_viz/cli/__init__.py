@@ -12,7 +12,7 @@ import sys
 import typer
 from typer.core import TyperGroup, TyperOption
 
-from . import bench, evaluate, files, match, serve, tune
+from . import bench, evaluate, files, lesson, match, serve, tune
 
 
 class OneLineErrors(TyperGroup):
@@ -45,7 +45,7 @@ TyperOption.display_type_rich = lambda self, ctx: None if self.is_flag else _dis
 app = typer.Typer(cls=OneLineErrors, no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
                   help="Visual debugger and teaching tool for 2-D laser scan matching (ICP, PL-ICP, MbICP, improved "
                        "MbICP, PSM, PMWN).")
-for group in (match, serve, evaluate, bench, files, tune):
+for group in (match, serve, lesson, evaluate, bench, files, tune):
     group.register(app)
 
 

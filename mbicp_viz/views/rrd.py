@@ -26,6 +26,7 @@ from . import scene
 
 APP_ID = "mbicp-viz"
 ABOUT = "about"
+AXIS_X, AXIS_Y = (220, 30, 30), (30, 160, 30)  # a frame's x and y axes
 _Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -117,8 +118,10 @@ def log_layer(stream: rr.RecordingStream, root: str, layer: scene.Layer, static:
         stream.log(path, rr.Transform3D(translation=[p.x, p.y, 0.0],
                                         rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=p.theta)),
                    static=static)
-        stream.log(f"{path}/heading", rr.Arrows2D(origins=[[0.0, 0.0]], vectors=[[layer.length, 0.0]],
-                                                  colors=_rgb(layer.style.color), radii=0.025 * layer.length,
+        # the frame's axes as the debugger draws them: x red, y green (the legend says so)
+        stream.log(f"{path}/heading", rr.Arrows2D(origins=[[0.0, 0.0]] * 2, vectors=[[layer.length, 0.0],
+                                                                                     [0.0, layer.length]],
+                                                  colors=[AXIS_X, AXIS_Y], radii=0.025 * layer.length,
                                                   draw_order=layer.style.order), static=static)
     else:
         raise TypeError(f"the rerun front end cannot draw a {type(layer).__name__} layer ({layer.path})")

@@ -17,7 +17,7 @@ from typing import Union
 
 import numpy as np
 
-from mbicp_viz.core import IterationEvent, PairKind, PairStatus, Pose2, StartEvent
+from mbicp_viz.core import IterationEvent, PairKind, PairStatus, Pose2, Scan, StartEvent
 
 RGB = tuple[int, int, int]
 
@@ -50,8 +50,11 @@ ISO_EUCLID = Style("Euclidean circle through the same target", (150, 130, 0), 4.
 CIRCLE = Style("PMWN projected circle and its centre", (210, 0, 130), 4.2)
 HELD = Style("held direction: left to the guess, the surfaces barely fix it", (120, 0, 60), 4.6)
 ESTIMATE = Style("estimate: object frame (x red, y green)", (40, 90, 220), 5.0)
+BEAMS = Style("reference beams: bearing and range of every few readings", (200, 200, 200), 0.2, on=False)
+INVALID = Style("reference bearings with no valid reading (short rays)", (190, 150, 230), 0.3, on=False)
+SENSOR = Style("reference sensor frame (x red: bearing 0, y green)", (60, 60, 60), 5.0, on=False)
 STYLES = (REFERENCE, TRUTH, INITIAL, ODOMETRY, OBJECT, OBJECT_AFTER, HIDDEN, PAIR_POINT, PAIR_INTERPOLATED, PAIR_REJECTED,
-          GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, HELD, ESTIMATE)
+          GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, HELD, ESTIMATE, BEAMS, INVALID, SENSOR)
 
 # Plot series: the legend of the plots.
 ERROR = Style("mean squared residual [m²]", (90, 90, 90))
@@ -207,6 +210,20 @@ def static_layers(start: StartEvent, truth: Pose2 | None = None, odometry: Pose2
                             ratio_colors(rs.ratio),
                             [f"eta={e:.2f} kept {k}/{n}" for e, k, n in zip(rs.ratio, rs.kept_count, rs.count)]))
     return layers
+
+
+def beam_layers(scan: Scan, most: int = 90) -> list[Layer]:
+    """The reference scan as the sensor measured it (its own frame, which is the reference frame):
+    a ray from the sensor to every few valid readings (at most ``most`` of them), a short ray along
+    each bearing that returned nothing usable, and the sensor frame (x along bearing 0)."""
+    s = scene_scale(scan.points())
+    pts = scan.points()
+    every = max(1, -(-len(pts) // most))
+    bad = scan.bearings[~scan.valid]
+    ends = 1.0 * s * np.column_stack((np.cos(bad), np.sin(bad)))
+    return [Segments(f"{SCANS}/beams/valid", np.zeros((len(pts[::every]), 2)), pts[::every], BEAMS, 0.003 * s),
+            Segments(f"{SCANS}/beams/invalid", np.zeros((len(bad), 2)), ends, INVALID, 0.004 * s),
+            Frame(f"{SCANS}/sensor", Pose2(), SENSOR, length=0.5 * s)]
 
 
 def initial_layers(start: StartEvent) -> list[Layer]:
@@ -480,3 +497,29 @@ def polar_layers(ev: IterationEvent, scale: float = 1.0) -> list[Layer]:
         layers.append(Points(f"{SCANS}/{POLAR}/circle_points", P.circle_points, CIRCLE, 0.01 * scale))
         layers.append(Points(f"{SCANS}/{POLAR}/circle_centre", P.circle_centre[None, :], CIRCLE, 0.03 * scale))
     return layers
+
+
+# Lesson: paper 000's rejection example (§2.4.2, Fig. 9), a dot plot of distances on a line.
+LESSON = "lesson"
+DOT_KEPT = Style("distances kept", (20, 20, 20))
+DOT_REJECTED = Style("distances beyond median + k MAD: rejected", PAIR_REJECTED.color)
+MAD_LINE = Style("median + k MAD (paper 000 eq. 5)", PAIR_REJECTED.color)
+SIGMA_LINE = Style("mean + 2 standard deviations", (90, 90, 220))
+
+
+def distance_layers(d: np.ndarray, threshold: float, sigma_threshold: float) -> list[Layer]:
+    """The distances as dots on the x axis (kept black, rejected orange) with the median, the MAD
+    threshold and the mean + 2 sigma threshold as vertical lines; x in the distances' own unit."""
+    hi = float(max(d.max(), sigma_threshold)) * 1.05
+    r, top = hi / 150, hi * 0.12
+
+    def vline(x: float) -> list[np.ndarray]:
+        return [np.array([[x, -top], [x, top]])]
+
+    return [Points(f"{LESSON}/distances/kept", np.column_stack((d[d <= threshold], np.zeros(np.sum(d <= threshold)))),
+                   DOT_KEPT, r),
+            Points(f"{LESSON}/distances/rejected", np.column_stack((d[d > threshold], np.zeros(np.sum(d > threshold)))),
+                   DOT_REJECTED, r),
+            Strips(f"{LESSON}/distances/median", vline(float(np.median(d))), MEDIAN, r / 4),
+            Strips(f"{LESSON}/distances/mad_threshold", vline(threshold), MAD_LINE, r / 4),
+            Strips(f"{LESSON}/distances/sigma_threshold", vline(sigma_threshold), SIGMA_LINE, r / 4)]

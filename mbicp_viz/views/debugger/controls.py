@@ -40,9 +40,9 @@ class Playback:
         threading.Thread(target=self._play, daemon=True).start()
 
     def show(self, n: int) -> None:
-        """A new match of ``n`` iterations, shown at its end."""
+        """A new match of ``n`` iterations, shown where the model is (its end, or a lesson step's)."""
         self.slider.max = max(n, 1)
-        self.slider.value = n  # the model is there already: no second redraw
+        self.slider.value = self.s.state.iteration  # the model is there already: no second redraw
 
     def _moved(self) -> None:
         k = int(self.slider.value)
@@ -68,6 +68,7 @@ class Matchers:
 
     def __init__(self, session, gui, order: float):
         self.s, self.gui, self.order = session, gui, order
+        self.showing = False
         state = session.state
         self.edited = state.algorithms[0]
         with gui.add_folder("Matchers", order=order):
@@ -88,12 +89,18 @@ class Matchers:
 
     def show(self) -> None:
         """The boxes as the model holds them (after a pair was reopened with its own matcher)."""
-        for n, box in self.boxes.items():
-            box.value = n in self.s.state.algorithms
+        self.showing = True
+        try:
+            for n, box in self.boxes.items():
+                box.value = n in self.s.state.algorithms
+        finally:
+            self.showing = False
         self.edited = self.edit.value = self.s.state.algorithms[0]
         self._build_params()
 
     def _chosen(self) -> None:
+        if self.showing:  # the model sets the boxes one by one (``show``): no match in between
+            return
         error = self.s.state.set_algorithms([n for n, box in self.boxes.items() if box.value])
         if error:
             for n, box in self.boxes.items():
@@ -225,7 +232,7 @@ class Layers:
     """A checkbox per kind of layer, and the iso-distance curves of a chosen object point."""
 
     def __init__(self, session, gui, order: float):
-        self.s = session
+        self.s, self.showing = session, False
         with gui.add_folder("Layers", order=order):
             self.boxes = {}
             for style in scene.STYLES:
@@ -238,7 +245,18 @@ class Layers:
         session.client.scene.on_click()(lambda ev: session.guarded(lambda: self.click(ev.ray_origin,
                                                                                       ev.ray_direction)))
 
+    def show(self) -> None:
+        """The boxes as the model holds them (a lesson step opens with its own layers)."""
+        self.showing = True
+        try:
+            for label, box in self.boxes.items():
+                box.value = self.s.state.visible[label]
+        finally:
+            self.showing = False
+
     def _toggled(self, label: str, value: bool) -> None:
+        if self.showing:  # the model sets the boxes (``show``): one redraw after, not one per box
+            return
         self.s.state.visible[label] = bool(value)
         self.s.redraw()
 

@@ -15,7 +15,7 @@ import viser
 from mbicp_viz.readers.params_toml import params_to_toml
 
 from .. import scene, viser_draw
-from . import controls, panels
+from . import controls, lesson, panels
 from .camera import TopDownCamera
 from .state import DebugState, Source
 
@@ -52,8 +52,24 @@ class Session:
         if ready is not None:
             ready.wait()
         with self.lock:
+            if self.lesson is not None:
+                self.lesson.open(self.state.source.lesson_step)
+                return
             self.after_match(self.state.rematch())
             self.fit_view()
+
+    def load(self, source: Source, iteration: int | None = None) -> None:
+        """Open another source (a lesson's step) in this tab: its pair, matchers, parameters and
+        layers, shown at ``iteration`` (None: where the match ended)."""
+        self.state = DebugState(source)
+        error = self.state.rematch()
+        if iteration is not None:
+            self.state.iteration = min(iteration, self.state.max_iteration())
+        self.matchers.show()
+        self.layers.show()
+        self.clear_scene()
+        self.after_match(error)
+        self.fit_view()
 
     def _build(self, gui, src: Source) -> None:
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
@@ -62,6 +78,7 @@ class Session:
         self.h_status = gui.add_markdown("", order=1)
         if src.note:
             gui.add_markdown(src.note, order=2)
+        self.lesson = lesson.Lesson(self, gui, src.lesson, order=2) if src.lesson else None
         self.h_legend = gui.add_html(panels.legend_html([]), order=3)
         self.camera = TopDownCamera(self.client)
         gui.add_button("fit the view", order=4, hint="top-down over the reference scan").on_click(
@@ -128,8 +145,11 @@ class Session:
         self.nodes = {}
 
     def fit_view(self) -> None:
-        """Top-down over the reference scan, with a metric grid under it (its cell size in the legend)."""
+        """Top-down over the reference scan (or the source's view), with a metric grid under it (its
+        cell size in the legend)."""
         pts = self.state.runs[0].start.ref_points if self.state.runs else np.zeros((1, 2))
+        if self.state.source.view is not None:
+            pts = np.reshape(self.state.source.view, (2, 2))
         self.camera.fit(pts)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         self.grid_m = grid_cell(float((hi - lo).max()))

@@ -15,12 +15,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mbicp_viz.core import (MATCHERS, FieldSpec, IterationEvent, MatchResult, ParamError, Params, Pose2, Recorder,
-                            ScanError, SearchParams, StartEvent, field_specs, match, pose_error)
+from mbicp_viz.core import (MATCHERS, FieldSpec, IterationEvent, ParamError, Params, Pose2, ScanError, SearchParams,
+                            field_specs, pose_error)
 from mbicp_viz.core.agreement import INLIER_RADIUS_M, inlier_fraction
 from mbicp_viz.core.params import check_value
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess, pair_guess, stored_odometry, stored_truth
+from mbicp_viz.evaluation.recorded import Run, run_match
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 from mbicp_viz.readers.rows import EvalRow
 
@@ -48,22 +49,10 @@ class Source:
     rows_label: str = ""  # the rows file they come from, and how many rows it holds
     opened: EvalRow | None = None  # the row the first match reopens
     options: ReadOptions | None = None  # how the log was read (to read another of a bag's scan topics)
-
-
-@dataclass
-class Run:
-    """One matcher's recorded match."""
-
-    name: str
-    start: StartEvent
-    iterations: list[IterationEvent]
-    result: MatchResult
-
-
-def run_match(name: str, ref, obj, guess: Pose2, params: Params) -> Run:
-    rec = Recorder()
-    result = match(ref, obj, guess, params, rec)
-    return Run(name, rec.start, rec.iterations, result)
+    shown: tuple[str, ...] | None = None  # the layers (legend labels) shown at first; None: each style's default
+    lesson: tuple = ()  # the lesson's steps (lesson/steps.py), in lesson mode
+    lesson_step: int = 0  # the step a new tab opens (0-based)
+    view: tuple[float, float, float, float] | None = None  # what "fit the view" shows [m]; None: the reference scan
 
 
 # What a failed match can raise that the user must read rather than a traceback.
@@ -135,8 +124,8 @@ class DebugState:
             self._apply_row(source.opened)
         self.runs: list[Run] = []
         self.iteration = 0
-        self.visible = {s.label: s.on or (source.teaching and s in (scene.ISO_METRIC, scene.ISO_EUCLID))
-                        for s in scene.STYLES}
+        self.visible = {s.label: s.label in source.shown if source.shown is not None else
+                        s.on or (source.teaching and s in (scene.ISO_METRIC, scene.ISO_EUCLID)) for s in scene.STYLES}
         self.iso_point: int | None = None
         self.match_ms = 0.0
         self.message = ""  # the last failure, shown to the user
@@ -300,8 +289,9 @@ class DebugState:
     def layers(self, run: Run) -> list[scene.Layer]:
         """The scene layers of ``run`` at the current iteration; in compare mode each run's object
         scan takes its matcher's colour."""
-        layers = scene.layers_at(run.start, run.iterations, self.iteration, self.truth(), teaching=True,
-                                 chosen=self.iso_point, odometry=stored_odometry(self.ref, self.obj))
+        layers = scene.beam_layers(self.ref) + scene.layers_at(
+            run.start, run.iterations, self.iteration, self.truth(), teaching=True, chosen=self.iso_point,
+            odometry=stored_odometry(self.ref, self.obj))
         if len(self.runs) > 1:
             layers = [scene.recolor(ly, scene.run_style(run.name)) if ly.path == f"{scene.SCANS}/object" else ly
                       for ly in layers]
