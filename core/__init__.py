@@ -21,6 +21,7 @@ _EXPORTS = {
                "PsmParams", "field_specs"),
     "result": ("Degeneracy", "MatchResult", "Termination"),
     "errors": ("ScanError", "ScanSource", "UnusableScan"),
+    "deskew": ("deskew", "twist"),
     "scan": ("Scan", "make_scan", "scan_from_points", "uniform_bearings"),
     "se2": ("Pose2", "pose_error", "relative", "wrap_angle"),
 }

@@ -29,6 +29,8 @@ class Scan:
     odometry: Pose2 | None = None
     stamp: float | None = None  # seconds
     source: ScanSource = field(default_factory=ScanSource)
+    beam_times: np.ndarray | None = None  # (N,) [s] when each beam was measured, after ``stamp``
+    raw: "Scan | None" = None  # the scan as measured, when this one is corrected for motion (core/deskew.py)
 
     @property
     def n_valid(self) -> int:
@@ -76,6 +78,7 @@ def make_scan(
     odometry: Pose2 | None = None,
     stamp: float | None = None,
     source: ScanSource | None = None,
+    beam_times=None,
 ) -> Scan:
     """Build a checked Scan.
 
@@ -99,6 +102,9 @@ def make_scan(
     v = None if valid is None else np.asarray(valid, dtype=bool).reshape(-1)
     if v is not None and v.shape != r.shape:
         raise ScanError(source, f"{len(v)} validity flags for {len(r)} beams")
+    t = None if beam_times is None else np.asarray(beam_times, dtype=float).reshape(-1)
+    if t is not None and (t.shape != r.shape or not np.all(np.isfinite(t))):
+        raise ScanError(source, f"{len(t)} beam times for {len(r)} beams, or a time that is not a number")
     if len(b) > 2:
         step = (b[-1] - b[0]) / (len(b) - 1)
         if b[-1] - b[0] > 2.0 * np.pi + 1.5 * step:
@@ -106,7 +112,7 @@ def make_scan(
                                     "and one step")
         turn = b < b[0] + 2.0 * np.pi - 0.5 * step  # beams past it repeat the first directions: dropped
         if not turn.all():
-            r, b, v = r[turn], b[turn], None if v is None else v[turn]
+            r, b, v, t = r[turn], b[turn], None if v is None else v[turn], None if t is None else t[turn]
     elif len(b) == 2 and b[1] - b[0] >= 2.0 * np.pi:
         raise ScanError(source, "two beams a full turn apart")
     with np.errstate(invalid="ignore"):
@@ -117,7 +123,7 @@ def make_scan(
         ok &= v
     if not ok.any():
         raise UnusableScan(source, f"no valid reading among {len(r)} beams")
-    return Scan(r, b, ok, pose, odometry, stamp, source)
+    return Scan(r, b, ok, pose, odometry, stamp, source, t)
 
 
 def uniform_bearings(n: int, start: float, increment: float) -> np.ndarray:

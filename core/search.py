@@ -12,7 +12,6 @@ paper 000 §2.3).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

@@ -26,6 +26,7 @@ class Topic:
     scans: list[Scan]
     upside_down: bool = False  # write the scans as a laser whose z axis points down sees them
     increments: list[float] | None = None  # per scan angle_increment (default: the scan's own)
+    time_increment: float = 0.0  # [s] between two beams (0: the driver does not say)
 
 
 @dataclass
@@ -72,7 +73,7 @@ def write(path: Path, robot: Robot, kind: str) -> Path:
             transform=T["geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](x=pose.x, y=pose.y, z=0.2),
                                                        rotation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)))
 
-    def scan_msg(t, frame, scan: Scan, upside_down: bool, increment: float | None):
+    def scan_msg(t, frame, scan: Scan, upside_down: bool, increment: float | None, dt: float):
         r = np.where(scan.valid, scan.ranges, np.inf).astype(np.float32)
         b = scan.bearings
         if upside_down:  # seen from a laser turned about x, the scan runs the other way round
@@ -80,7 +81,7 @@ def write(path: Path, robot: Robot, kind: str) -> Path:
         inc = increment if increment is not None else float(np.median(np.diff(b)))
         return T["sensor_msgs/msg/LaserScan"](
             header=header(t, frame), angle_min=float(b[0]), angle_max=float(b[0] + inc * (len(b) - 1)),
-            angle_increment=inc, time_increment=0.0, scan_time=0.1, range_min=0.05, range_max=80.0, ranges=r,
+            angle_increment=inc, time_increment=dt, scan_time=0.1, range_min=0.05, range_max=80.0, ranges=r,
             intensities=np.zeros(0, dtype=np.float32))
 
     out = []  # (topic, msgtype, t, msg)
@@ -88,7 +89,7 @@ def write(path: Path, robot: Robot, kind: str) -> Path:
         for k, (t, scan) in enumerate(zip(robot.stamps, topic.scans)):
             inc = topic.increments[k] if topic.increments else None
             out.append((topic.name, "sensor_msgs/msg/LaserScan", t, scan_msg(t, topic.frame_id, scan, topic.upside_down,
-                                                                            inc)))
+                                                                            inc, topic.time_increment)))
     tf = T["tf2_msgs/msg/TFMessage"]
     if robot.mount is not None:
         laser = robot.topics[0].frame_id

@@ -13,15 +13,14 @@ import typer
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.choices import Removal, Thin
 
-from .options import (ALL_ALGOS, DEFAULT_ALGO, SEARCH, AlgoOpt, AlgosOpt, CaseGuessOpt, CaseTruthOpt, FirstArg, Frame,
-                      FrameOpt, Guess, GuessOpt, MountOpt, OffsetOpt, PairOpt, ParamsOpt, PerturbOpt, Progress,
-                      RelationsOpt, RrdOpt, SecondArg, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt, UpsideDownOpt,
-                      WorkersOpt, cases_options, finite, number_list, params_for, pose_from_deg, read_options, say,
-                      user_errors)
+from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, FirstArg,
+                      Frame, FrameOpt, Guess, GuessOpt, MountOpt, OffsetOpt, PairOpt, ParamsOpt, PerturbOpt, Progress,
+                      RelationsOpt, RrdOpt, SEARCH, SecondArg, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt,
+                      UpsideDownOpt, WorkersOpt, cases_options, finite, number_list, params_for, pose_from_deg,
+                      read_options, say, user_errors)
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[Optional[int], typer.Option("--limit", min=1, help="only the first N pairs")]
-SeedOpt = Annotated[int, typer.Option("--seed", min=0, help="random seed")]
 
 
 def _read(log: str, reading=None):
@@ -50,7 +49,8 @@ def sequence(log: LogArg,
                                                   "paper 003 §5.3); the TUM file and map then use the fused track")]
              = False,
              workers: WorkersOpt = None, frame: FrameOpt = Frame.base, topic: TopicOpt = None,
-             typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False):
+             typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False,
+             deskew: DeskewOpt = None):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
     from mbicp_viz.evaluation.sequence import match_sequence, odometry_summary, truth_summary
     from mbicp_viz.readers.params_toml import load_search, make_params
@@ -58,7 +58,7 @@ def sequence(log: LogArg,
     if truth not in (None, "pose"):
         raise InputError("the only truth a log carries is 'pose'", field="--truth")
     p = make_params(algo.value, params)
-    lg = _read(log, read_options(topic, typestore, mount, upside_down))
+    lg = _read(log, read_options(topic, typestore, mount, upside_down, deskew))
     total = len(lg.consecutive_pairs(limit))
     with Progress(total) as bar:
         rows = match_sequence(lg, p, limit, guess, truth, on_row=lambda _: bar.update(1), workers=workers,
@@ -189,7 +189,7 @@ def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses 
              perturb: Annotated[tuple[float, float], typer.Option(
                  "--perturb", metavar="XY_M THETA_DEG", help="guesses: the stored pose moved uniformly within "
                  "+/-XY_M in x and y and +/-THETA_DEG (seeded)")] = (0.3, 15.0),
-             seed: Annotated[int, typer.Option("--seed", help="seed of the guesses")] = 0,
+             seed: SeedOpt = 0,
              condition: Annotated[float, typer.Option("--condition", min=1.0, callback=finite,
                                                       help="a pair is degenerate above this surface condition "
                                                            "number at its true pose")] = 30.0,
@@ -273,14 +273,15 @@ def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
           thetas_deg: Annotated[str, typer.Option("--thetas-deg", help="theta offsets [deg]")] = "-30,-15,0,15,30",
           png: Annotated[Optional[Path], typer.Option("--png", help="write the atlas as a PNG")] = None,
           rrd: RrdOpt = None, workers: WorkersOpt = None, topic: TopicOpt = None,
-          typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False):
+          typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False,
+          deskew: DeskewOpt = None):
     """A convergence atlas: every matcher from a grid of initial offsets, coloured by outcome."""
     from mbicp_viz.evaluation.basin import basin as atlas_of, plot_png, summary
     from mbicp_viz.evaluation.pairs import load_pair, stored_truth
 
     thetas = [math.radians(v) for v in number_list(thetas_deg, "--thetas-deg", "-15,0,15")]
     ps = params_for(algos, params)
-    sp = load_pair(first, second, pair, read_options(topic, typestore, mount, upside_down))
+    sp = load_pair(first, second, pair, read_options(topic, typestore, mount, upside_down, deskew))
     answer = pose_from_deg(truth, "--truth") or stored_truth(sp.ref, sp.obj)
     t0 = time.perf_counter()
     atlas = atlas_of(sp.ref, sp.obj, ps, answer, range_xy, steps, thetas, workers)

@@ -8,10 +8,10 @@ from typing import Annotated
 
 import typer
 
-from .options import (ALL_ALGOS, DEFAULT_ALGO, AlgoOpt, AlgosOpt, ConnectOpt, FirstArg, Frame, FrameOpt, Guess,
-                      GuessOpt, InitOpt, MountOpt, PairOpt, ParamsOpt, PortOpt, RrdOpt, SearchFlag, SecondArg,
-                      ServeOpt, TeachOpt, TopicOpt, TruthOpt, TypestoreOpt, UpsideDownOpt, pose_from_deg,
-                      read_options, say, user_errors)
+from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, ConnectOpt, DEFAULT_ALGO, DeskewOpt, FirstArg, Frame, FrameOpt,
+                      Guess, GuessOpt, InitOpt, MountOpt, PairOpt, ParamsOpt, PortOpt, RrdOpt, SearchFlag, SecondArg,
+                      ServeOpt, TeachOpt, TopicOpt, TruthOpt, TypestoreOpt, UpsideDownOpt, pose_from_deg, read_options,
+                      say, user_errors)
 
 JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object with the result fields")]
 
@@ -33,14 +33,14 @@ def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, a
               params: ParamsOpt = None, as_json: JsonOpt = False, frame: FrameOpt = Frame.base, rrd: RrdOpt = None,
               teach: TeachOpt = False, connect: ConnectOpt = None, serve: ServeOpt = False, port: PortOpt = 9090,
               topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None,
-              upside_down: UpsideDownOpt = False):
+              upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None):
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from mbicp_viz.evaluation import single
     from mbicp_viz.readers.params_toml import make_params
     from mbicp_viz.views.text import match_report
 
     p = make_params(algo.value, params)
-    sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down), guess, init,
+    sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down, deskew), guess, init,
                             search, truth, params)
     outcome = single.run(sp.ref, sp.obj, s.guess, p, record=not as_json)
     base = frame is Frame.base
@@ -62,7 +62,8 @@ def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
                 guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
                 params: ParamsOpt = None, rrd: RrdOpt = None, teach: TeachOpt = False, connect: ConnectOpt = None,
                 serve: ServeOpt = False, port: PortOpt = 9090, topic: TopicOpt = None,
-                typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False):
+                typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False,
+                deskew: DeskewOpt = None):
     """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
     from mbicp_viz.evaluation.compare import compare_table
     from mbicp_viz.views.rrd import Run
@@ -70,7 +71,7 @@ def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
     from .options import params_for
 
     ps = params_for(algos, params)
-    sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down), guess, init,
+    sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down, deskew), guess, init,
                             search, truth, params)
     typer.echo(f"{sp.label}\ninitial guess {s.guess} (from: {s.guess_source}); poses: the laser frame")
     typer.echo(f"errors against: {s.truth_source or 'nothing (no known answer; give --truth X Y THETA_DEG)'}\n")

@@ -16,7 +16,7 @@ from mbicp_viz.core.matchers import MATCHERS
 from mbicp_viz.core.errors import ScanError
 from mbicp_viz.core.params import ParamError, SearchParams
 from mbicp_viz.errors import InputError
-from mbicp_viz.evaluation.choices import Guess
+from mbicp_viz.evaluation.choices import Deskew, Guess
 
 Algo = enum.Enum("Algo", {name: name for name in MATCHERS}, type=str)
 
@@ -55,6 +55,9 @@ TypestoreOpt = Annotated[str, typer.Option("--typestore", help="the ROS distro w
                                                                "ROS2_FOXY, ROS1_NOETIC)")]
 MountOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
     "--mount", help="the laser's pose on the robot X Y THETA_DEG (base frame; m, m, deg), for files without tf")]
+DeskewOpt = Annotated[Optional[Deskew], typer.Option(
+    "--deskew", help="correct each scan for the motion while it was measured (bags whose LaserScans give "
+                     "time_increment): the velocity from the log's odometry, or from matching consecutive scans")]
 UpsideDownOpt = Annotated[bool, typer.Option("--upside-down", help="the laser is mounted upside down (its z axis "
                                                                     "points down), for files without tf")]
 FrameOpt = Annotated[Frame, typer.Option("--frame", help="report motions of the robot's base (its mount from tf, "
@@ -87,7 +90,8 @@ CaseGuessOpt = Annotated[str, typer.Option("--guess", help="'perturb': the truth
                                                         "identity, odometry, search")]
 PerturbOpt = Annotated[tuple[float, float], typer.Option("--perturb", metavar="XY_M THETA_DEG",
                                                          help="bounds of the perturbed guesses")]
-SeedOpt = Annotated[int, typer.Option("--seed", help="seed of the perturbed guesses")]
+SeedOpt = Annotated[int, typer.Option("--seed", min=0, help="random seed (of perturbed guesses, displacements, "
+                                                               "removals)")]
 OffsetOpt = Annotated[float, typer.Option("--offset", callback=finite, help="seconds added to the log's stamps to "
                                           "meet the relations' (Intel corrected: 976052857.337)")]
 ToleranceOpt = Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
@@ -213,8 +217,10 @@ class Progress:
             self.bar.__exit__(*exc)
 
 
-def read_options(topic: str | None, typestore: str, mount, upside_down: bool):
-    """How to read the files a command names (``--topic``, ``--typestore``, ``--mount``, ``--upside-down``)."""
+def read_options(topic: str | None, typestore: str, mount, upside_down: bool, deskew=None):
+    """How to read the files a command names (``--topic``, ``--typestore``, ``--mount``, ``--upside-down``,
+    ``--deskew``)."""
     from mbicp_viz.readers import ReadOptions
 
-    return ReadOptions(topic, typestore, pose_from_deg(mount, "--mount"), upside_down)
+    return ReadOptions(topic, typestore, pose_from_deg(mount, "--mount"), upside_down,
+                       None if deskew is None else deskew.value)

@@ -10,8 +10,8 @@ import typer
 
 from mbicp_viz.errors import InputError
 
-from .options import (Guess, GuessOpt, MountOpt, PairOpt, TopicOpt, TypestoreOpt, UpsideDownOpt, read_options,
-                      user_errors)
+from .options import (DeskewOpt, Guess, GuessOpt, MountOpt, PairOpt, TopicOpt, TypestoreOpt, UpsideDownOpt,
+                      read_options, user_errors)
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 DEMO_PAIR = EXAMPLES / "hokuyo-125-130.npz"
@@ -30,7 +30,7 @@ def serve(first: Annotated[Optional[str], typer.Argument(help="a scan log, or th
           pair: PairOpt = None, guess: GuessOpt = Guess.stored, host: HostOpt = "127.0.0.1",
           port: ServePortOpt = 8080, allow_origin: OriginOpt = None, for_seconds: ForOpt = None,
           topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None,
-          upside_down: UpsideDownOpt = False,
+          upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None,
           rows: Annotated[Optional[str], typer.Option("--rows", help="an evaluation's rows (`eval sequence --out`): "
                                                       "its failures listed worst first, each opened as it ran")] = None):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
@@ -38,7 +38,7 @@ def serve(first: Annotated[Optional[str], typer.Argument(help="a scan log, or th
 
     if scenario is not None and (first is not None or rows is not None):
         raise InputError("a scenario brings its own scans: give --scenario alone", field="--scenario")
-    reading = read_options(topic, typestore, mount, upside_down)
+    reading = read_options(topic, typestore, mount, upside_down, deskew)
     source = scenario_source(scenario) if scenario is not None else files_source(first, second, pair, guess, reading, rows)
     _serve(source, host, port, tuple(allow_origin or ()), for_seconds)
 

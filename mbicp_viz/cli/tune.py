@@ -11,9 +11,9 @@ import typer
 
 from mbicp_viz.errors import InputError
 
-from .options import (DEFAULT_ALGO, AlgoOpt, CaseGuessOpt, CaseTruthOpt, MountOpt, OffsetOpt, ParamsOpt, PerturbOpt,
-                      Progress, RelationsOpt, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt, UpsideDownOpt, WorkersOpt,
-                      cases_options, read_options, say, user_errors)
+from .options import (AlgoOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, MountOpt, OffsetOpt, ParamsOpt,
+                      PerturbOpt, Progress, RelationsOpt, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt, UpsideDownOpt,
+                      WorkersOpt, cases_options, read_options, say, user_errors)
 
 
 def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="training logs with a truth")],
@@ -36,7 +36,7 @@ def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="train
          rows_dir: Annotated[Optional[Path], typer.Option("--rows-dir", help="each training log's pairs under the "
                                                           "best parameters as a rows file (serve LOG --rows)")] = None,
          workers: WorkersOpt = None, topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE",
-         mount: MountOpt = None, upside_down: UpsideDownOpt = False):
+         mount: MountOpt = None, upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None):
     """Search a matcher's parameters on training logs against their truth; defaults and best side by side."""
     from mbicp_viz.evaluation import tune as t
     from mbicp_viz.evaluation.cases import cases_for
@@ -49,7 +49,7 @@ def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="train
     space = t.search_space(type(base), [f.strip() for f in fields.split(",")] if fields else None)
     if not space:
         raise InputError(f"{algo.value} has no parameter with a tuning range: name some", field="--fields")
-    reading = read_options(topic, typestore, mount, upside_down)
+    reading = read_options(topic, typestore, mount, upside_down, deskew)
     search = load_search(params)
     rels = read_relations(relations) if relations else None
 

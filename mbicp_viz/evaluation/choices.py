@@ -28,3 +28,11 @@ class Removal(str, enum.Enum):
 
     block = "block"  # one contiguous block, as an occlusion leaves
     random = "random"  # paper 000's wording (§3.2)
+
+
+class Deskew(str, enum.Enum):
+    """Where the velocity that corrects a scan for the motion during it comes from (``--deskew``,
+    readers/deskew.py)."""
+
+    odometry = "odometry"  # the log's odometry between consecutive scans
+    velocity = "velocity"  # the motion matched between consecutive scans as measured

@@ -49,12 +49,14 @@ def format_suffix(path: Path) -> str:
 class ReadOptions:
     """How to read a file beyond its name: a bag's scan topic and ROS distro, and the laser's mount
     for files that do not store it (T_base_laser; ``upside_down``: the laser's z axis points down,
-    its bearings run clockwise seen from above)."""
+    its bearings run clockwise seen from above); ``deskew``: correct each scan for the motion during
+    it (``deskew.py``: "odometry" or "velocity")."""
 
     topic: str | None = None
     typestore: str = "ROS2_HUMBLE"
     mount: Pose2 | None = None
     upside_down: bool = False
+    deskew: str | None = None
 
 
 def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
@@ -81,6 +83,10 @@ def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
         first = log.unusable[min(log.unusable)]
         raise InputError(f"no usable scan: all {log.records} are unusable (scan {min(log.unusable)}: {first.reason})",
                          str(p), first.source.line, "ranges")
+    if o.deskew is not None:
+        from .deskew import deskew_log
+
+        log = deskew_log(log, o.deskew)
     return log
 
 

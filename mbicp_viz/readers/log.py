@@ -138,6 +138,7 @@ def mirrored(log: ScanLog) -> ScanLog:
     """The log of a laser mounted upside down, its scans turned upright (every bearing negated)."""
     from dataclasses import replace
 
-    scans = [replace(s, ranges=s.ranges[::-1], bearings=-s.bearings[::-1], valid=s.valid[::-1]) for s in log.scans]
+    scans = [replace(s, ranges=s.ranges[::-1], bearings=-s.bearings[::-1], valid=s.valid[::-1],
+                     beam_times=None if s.beam_times is None else s.beam_times[::-1]) for s in log.scans]
     source = f"{log.frames.mount_source or 'no mount given'}, the laser upside down"
     return replace(log, scans=scans, frames=replace(log.frames, mount_source=source))

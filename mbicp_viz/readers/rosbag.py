@@ -319,10 +319,13 @@ def _scan(m, path: str, k: int, upside_down: bool, odometry, mount: Pose2):
         ranges = np.asarray(m.ranges, dtype=float)
     inc = float(m.angle_increment)
     bearings = float(m.angle_min) + inc * np.arange(len(ranges))
+    dt = float(m.time_increment)  # between two beams [s]; 0 when the driver does not say
+    times = dt * np.arange(len(ranges)) if np.isfinite(dt) and dt > 0 else None
     if upside_down:  # the laser's z axis points down: seen upright, every bearing is mirrored
         bearings = -bearings
     if len(bearings) > 1 and bearings[1] < bearings[0]:  # clockwise in the upright frame: store increasing
         ranges, bearings = ranges[::-1], bearings[::-1]
+        times = None if times is None else times[::-1]
     stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
     odom = None
     if odometry is not None:
@@ -331,4 +334,4 @@ def _scan(m, path: str, k: int, upside_down: bool, odometry, mount: Pose2):
     range_max = float(m.range_max) if np.isfinite(m.range_max) and m.range_max > 0 else np.inf
     range_min = float(m.range_min) if np.isfinite(m.range_min) else 0.0
     return scan_or_reason(ranges, bearings, path, None, f"message {k}", range_min=range_min, range_max=range_max,
-                          stamp=stamp, odometry=odom, source=ScanSource(path, k))
+                          stamp=stamp, odometry=odom, source=ScanSource(path, k), beam_times=times)

@@ -53,8 +53,10 @@ ESTIMATE = Style("estimate: object frame (x red, y green)", (40, 90, 220), 5.0)
 BEAMS = Style("reference beams: bearing and range of every few readings", (200, 200, 200), 0.2, on=False)
 INVALID = Style("reference bearings with no valid reading (short rays)", (190, 150, 230), 0.3, on=False)
 SENSOR = Style("reference sensor frame (x red: bearing 0, y green)", (60, 60, 60), 5.0, on=False)
+RAW = Style("scans as measured, before the motion correction (--deskew)", (240, 110, 190), 1.5)
+SEAM = Style("360° seam: the first and the last beam of the reference", (0, 0, 0), 4.8)
 STYLES = (REFERENCE, TRUTH, INITIAL, ODOMETRY, OBJECT, OBJECT_AFTER, HIDDEN, PAIR_POINT, PAIR_INTERPOLATED, PAIR_REJECTED,
-          GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, HELD, ESTIMATE, BEAMS, INVALID, SENSOR)
+          GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, HELD, ESTIMATE, BEAMS, INVALID, SENSOR, RAW, SEAM)
 
 # Plot series: the legend of the plots.
 ERROR = Style("mean squared residual [m²]", (90, 90, 90))
@@ -224,6 +226,21 @@ def beam_layers(scan: Scan, most: int = 90) -> list[Layer]:
     return [Segments(f"{SCANS}/beams/valid", np.zeros((len(pts[::every]), 2)), pts[::every], BEAMS, 0.003 * s),
             Segments(f"{SCANS}/beams/invalid", np.zeros((len(bad), 2)), ends, INVALID, 0.004 * s),
             Frame(f"{SCANS}/sensor", Pose2(), SENSOR, length=0.5 * s)]
+
+
+def deskew_layers(ref: Scan, obj: Scan, pose: Pose2) -> list[Layer]:
+    """Scans corrected for motion (``Scan.raw``): both as measured (the object at ``pose``), and for a
+    360° reference the seam between its first and last beams, which the motion opens."""
+    s = scene_scale(ref.points())
+    layers: list[Layer] = []
+    if ref.raw is not None or obj.raw is not None:
+        measured = [ref.raw.points() if ref.raw is not None else np.zeros((0, 2)),
+                    pose.apply(obj.raw.points()) if obj.raw is not None else np.zeros((0, 2))]
+        layers.append(Points(f"{SCANS}/as_measured", np.vstack(measured), RAW, 0.012 * s))
+    if ref.is_full_circle() and ref.n_valid >= 2:
+        first_last = ref.points()[[0, -1]]
+        layers.append(Segments(f"{SCANS}/seam", np.zeros((2, 2)), first_last, SEAM, 0.006 * s))
+    return layers
 
 
 def initial_layers(start: StartEvent) -> list[Layer]:

@@ -76,8 +76,9 @@ class Session:
         gui.main_panel.dock_right()  # beside the view, never over it
         gui.add_markdown(f"**mbicp-viz** — {src.label}", order=0)
         self.h_status = gui.add_markdown("", order=1)
-        if src.note:
-            gui.add_markdown(src.note, order=2)
+        notes = [src.note, *(f"*{n}*" for n in src.log.notes)]  # what to look at; how the log was read
+        if any(notes):
+            gui.add_markdown("\n\n".join(filter(None, notes)), order=2)
         self.lesson = lesson.Lesson(self, gui, src.lesson, order=2) if src.lesson else None
         self.h_legend = gui.add_html(panels.legend_html([]), order=3)
         self.camera = TopDownCamera(self.client)

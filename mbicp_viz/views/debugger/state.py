@@ -82,7 +82,7 @@ def parse_entry(spec: FieldSpec, typed: str):
         v = math.radians(v)
     try:
         return check_value(spec, v)
-    except ParamError as e:
+    except ParamError:
         if spec.unit != "rad":
             raise
         lo, hi = (None if b is None else round(math.degrees(b), 6) for b in (spec.lo, spec.hi))
@@ -289,7 +289,9 @@ class DebugState:
     def layers(self, run: Run) -> list[scene.Layer]:
         """The scene layers of ``run`` at the current iteration; in compare mode each run's object
         scan takes its matcher's colour."""
-        layers = scene.beam_layers(self.ref) + scene.layers_at(
+        ev = self.event(run)
+        layers = scene.beam_layers(self.ref) + scene.deskew_layers(
+            self.ref, self.obj, ev.estimate_before if ev is not None else self.guess) + scene.layers_at(
             run.start, run.iterations, self.iteration, self.truth(), teaching=True, chosen=self.iso_point,
             odometry=stored_odometry(self.ref, self.obj))
         if len(self.runs) > 1:
