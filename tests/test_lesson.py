@@ -18,7 +18,7 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.lesson.steps import load_lesson, run_step, step_paths
 from mbicp_viz.views import scene
 
-from .conftest import RERUN
+from .conftest import viewer_screenshot
 
 
 @pytest.fixture(scope="module")
@@ -240,8 +240,7 @@ def test_rerun_viewer_renders_the_lesson(lesson, tmp_path):
     # frame (an empty view, whatever the data); a new screenshot, never a weaker check, is the answer.
     for attempt in range(4):
         shot = tmp_path / f"shot{attempt}.png"
-        res = subprocess.run([RERUN, str(path), "--headless", "--window-size", "1400x900", "--screenshot-to",
-                              str(shot)], capture_output=True, text=True, timeout=180)
+        res = viewer_screenshot(path, shot)
         assert res.returncode == 0 and shot.exists(), res.stderr[-2000:]
         img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
         red = np.count_nonzero(np.abs(img - np.array(scene.REFERENCE.color)).max(axis=2) < 40)

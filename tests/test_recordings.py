@@ -13,7 +13,7 @@ from mbicp_viz.evaluation.scenarios import load_scenario, recordings_dir, scenar
 RECORDINGS = recordings_dir()
 from mbicp_viz.views.scene import OBJECT, REFERENCE
 
-from .conftest import RERUN
+from .conftest import RERUN, viewer_screenshot
 
 NAMES = [p.stem for p in scenario_paths()]
 
@@ -77,8 +77,7 @@ def test_rerun_viewer_renders_a_curated_recording(tmp_path):
     from PIL import Image
 
     shot = tmp_path / "shot.png"
-    res = subprocess.run([RERUN, str(RECORDINGS / "partial-overlap.rrd"), "--headless", "--window-size", "1200x800",
-                          "--screenshot-to", str(shot)], capture_output=True, text=True, timeout=180)
+    res = viewer_screenshot(RECORDINGS / "partial-overlap.rrd", shot, "1200x800")
     assert res.returncode == 0 and shot.exists(), res.stderr[-2000:]
     img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     near = lambda rgb: int(np.count_nonzero(np.abs(img - np.array(rgb)).max(axis=2) < 40))  # noqa: E731

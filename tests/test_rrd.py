@@ -10,7 +10,7 @@ from rerun.chunk import RrdReader
 from mbicp_viz.core import ImprovedParams, MbicpParams, PairKind, PairStatus, Pose2, Recorder
 from mbicp_viz.views.rrd import Run, record
 
-from .conftest import RERUN
+from .conftest import RERUN, viewer_screenshot
 
 ROOT = "improved"
 
@@ -237,8 +237,7 @@ def test_rerun_viewer_shows_scenes_y_up_as_the_debugger(tmp_path, intel):
     log_layer(stream, "run", scene.Points("scene/right", pts[pts[:, 1] < -0.5], scene.OBJECT, 0.15), static=True)
     stream.flush()
     stream.disconnect()
-    res = subprocess.run([RERUN, str(path), "--headless", "--window-size", "900x700", "--screenshot-to", str(shot)],
-                         capture_output=True, text=True, timeout=180)
+    res = viewer_screenshot(path, shot, "900x700")
     assert res.returncode == 0 and shot.exists(), res.stderr[-2000:]
     img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     img = img[:, : img.shape[1] // 2]  # the left half: away from the viewer's notifications

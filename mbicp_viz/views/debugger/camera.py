@@ -30,6 +30,11 @@ class TopDownCamera:
         if isinstance(client, viser.ClientHandle):
             client.camera.on_update(lambda cam: self.level(cam))
 
+    def stop(self) -> None:
+        """No more looks (the tab has gone): a pending recheck is cancelled."""
+        if self.recheck is not None:
+            self.recheck.cancel()
+
     @staticmethod
     def is_top_down(position, look_at, up) -> bool:
         d = np.asarray(position, float) - np.asarray(look_at, float)

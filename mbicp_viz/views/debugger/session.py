@@ -189,5 +189,6 @@ class Session:
         """Stop the player; returns once a frame it was drawing has been sent (nothing is queued
         for a client that has gone, or on a stopped server)."""
         self.playback.closed.set()
+        self.camera.stop()
         with self.lock:
             pass
