@@ -183,8 +183,10 @@ def weakest_direction(A: np.ndarray, L: float):
     N = M - smallest * np.eye(3)
     best, v = -1.0, np.zeros(3)
     for a, b in ((0, 1), (0, 2), (1, 2)):
-        c = np.cross(N[a], N[b])
-        n = np.sqrt(c @ c)
+        # written out: numba's np.cross and 1-D matmul cost seconds of compilation for three products
+        c = np.array([N[a, 1] * N[b, 2] - N[a, 2] * N[b, 1], N[a, 2] * N[b, 0] - N[a, 0] * N[b, 2],
+                      N[a, 0] * N[b, 1] - N[a, 1] * N[b, 0]])
+        n = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
         if n > best:
             best, v = n, c / n if n > 0.0 else c
     cond = largest / smallest if smallest > 1e-12 * largest else np.inf

@@ -1,7 +1,9 @@
+import contextlib
 import os
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import settings
 
@@ -27,6 +29,52 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def rerun_viewer(size: str = "1400x900"):
+    """rerun's own viewer, headless, on a free loopback port, driven through its (experimental)
+    ViewerClient: open a file, move the time cursor, screenshot a view. Stopped on the way out."""
+    import subprocess
+    import time
+
+    from rerun.experimental import ViewerClient
+
+    port = free_port()
+    proc = subprocess.Popen([RERUN, "--headless", "--port", str(port), "--bind", "127.0.0.1", "--window-size", size],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
+                client.get_state()
+                break
+            except Exception:  # not listening yet
+                if time.monotonic() > deadline or proc.poll() is not None:
+                    raise
+                time.sleep(0.2)
+        yield client
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def settled_screenshot(client, path, view_id=None, timeout: float = 30.0):
+    """A screenshot of the viewer (or one view) once it stops changing: after a time change a view
+    can take a few frames to fit its data."""
+    import time
+
+    from PIL import Image
+
+    last, deadline = None, time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        client.save_screenshot(str(path), view_id)
+        img = np.asarray(Image.open(path).convert("RGB"))
+        if last is not None and last.shape == img.shape and np.array_equal(last, img):
+            return img.astype(int)
+        last = img
+    return last.astype(int)
 
 
 def viewer_screenshot(rrd, shot, size: str = "1400x900"):

@@ -17,8 +17,9 @@ from mbicp_viz.core import PairKind, PairStatus, Recorder, match, pose_error
 from mbicp_viz.errors import InputError
 from mbicp_viz.lesson.steps import load_lesson, run_step, step_paths
 from mbicp_viz.views import scene
+from mbicp_viz.views.rrd import BACKGROUND
 
-from .conftest import viewer_screenshot
+from .conftest import rerun_viewer, settled_screenshot
 
 
 @pytest.fixture(scope="module")
@@ -228,22 +229,43 @@ def test_handout_and_rrd_export(lesson, tmp_path):
     assert reference_steps == {sr.step.number for sr in lesson}
 
 
-def test_rerun_viewer_renders_the_lesson(lesson, tmp_path):
-    """rerun's own viewer opens the lesson at its first step: the scan in the reference's red."""
-    from PIL import Image
-
+def test_rerun_viewer_shows_every_step(lesson, tmp_path):
+    """rerun's own viewer, moved to each step of the lesson's .rrd: the first matcher's view draws the
+    reference scan (red), the second one's draws scans when the step has two matchers and nothing
+    when it has one, and the plot beside them is drawn when the step has one."""
+    from mbicp_viz.views.handout import side_plot
     from mbicp_viz.views.lesson_rrd import record_lesson
 
     path = tmp_path / "lesson.rrd"
     record_lesson(lesson, str(path))
-    # The headless viewer can take its screenshot before it has drawn a loaded recording's first
-    # frame (an empty view, whatever the data); a new screenshot, never a weaker check, is the answer.
-    for attempt in range(4):
-        shot = tmp_path / f"shot{attempt}.png"
-        res = viewer_screenshot(path, shot)
-        assert res.returncode == 0 and shot.exists(), res.stderr[-2000:]
-        img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
-        red = np.count_nonzero(np.abs(img - np.array(scene.REFERENCE.color)).max(axis=2) < 40)
-        if red > 200:
-            break
-    assert red > 200
+    red = np.array(scene.REFERENCE.color)
+    with rerun_viewer() as viewer:
+        viewer.open(str(path))
+        assert wait_until(lambda: not viewer.get_state().loading)
+        views = {v.name.split(":")[0]: v.view_id for v in viewer.get_state().views}
+        for sr in lesson:
+            viewer.set_time("step", sequence=sr.step.number, play_state="paused")
+            first = settled_screenshot(viewer, tmp_path / f"{sr.step.number}-first.png",
+                                       views["first matcher of the step"])
+            assert np.count_nonzero(np.abs(first - red).max(axis=2) < 40) > 100, sr.step.title
+            second = settled_screenshot(viewer, tmp_path / f"{sr.step.number}-second.png",
+                                        views["second matcher of the step"])
+            assert (ink(second) > 500) == (len(sr.runs) == 2), (sr.step.title, ink(second))
+            plot = settled_screenshot(viewer, tmp_path / f"{sr.step.number}-plot.png", views["plot beside the scans"])
+            assert (ink(plot) > 500) == (side_plot(sr) is not None), (sr.step.title, ink(plot))
+
+
+def ink(img) -> int:
+    """Pixels of a view that are not its light background: what it draws."""
+    return int(np.count_nonzero(np.abs(img - np.array(BACKGROUND)).max(axis=2) > 60))
+
+
+def wait_until(cond, timeout: float = 60.0) -> bool:
+    import time
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.1)
+    return False

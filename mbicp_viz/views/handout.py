@@ -12,16 +12,18 @@ from .figure import Plot, scene_png
 
 
 def side_plot(sr: StepRun) -> Plot | None:
-    """The plot beside the scans: the step's distances, else a polar matcher's cost per shift, else
-    the first run's pair distances."""
+    """The plot beside the scans: the step's distances, else a polar matcher's ranges per bearing
+    (the reference's, and the object's projected onto its bearings), else the first run's pair
+    distances."""
     if "distances" in sr.facts:
         d = sr.facts["distances"]
         return Plot(f"paper 000 Fig. 9: {d['n']} distances", "distance (the paper's unit)", "", sr.distance_layers(),
                     y_values=False)
     for run in sr.runs:
-        cost = [ly for ly in sr.layers(run) if ly.path.startswith(f"{scene.POLAR}/cost/")]
-        if cost:
-            return Plot(f"{run.name}: cost per shift at iteration {sr.iteration}", "shift [deg]", "cost [cm]", cost)
+        ranges = [ly for ly in sr.layers(run) if ly.path.startswith(f"{scene.POLAR}/ranges/")]
+        if ranges:
+            return Plot(f"{run.name}: ranges per bearing at iteration {sr.iteration}", "bearing [deg]", "range [dm]",
+                        ranges)
     hist = [ly for ly in sr.layers(sr.runs[0]) if ly.path.startswith(f"{scene.TEACH}/histogram/")] if sr.runs else []
     if hist:
         return Plot(f"{sr.runs[0].name}: pair distances at iteration {sr.iteration}", "pair distance [m]",
