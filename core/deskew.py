@@ -51,8 +51,13 @@ def deskew(scan: Scan, v: np.ndarray) -> Scan:
     # the corrected bearing, near the beam's own direction turned with the sensor (no wrap-around jump)
     bearings = np.where(scan.valid, turned + np.angle(np.exp(1j * (np.arctan2(qy, qx) - turned))), turned)
     ranges = np.where(scan.valid, np.hypot(qx, qy), scan.ranges)
+    if scan.is_full_circle():  # a 360-degree sweep: beams turned past the first direction wrap round the seam
+        bearings = bearings[0] + np.mod(bearings - bearings[0], 2.0 * np.pi)
     order = np.argsort(bearings, kind="stable")
     if np.any(np.diff(bearings[order]) <= 0):
         raise ScanError(scan.source, "two beams fall on one bearing once corrected for motion")
+    if bearings[order[-1]] - bearings[order[0]] >= 2.0 * np.pi:
+        raise ScanError(scan.source, "corrected for motion, the scan would cover more than a full turn: the velocity "
+                                     f"({v[0]:.3g} m/s, {v[1]:.3g} m/s, {v[2]:.3g} rad/s) is not plausible")
     return Scan(ranges[order], bearings[order], scan.valid[order], scan.pose, scan.odometry, scan.stamp,
                 scan.source, scan.beam_times[order], raw=scan)

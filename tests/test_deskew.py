@@ -149,3 +149,26 @@ def test_on_a_real_hand_held_recording_the_correction_makes_scans_agree(hokuyo):
     ks = range(0, len(hokuyo.scans) - 3, 2)
     raw, good, bad = (np.median([residual(scans, k) for k in ks]) for scans in (hokuyo.scans, fixed, backwards))
     assert good < raw < bad
+
+
+def test_beam_times_longer_than_the_gap_between_scans_are_refused(tmp_path, hokuyo):
+    """A driver's time_increment that makes a sweep outlast the time to the next scan is wrong: the
+    correction would move the points by whatever it says, so it is refused in one line."""
+    path = write(tmp_path / "h", Robot([Topic("/scan", "laser", [hokuyo.scan(0), hokuyo.scan(1)],
+                                              time_increment=0.01)], [10.0, 10.5]), "humble")
+    res = subprocess.run([sys.executable, "-m", "mbicp_viz", "match", str(path), "--deskew", "velocity"],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and "beam times are wrong" in res.stderr and "--deskew" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("w", [-2.0, 2.0])
+def test_a_360_degree_scan_wraps_round_its_seam(w):
+    """A 360-degree lidar turning while it sweeps: corrected beams past the first direction wrap
+    round the seam, and the scan still covers less than a full turn, bearings increasing."""
+    stallo = read_log(DATA.parent.parent / "recordings" / "inputs" / "stallo2.jsonl").scans[0]
+    assert stallo.is_full_circle()
+    s = replace(stallo, beam_times=np.linspace(0.0, 0.1, len(stallo.ranges)))
+    c = deskew(s, np.array([0.5, 0.0, w]))
+    assert np.all(np.diff(c.bearings) > 0) and c.bearings[-1] - c.bearings[0] < 2 * np.pi
+    assert c.n_valid == s.n_valid

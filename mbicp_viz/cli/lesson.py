@@ -20,7 +20,7 @@ def lesson(step: Annotated[int, typer.Option("--step", min=1, help="open at this
                "--export", help="write the lesson to this folder instead of serving it: lesson.md with a PNG per "
                                 "step, and lesson.rrd (a step timeline, the step's text, its layers)")] = None,
            port: ServePortOpt = 8080, for_seconds: ForOpt = None):
-    """The guided MbICP lesson: from one laser scan to improved MbICP, step by step (Next/Back), each
+    """The guided MbICP lesson: from one laser scan to improved MbICP, step by step (next/previous), each
     step a real scan pair whose text quotes its own run."""
     from mbicp_viz.lesson.steps import load_lesson
 

@@ -24,12 +24,21 @@ from mbicp_viz.evaluation.choices import Deskew
 from .log import ScanLog
 
 
+SWEEP_SLACK = 1.5  # a sweep may outlast the gap to the next stamp this much (stamps jitter), no more
+
+
 def _check(log: ScanLog, mode: Deskew) -> None:
     if any(s.beam_times is None for s in log.scans):
         raise InputError("its scans do not say when each beam was measured (a LaserScan's time_increment): "
                          "nothing to correct the motion with", log.path, field="--deskew")
     if any(s.stamp is None for s in log.scans):
         raise InputError("its scans have no time stamps", log.path, field="--deskew")
+    for a, b in zip(log.scans[:-1], log.scans[1:]):  # a sweep ends before the next scan begins
+        sweep, gap = float(np.max(a.beam_times)) - float(np.min(a.beam_times)), b.stamp - a.stamp
+        if gap > 0 and sweep > SWEEP_SLACK * gap:
+            raise InputError(f"scan message {a.source.index} sweeps for {sweep:.4g} s (its time_increment times its "
+                             f"beams) but the next scan comes {gap:.4g} s later: its beam times are wrong", log.path,
+                             field="--deskew")
     if mode is Deskew.odometry and any(s.odometry is None for s in log.scans):
         raise InputError("no odometry at every scan's stamp: use --deskew velocity (from the matches)", log.path,
                          field="--deskew")
