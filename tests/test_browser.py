@@ -253,7 +253,7 @@ def test_the_lesson_step_by_step(browser, tmp_path):
     L re-runs the step's matcher while its text keeps the step's own numbers."""
     from PIL import Image
 
-    from mbicp_viz.lesson.steps import load_lesson, run_step
+    from mbicp_viz.views.lesson.steps import load_lesson, run_step
     from mbicp_viz.views.debugger.lesson import step_source
 
     steps = tuple(load_lesson())

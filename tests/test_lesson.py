@@ -15,7 +15,7 @@ from rerun.chunk import RrdReader
 
 from mbicp_viz.core import PairKind, PairStatus, Recorder, match, pose_error
 from mbicp_viz.errors import InputError
-from mbicp_viz.lesson.steps import load_lesson, run_step, step_paths
+from mbicp_viz.views.lesson.steps import load_lesson, run_step, step_paths
 from mbicp_viz.views import scene
 from mbicp_viz.views.rrd import BACKGROUND
 

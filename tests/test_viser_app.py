@@ -10,7 +10,7 @@ import viser
 
 import mbicp_viz.views.debugger.state as st
 from mbicp_viz.core import MATCHERS, Pose2, field_specs, pose_error
-from mbicp_viz.evaluation.choices import Guess
+from mbicp_viz.choices import Guess
 from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene
 from mbicp_viz.views.debugger.camera import TopDownCamera

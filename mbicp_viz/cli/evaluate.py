@@ -11,7 +11,7 @@ from typing import Annotated, Optional
 import typer
 
 from mbicp_viz.errors import InputError
-from mbicp_viz.evaluation.choices import Removal, Thin
+from mbicp_viz.choices import Removal, Thin
 
 from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, FirstArg,
                       Frame, FrameOpt, Guess, GuessOpt, MountOpt, OffsetOpt, PairOpt, ParamsOpt, PerturbOpt, Progress,

@@ -22,7 +22,7 @@ def lesson(step: Annotated[int, typer.Option("--step", min=1, help="open at this
            port: ServePortOpt = 8080, for_seconds: ForOpt = None):
     """The guided MbICP lesson: from one laser scan to improved MbICP, step by step (next/previous), each
     step a real scan pair whose text quotes its own run."""
-    from mbicp_viz.lesson.steps import load_lesson
+    from mbicp_viz.views.lesson.steps import load_lesson
 
     steps = tuple(load_lesson(directory))
     if step > len(steps):
@@ -36,7 +36,7 @@ def lesson(step: Annotated[int, typer.Option("--step", min=1, help="open at this
 
 
 def _export(steps, out: Path) -> None:
-    from mbicp_viz.lesson.steps import run_step
+    from mbicp_viz.views.lesson.steps import run_step
     from mbicp_viz.views.handout import write_handout
     from mbicp_viz.views.lesson_rrd import record_lesson
 

@@ -16,7 +16,7 @@ from mbicp_viz.core.matchers import MATCHERS
 from mbicp_viz.core.errors import ScanError
 from mbicp_viz.core.params import ParamError, SearchParams
 from mbicp_viz.errors import InputError
-from mbicp_viz.evaluation.choices import Deskew, Guess
+from mbicp_viz.choices import Deskew, Guess
 
 Algo = enum.Enum("Algo", {name: name for name in MATCHERS}, type=str)
 

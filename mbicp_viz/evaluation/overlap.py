@@ -26,7 +26,7 @@ import numpy as np
 from mbicp_viz.core import Params, Pose2, Scan, match, pose_error
 
 from .criteria import PAPER_000
-from .choices import Removal, Thin
+from mbicp_viz.choices import Removal, Thin
 from .pairs import block_mask, displaced_pair
 from .pool import ordered_map
 

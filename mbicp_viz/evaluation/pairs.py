@@ -14,7 +14,7 @@ from mbicp_viz.core import Pose2, Scan, ScanSource, SearchParams, make_scan, rel
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 
-from .choices import Guess, Thin
+from mbicp_viz.choices import Guess, Thin
 
 
 @dataclass(frozen=True)

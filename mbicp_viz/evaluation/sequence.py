@@ -15,6 +15,7 @@ from mbicp_viz.readers import ScanLog
 from .criteria import CONSECUTIVE, Criteria
 from .pairs import Guess, pair_guess, stored_truth
 from .pool import ordered_map
+from .single import reported, result_row, run
 
 
 def truth_doubted(row: dict) -> bool:
@@ -42,12 +43,6 @@ def truth_summary(rows: list[dict]) -> list[str]:
     return [f"against the scan poses: {ok}/{len(rows)} within {CONSECUTIVE.text()} ({100.0 * ok / len(rows):.1f} %)",
             f"failures where more object points lie within {100 * INLIER_RADIUS_M:.0f} cm of the reference at the "
             f"matched pose than at the scan poses: {doubted} of {len(rows) - ok}"]
-
-
-def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
-    """The stable JSON record of one match (``match --json``, ``eval sequence``): scripts rely on these keys."""
-    return {"ref": ref, "obj": obj, "x": r.pose.x, "y": r.pose.y, "theta": r.pose.theta,
-            "iterations": r.iterations, "converged": r.converged, "reason": r.reason.value, "time_ms": time_ms}
 
 
 def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess: Guess | str = Guess.stored,
@@ -89,8 +84,6 @@ def pair_row(i: int, j: int, ref: Scan, obj: Scan, params: Params, guess: Pose2,
     frame; ``source`` says where it came from) reported in the frame ``base`` chooses, its distance
     from the log's odometry when it has some, and with ``truth`` (laser frame) its error. The guess
     and every parameter are kept: the pair reopens exactly as it ran (``serve LOG --rows``)."""
-    from .single import reported, run
-
     o = run(ref, obj, guess, params)
     r = reported(o.result, frames, base)
     row = result_row(i, j, r, o.time_ms) | r.as_dict() | {

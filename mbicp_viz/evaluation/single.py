@@ -11,7 +11,7 @@ from mbicp_viz.core.agreement import inlier_fraction
 
 from mbicp_viz.readers.log import Frames
 
-from .choices import Guess
+from mbicp_viz.choices import Guess
 from .pairs import ScanPair, pair_guess, stored_truth
 
 
@@ -65,10 +65,14 @@ def reported(result: MatchResult, frames: Frames, base: bool) -> MatchResult:
     return result.conjugated(frames.mount) if frames.reports_base(base) else result
 
 
+def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
+    """The stable JSON record of one match (``match --json``, ``eval sequence``): scripts rely on these keys."""
+    return {"ref": ref, "obj": obj, "x": r.pose.x, "y": r.pose.y, "theta": r.pose.theta,
+            "iterations": r.iterations, "converged": r.converged, "reason": r.reason.value, "time_ms": time_ms}
+
+
 def row(indices: tuple[int, int], s: Setup, o: Outcome, frames: Frames, base: bool = True) -> dict:
     """The JSON record of ``match --json`` (the keys of ``eval sequence``'s rows, and more)."""
-    from .sequence import result_row
-
     r = reported(o.result, frames, base)
     out = result_row(*indices, r, o.time_ms) | r.as_dict() | {"on_ref": o.on_ref, "guess": s.guess_source,
                                                               "frame": frames.frame_name(base)}

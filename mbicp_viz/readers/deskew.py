@@ -19,7 +19,7 @@ import numpy as np
 
 from mbicp_viz.core import Pose2, Scan, ScanError, deskew, relative, twist
 from mbicp_viz.errors import InputError
-from mbicp_viz.evaluation.choices import Deskew
+from mbicp_viz.choices import Deskew
 
 from .log import ScanLog
 

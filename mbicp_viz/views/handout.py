@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mbicp_viz.lesson.steps import StepRun
+from mbicp_viz.views.lesson.steps import StepRun
 
 from . import scene
 from .figure import Plot, scene_png

@@ -8,7 +8,7 @@ from __future__ import annotations
 import rerun as rr
 import rerun.blueprint as rrb
 
-from mbicp_viz.lesson.steps import StepRun
+from mbicp_viz.views.lesson.steps import StepRun
 
 from . import scene
 from .handout import panel_title, side_plot

@@ -9,7 +9,7 @@ import io
 
 import numpy as np
 
-from mbicp_viz.lesson.steps import Step, StepRun, run_step
+from mbicp_viz.views.lesson.steps import Step, StepRun, run_step
 from mbicp_viz.readers import ScanLog
 
 from ..figure import Plot, scene_png

@@ -1,4 +1,4 @@
-"""The choices the evaluations offer (command-line choice options take them as they are): plain
+"""The choices the commands offer (command-line choice options take them as they are): plain
 enums, importable without loading numpy, so that ``--help`` lists them at once."""
 
 from __future__ import annotations
