@@ -28,7 +28,10 @@ def _rgb(style: scene.Style):
 
 def draw_layers(ax, layers: list[scene.Layer], shown: dict[str, scene.Style]) -> None:
     """Every drawable layer on ``ax`` (points in metres, or a plot space's own units); the styles
-    that drew something are added to ``shown`` (the legend)."""
+    that drew something are added to ``shown`` (the legend). Dots keep the sizes the layers give
+    them relative to each other (the known answer's larger dots ring the scans drawn over them)."""
+    radii = [ly.radius for ly in layers if isinstance(ly, scene.Points) and scene.has_content(ly)]
+    unit = min(radii) if radii else 1.0
     from matplotlib.collections import LineCollection
     from matplotlib.patches import Rectangle
 
@@ -38,8 +41,8 @@ def draw_layers(ax, layers: list[scene.Layer], shown: dict[str, scene.Style]) ->
         z = ly.style.order
         if isinstance(ly, scene.Points):
             colors = ly.colors[:, :3] / 255 if ly.colors is not None else [_rgb(ly.style)]
-            # s is the marker's area in points^2: a dot a few points across, larger for larger radii
-            size = 4.0 if ly.radius < 0.015 else 9.0
+            # s is the marker's area in points^2: the smallest dots 3 points^2, the others by their radius
+            size = float(np.clip(3.0 * (ly.radius / unit) ** 2, 3.0, 40.0))
             ax.scatter(ly.xy[:, 0], ly.xy[:, 1], s=size, c=colors, linewidths=0, zorder=z)
         elif isinstance(ly, scene.Segments):
             ax.add_collection(LineCollection(np.stack((ly.starts, ly.ends), axis=1), colors=[_rgb(ly.style)],
