@@ -194,6 +194,8 @@ def test_a_teacher_adds_a_step_with_one_file(tmp_path):
     [sr] = [run_step(s) for s in load_lesson(path.parent)]
     assert sr.text == f"{sr.step.scenario.ref.n_valid} valid readings, {sr.runs[0].result.iterations} iterations"
     assert [p.name for p in step_paths(path.parent)] == ["01-step.toml"]
+    absolute = _step_file(tmp_path, input=json.dumps(str(tmp_path / "inputs" / "hokuyo-125-130.npz")))
+    assert run_step(load_lesson(absolute.parent)[0]).facts["scan"]["valid"] == sr.step.scenario.ref.n_valid
 
 
 def test_handout_and_rrd_export(lesson, tmp_path):
