@@ -354,3 +354,23 @@ def test_a_tab_says_it_waits_for_the_kernels_then_shows_its_result(server):
     s.first_match(ready)
     assert s.state.runs and s.h_status.content == "" and "converged" in s.h_result.content
     s.close()
+
+
+def test_lesson_mode_opens_each_step_and_refuses_a_forged_step(server):
+    from mbicp_viz.views.debugger.lesson import step_source
+    from mbicp_viz.views.lesson.steps import load_lesson
+
+    steps = tuple(load_lesson())
+    s = Session(server, step_source(steps[0], steps))
+    assert s.lesson is not None and "Step 1 of" in s.lesson.heading.content
+    s.lesson.open(5)
+    assert s.state.algorithms == list(steps[5].scenario.params) and "Step 6 of" in s.lesson.heading.content
+    assert s.lesson.pick.value.startswith("6.")
+    n = len(steps)
+    s.lesson.open(n + 5)  # past the end: the last step
+    assert f"Step {n} of {n}" in s.lesson.heading.content
+    s.lesson.pick._impl.value = "no such step"  # what a forged browser message leaves in the box
+    s.lesson._picked()
+    assert "no such step" in s.h_status.content and f"Step {n} of {n}" in s.lesson.heading.content
+    assert s.lesson.pick.value.startswith(f"{n}.")
+    s.close()

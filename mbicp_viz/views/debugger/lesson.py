@@ -57,8 +57,11 @@ class Lesson:
         return f"{step.number}. {step.title}"
 
     def _picked(self) -> None:
-        k = next(i for i, s in enumerate(self.steps) if self._label(s) == self.pick.value)
-        if k != self.k:
+        k = next((i for i, s in enumerate(self.steps) if self._label(s) == self.pick.value), None)
+        if k is None:  # not one of the listed steps (a message no page of ours sends)
+            self.s.say(f"no such step: {str(self.pick.value)[:80]!r}")
+            self.pick.value = self._label(self.steps[self.k])
+        elif k != self.k:
             self.open(k)
 
     def open(self, k: int) -> None:
