@@ -316,9 +316,9 @@ def has_content(layer: Layer) -> bool:
     return True
 
 
-def recolor(layer: Layer, style: Style) -> Layer:
-    """The same layer in another style (a matcher's colour in compare mode)."""
-    return replace(layer, style=style)
+def compared(layers: list[Layer], name: str) -> list[Layer]:
+    """A run's layers among several matchers' (compare mode): its object scan in the matcher's colour."""
+    return [replace(ly, style=run_style(name)) if ly.path == f"{SCANS}/object" else ly for ly in layers]
 
 
 # Teaching layers (switchable): paper 000 Fig. 3 and Fig. 9b.

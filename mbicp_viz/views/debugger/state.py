@@ -294,10 +294,7 @@ class DebugState:
             self.ref, self.obj, ev.estimate_before if ev is not None else self.guess) + scene.layers_at(
             run.start, run.iterations, self.iteration, self.truth(), teaching=True, chosen=self.iso_point,
             odometry=stored_odometry(self.ref, self.obj))
-        if len(self.runs) > 1:
-            layers = [scene.recolor(ly, scene.run_style(run.name)) if ly.path == f"{scene.SCANS}/object" else ly
-                      for ly in layers]
-        return layers
+        return scene.compared(layers, run.name) if len(self.runs) > 1 else layers
 
     def iteration_text(self, run: Run) -> str:
         ev = self.event(run)

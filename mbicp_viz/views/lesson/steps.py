@@ -197,10 +197,7 @@ class StepRun:
         if shown_only:
             layers = [ly for ly in layers if getattr(ly, "style", None) not in scene.STYLES
                       or ly.style in self.step.layers]
-        if len(self.runs) > 1:
-            layers = [scene.recolor(ly, scene.run_style(run.name)) if ly.path == f"{scene.SCANS}/object" else ly
-                      for ly in layers]
-        return layers
+        return scene.compared(layers, run.name) if len(self.runs) > 1 else layers
 
 
     def distance_layers(self) -> list[scene.Layer]:
