@@ -212,10 +212,13 @@ def test_handout_and_rrd_export(lesson, tmp_path):
         img = np.asarray(Image.open(png).convert("RGB")).astype(int)
         assert np.count_nonzero(np.abs(img - np.array(scene.REFERENCE.color)).max(axis=2) < 30) > 50, png.name
 
-    # the .rrd: one text per step on the step timeline, each step's layers at its step
-    texts, reference_steps = {}, set()
+    # the .rrd: one text per step on the step timeline, each step's layers at its step; and every
+    # iteration of every step on the lesson_iteration timeline
+    texts, reference_steps, object_ticks = {}, set(), set()
     for chunk in RrdReader(str(out / "lesson.rrd")).stream().to_chunks():
         rb = chunk.to_record_batch()
+        if chunk.entity_path == "/lesson/first/scene/object" and "lesson_iteration" in rb.schema.names:
+            object_ticks |= set(rb.column("lesson_iteration").to_pylist())
         if "step" not in rb.schema.names:
             continue
         steps = rb.column("step").to_pylist()
@@ -229,6 +232,10 @@ def test_handout_and_rrd_export(lesson, tmp_path):
     for sr in lesson:
         assert len(texts[sr.step.number]) == 1 and sr.text in texts[sr.step.number][0]
     assert reference_steps == {sr.step.number for sr in lesson}
+    for sr in lesson:
+        if scene.OBJECT in sr.step.layers:
+            n = max(len(r.iterations) for r in sr.runs)
+            assert {sr.step.number * 1000 + i for i in range(n + 1)} <= object_ticks, sr.step.title
 
 
 def test_rerun_viewer_shows_every_step(lesson, tmp_path):
@@ -255,6 +262,16 @@ def test_rerun_viewer_shows_every_step(lesson, tmp_path):
             assert (ink(second) > 500) == (len(sr.runs) == 2), (sr.step.title, ink(second))
             plot = settled_screenshot(viewer, tmp_path / f"{sr.step.number}-plot.png", views["plot beside the scans"])
             assert (ink(plot) > 500) == (side_plot(sr) is not None), (sr.step.title, ink(plot))
+        # the other timeline: the iterations of the MbICP step, its first and its last
+        step = next(sr for sr in lesson if sr.step.title.startswith("MbICP, iteration"))
+        pictures = []
+        for i in (1, len(step.runs[0].iterations)):
+            viewer.set_time("lesson_iteration", sequence=step.step.number * 1000 + i, play_state="paused")
+            pictures.append(settled_screenshot(viewer, tmp_path / f"it{i}.png", views["first matcher of the step"]))
+            assert ink(pictures[-1]) > 500
+        # the scan has moved between them: at the last it covers the reference (little red shows)
+        first, last = (np.count_nonzero(np.abs(p - red).max(axis=2) < 40) for p in pictures)
+        assert first > 100 and last < first / 2
 
 
 def ink(img) -> int:

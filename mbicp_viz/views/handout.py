@@ -11,22 +11,22 @@ from . import scene
 from .figure import Plot, scene_png
 
 
-def side_plot(sr: StepRun) -> Plot | None:
+def side_plot(sr: StepRun, iteration: int | None = None) -> Plot | None:
     """The plot beside the scans: the step's distances, else a polar matcher's ranges per bearing
     (the reference's, and the object's projected onto its bearings), else the first run's pair
-    distances."""
+    distances; at ``iteration`` (default: the step's)."""
     if "distances" in sr.facts:
         d = sr.facts["distances"]
         return Plot(f"paper 000 Fig. 9: {d['n']} distances", "distance (the paper's unit)", "", sr.distance_layers(),
                     y_values=False)
+    k = sr.iteration if iteration is None else iteration
     for run in sr.runs:
-        ranges = [ly for ly in sr.layers(run) if ly.path.startswith(f"{scene.POLAR}/ranges/")]
+        ranges = [ly for ly in sr.layers(run, k) if ly.path.startswith(f"{scene.POLAR}/ranges/")]
         if ranges:
-            return Plot(f"{run.name}: ranges per bearing at iteration {sr.iteration}", "bearing [deg]", "range [dm]",
-                        ranges)
-    hist = [ly for ly in sr.layers(sr.runs[0]) if ly.path.startswith(f"{scene.TEACH}/histogram/")] if sr.runs else []
+            return Plot(f"{run.name}: ranges per bearing at iteration {k}", "bearing [deg]", "range [dm]", ranges)
+    hist = [ly for ly in sr.layers(sr.runs[0], k) if ly.path.startswith(f"{scene.TEACH}/histogram/")] if sr.runs else []
     if hist:
-        return Plot(f"{sr.runs[0].name}: pair distances at iteration {sr.iteration}", "pair distance [m]",
+        return Plot(f"{sr.runs[0].name}: pair distances at iteration {k}", "pair distance [m]",
                     "pairs per bin (relative heights)", hist, y_values=False)
     return None
 
