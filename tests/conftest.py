@@ -77,14 +77,19 @@ def settled_screenshot(client, path, view_id=None, timeout: float = 30.0):
     return last.astype(int)
 
 
-def viewer_screenshot(rrd, shot, size: str = "1400x900"):
-    """rerun's own viewer, headless, renders ``rrd`` into ``shot``: on a free loopback port, never
-    rerun's default 9876 (where a user's viewer may listen and would receive the file instead)."""
-    import subprocess
+def viewer_screenshot(rrd, shot, size: str = "1400x900") -> np.ndarray:
+    """What rerun's own viewer (headless) draws of ``rrd`` once loaded and settled, as RGB pixels
+    (also saved to ``shot``)."""
+    import time
 
-    return subprocess.run([RERUN, str(rrd), "--headless", "--port", str(free_port()), "--bind", "127.0.0.1",
-                           "--window-size", size, "--screenshot-to", str(shot)], capture_output=True, text=True,
-                          timeout=180)
+    with rerun_viewer(size) as viewer:
+        viewer.open(str(rrd))
+        deadline = time.monotonic() + 60
+        while viewer.get_state().loading and time.monotonic() < deadline:
+            time.sleep(0.1)
+        return settled_screenshot(viewer, shot)
+
+
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 
