@@ -374,3 +374,6 @@ def test_lesson_mode_opens_each_step_and_refuses_a_forged_step(server):
     assert "no such step" in s.h_status.content and f"Step {n} of {n}" in s.lesson.heading.content
     assert s.lesson.pick.value.startswith(f"{n}.")
     s.close()
+    third = Session(server, step_source(steps[2], steps))  # `mbicp-viz lesson --step 3`
+    assert "Step 3 of" in third.lesson.heading.content and third.state.iteration == steps[2].iteration
+    third.close()
