@@ -23,6 +23,18 @@ HOKUYO_BAG = DATA / "hokuyo-demo.bag"
 RERUN = str(Path(sys.executable).parent / "rerun")
 
 
+def wait_for(cond, timeout: float = 30.0) -> bool:
+    """Whether ``cond()`` becomes true within ``timeout`` seconds (polled, never a fixed sleep)."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.05)
+    return False
+
+
 def free_port() -> int:
     import socket
 

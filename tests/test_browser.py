@@ -2,7 +2,6 @@
 and what the boxes really send."""
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -14,7 +13,7 @@ from mbicp_viz.views.debugger.app import App
 from mbicp_viz.views.debugger.state import Source
 from mbicp_viz.views.scene import OBJECT, REFERENCE
 
-from .conftest import DATA, EXAMPLES
+from .conftest import DATA, EXAMPLES, wait_for
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--disable-background-networking",
@@ -34,15 +33,6 @@ def browser():
         b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         yield b
         b.close()
-
-
-def wait_for(cond, timeout=30.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def open_tab(browser, app):

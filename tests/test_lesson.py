@@ -19,7 +19,7 @@ from mbicp_viz.views.lesson.steps import load_lesson, run_step, step_paths
 from mbicp_viz.views import scene
 from mbicp_viz.views.rrd import BACKGROUND
 
-from .conftest import rerun_viewer, settled_screenshot
+from .conftest import rerun_viewer, settled_screenshot, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -250,7 +250,7 @@ def test_rerun_viewer_shows_every_step(lesson, tmp_path):
     red = np.array(scene.REFERENCE.color)
     with rerun_viewer() as viewer:
         viewer.open(str(path))
-        assert wait_until(lambda: not viewer.get_state().loading)
+        assert wait_for(lambda: not viewer.get_state().loading, 60.0)
         views = {v.name.split(":")[0]: v.view_id for v in viewer.get_state().views}
         for sr in lesson:
             viewer.set_time("step", sequence=sr.step.number, play_state="paused")
@@ -278,13 +278,3 @@ def ink(img) -> int:
     """Pixels of a view that are not its light background: what it draws."""
     return int(np.count_nonzero(np.abs(img - np.array(BACKGROUND)).max(axis=2) > 60))
 
-
-def wait_until(cond, timeout: float = 60.0) -> bool:
-    import time
-
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.1)
-    return False

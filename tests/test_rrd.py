@@ -10,7 +10,7 @@ from rerun.chunk import RrdReader
 from mbicp_viz.core import ImprovedParams, MbicpParams, PairKind, PairStatus, Pose2, Recorder
 from mbicp_viz.views.rrd import Run, record
 
-from .conftest import RERUN, viewer_screenshot
+from .conftest import RERUN, free_port, viewer_screenshot, wait_for
 
 ROOT = "improved"
 
@@ -141,29 +141,21 @@ def _listeners(port: int) -> set[str]:
 def test_serve_binds_loopback_only(tmp_path):
     import os
     import signal
-    import socket
     import sys
-    import time
     import urllib.request
 
     from .conftest import DATA
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_port()
     proc = subprocess.Popen([sys.executable, "-m", "mbicp_viz", "match", str(DATA / "datos.off"), str(DATA / "datos.off"),
                              "--serve", "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             start_new_session=True)
     try:
-        deadline = time.time() + 60
-        while time.time() < deadline and not _listeners(port):
-            time.sleep(0.3)
+        wait_for(lambda: _listeners(port), 60.0)
         assert _listeners(port) == {"0100007F"}, _listeners(port)  # 127.0.0.1, never 0.0.0.0
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as r:
             assert r.status == 200
-        deadline = time.time() + 30
-        while time.time() < deadline and not _listeners(port + 1):
-            time.sleep(0.3)
+        wait_for(lambda: _listeners(port + 1), 30.0)
         assert _listeners(port + 1) == {"0100007F"}
     finally:
         os.killpg(proc.pid, signal.SIGTERM)
@@ -174,29 +166,21 @@ def test_connect_streams_into_a_running_viewer_server(tmp_path):
     """A rerun server (no window) saving what it receives; --connect streams the run into it."""
     import os
     import signal
-    import socket
     import sys
-    import time
 
     from .conftest import DATA
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_port()
     saved = tmp_path / "received.rrd"
     server = subprocess.Popen([RERUN, "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
-        deadline = time.time() + 30
-        while time.time() < deadline and not _listeners(port):
-            time.sleep(0.2)
+        wait_for(lambda: _listeners(port), 30.0)
         res = subprocess.run([sys.executable, "-m", "mbicp_viz", "match", str(DATA / "datos.off"),
                               str(DATA / "datos.off"), "--connect", f"rerun+http://127.0.0.1:{port}/proxy"],
                              capture_output=True, text=True, timeout=60)
         assert res.returncode == 0, res.stderr
-        deadline = time.time() + 30  # until the server has saved what the run streamed
-        while time.time() < deadline and not WANTED <= _saved_paths(saved):
-            time.sleep(0.2)
+        wait_for(lambda: WANTED <= _saved_paths(saved), 30.0)  # until the server has saved what the run streamed
     finally:
         os.killpg(server.pid, signal.SIGINT)
         server.wait(timeout=30)

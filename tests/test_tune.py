@@ -5,13 +5,11 @@ import glob
 import os
 import shutil
 import signal
-import socket
 import sqlite3
 from contextlib import closing
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
@@ -22,7 +20,7 @@ from mbicp_viz.readers.params_toml import load_params
 from mbicp_viz.readers.rows import read_rows
 from mbicp_viz.views.debugger.sources import files_source
 
-from .conftest import DATA
+from .conftest import DATA, free_port, wait_for
 
 LOG, HOLDOUT = str(DATA / "intel-relations.log"), str(DATA / "aces-10.log.gz")
 
@@ -70,9 +68,7 @@ def test_ctrl_c_keeps_the_finished_trials(tmp_path):
         except sqlite3.Error:
             return 0
 
-    deadline = time.monotonic() + 120
-    while finished() < 3 and time.monotonic() < deadline:
-        time.sleep(0.2)
+    wait_for(lambda: finished() >= 3, 120.0)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err
@@ -85,12 +81,6 @@ def test_ctrl_c_keeps_the_finished_trials(tmp_path):
 def test_wrong_options_are_one_line(tmp_path, args, field):
     res = tune(tmp_path, "--trials", "1", *args)
     assert res.exit_code == 2 and field in res.output and "Traceback" not in res.output
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")

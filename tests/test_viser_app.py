@@ -18,7 +18,7 @@ from mbicp_viz.views.debugger.session import Session
 from mbicp_viz.views.debugger.sources import files_source, scenario_source
 from mbicp_viz.views.debugger.state import DebugState, Source, parse_entry
 
-from .conftest import EXAMPLES, INTEL, LASERAZOS
+from .conftest import EXAMPLES, INTEL, LASERAZOS, wait_for
 
 PAIR = EXAMPLES / "hokuyo-125-130.npz"
 
@@ -78,9 +78,7 @@ def test_previous_next_and_play(session):
     assert session.state.iteration == 2
     session.playback.fps = 30.0
     session.playback.playing = True
-    deadline = time.monotonic() + 10
-    while session.state.iteration == 2 and time.monotonic() < deadline:
-        time.sleep(0.01)
+    wait_for(lambda: session.state.iteration != 2, 10.0)
     assert session.state.iteration != 2  # the player advanced
     session.close()  # stops the player even while playing
     at = session.state.iteration
