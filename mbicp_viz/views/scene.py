@@ -308,6 +308,19 @@ def layers_at(start: StartEvent, iterations: list[IterationEvent], k: int, truth
     return layers + teaching_layers(start, ev, chosen=chosen) if teaching else layers
 
 
+def pair_layers(ref: Scan, obj: Scan, name: str, start: StartEvent, iterations: list[IterationEvent], k: int,
+                truth: Pose2 | None, odometry: Pose2 | None, several: bool = False,
+                chosen: int | None = None) -> list[Layer]:
+    """Everything the views draw of one matcher's run (``name``) on the scans ``ref`` and ``obj`` at
+    iteration ``k``: the reference as measured (beams, invalid bearings, sensor frame), the scans
+    before a motion correction, the run's layers with the teaching ones; among ``several``
+    matchers its object scan takes the matcher's colour (compare mode)."""
+    ev = iterations[min(k, len(iterations)) - 1] if k > 0 and iterations else None
+    layers = beam_layers(ref) + deskew_layers(ref, obj, ev.estimate_before if ev is not None else start.initial_guess) \
+        + layers_at(start, iterations, k, truth, teaching=True, chosen=chosen, odometry=odometry)
+    return compared(layers, name) if several else layers
+
+
 def has_content(layer: Layer) -> bool:
     """Whether a drawable layer draws anything (an empty one gets no legend entry)."""
     for field in ("xy", "starts", "strips", "centers"):

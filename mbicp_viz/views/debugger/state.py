@@ -289,12 +289,8 @@ class DebugState:
     def layers(self, run: Run) -> list[scene.Layer]:
         """The scene layers of ``run`` at the current iteration; in compare mode each run's object
         scan takes its matcher's colour."""
-        ev = self.event(run)
-        layers = scene.beam_layers(self.ref) + scene.deskew_layers(
-            self.ref, self.obj, ev.estimate_before if ev is not None else self.guess) + scene.layers_at(
-            run.start, run.iterations, self.iteration, self.truth(), teaching=True, chosen=self.iso_point,
-            odometry=stored_odometry(self.ref, self.obj))
-        return scene.compared(layers, run.name) if len(self.runs) > 1 else layers
+        return scene.pair_layers(self.ref, self.obj, run.name, run.start, run.iterations, self.iteration, self.truth(),
+                                 stored_odometry(self.ref, self.obj), len(self.runs) > 1, self.iso_point)
 
     def iteration_text(self, run: Run) -> str:
         ev = self.event(run)

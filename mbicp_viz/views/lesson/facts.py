@@ -30,6 +30,12 @@ def scan_facts(scan: Scan) -> dict[str, object]:
             "nearest_m": float(r.min()), "farthest_m": float(r.max()), "median_m": float(np.median(r))}
 
 
+def pose_facts(pose: Pose2) -> dict[str, object]:
+    """A pose (the guess, the known answer): x, y, heading, and how far it is from the origin."""
+    return {"x_m": pose.x, "y_m": pose.y, "theta_deg": math.degrees(pose.theta),
+            "distance_m": math.hypot(pose.x, pose.y)}
+
+
 def iteration_facts(ev: IterationEvent) -> dict[str, object]:
     """One iteration's pairs by kind and status, its threshold and its step."""
     p = ev.pairs

@@ -186,19 +186,16 @@ class StepRun:
         return n if self.step.iteration is None else min(self.step.iteration, n)
 
     def layers(self, run: Run, iteration: int | None = None, shown_only: bool = False) -> list[scene.Layer]:
-        """Everything ``run`` draws at ``iteration`` (default: the step's), the beams of the
-        reference scan with it; ``shown_only``: only the kinds the step shows (and every plot). In a
-        step with several matchers each object scan takes its matcher's colour, as in the
-        debugger's compare mode."""
+        """Everything ``run`` draws at ``iteration`` (default: the step's), as the debugger draws it
+        (``scene.pair_layers``); ``shown_only``: only the kinds the step shows (and every plot)."""
         s = self.step.scenario
-        k = self.iteration if iteration is None else iteration
-        layers = scene.beam_layers(s.ref) + scene.layers_at(run.start, run.iterations, k, s.truth, teaching=True,
-                                                             odometry=stored_odometry(s.ref, s.obj))
+        layers = scene.pair_layers(s.ref, s.obj, run.name, run.start, run.iterations,
+                                   self.iteration if iteration is None else iteration, s.truth,
+                                   stored_odometry(s.ref, s.obj))
         if shown_only:
             layers = [ly for ly in layers if getattr(ly, "style", None) not in scene.STYLES
                       or ly.style in self.step.layers]
         return scene.compared(layers, run.name) if len(self.runs) > 1 else layers
-
 
     def distance_layers(self) -> list[scene.Layer]:
         """The step's list of distances as a dot plot (paper 000 Fig. 9), when it has one."""
@@ -212,21 +209,16 @@ def run_step(step: Step) -> StepRun:
     runs = [run_match(name, s.ref, s.obj, s.guess, p) for name, p in s.params.items()]
     v = step.variant
     variant = run_match(v.matcher, s.ref, s.obj, s.guess, v.params) if v is not None else None
-    k = step.iteration
-    facts: F.Facts = {"scan": F.scan_facts(s.ref), "object_scan": F.scan_facts(s.obj)}
-    for run in runs:
-        facts[run.name] = F.run_facts(run, s.truth, len(run.iterations) if k is None else k)
-    if variant is not None:
-        facts[v.name] = F.run_facts(variant, s.truth, len(variant.iterations) if k is None else k)
-    L = next((getattr(p, "L") for p in s.params.values() if hasattr(p, "L")), None)
+    facts: F.Facts = {"scan": F.scan_facts(s.ref), "object_scan": F.scan_facts(s.obj), "guess": F.pose_facts(s.guess)}
+    named = [(r.name, r) for r in runs] + ([(v.name, variant)] if variant is not None else [])
+    for name, run in named:
+        facts[name] = F.run_facts(run, s.truth, len(run.iterations) if step.iteration is None else step.iteration)
+    L = next((p.L for p in s.params.values() if hasattr(p, "L")), None)
     if L is not None:
         facts["metric"] = F.metric_facts(s.ref, L, step.L_try)
     if step.distances is not None:
         facts["distances"] = F.distance_facts(step.distances, step.mad_k)
     if s.truth is not None:
-        facts["truth"] = {"x_m": s.truth.x, "y_m": s.truth.y, "theta_deg": math.degrees(s.truth.theta),
-                          "distance_m": math.hypot(s.truth.x, s.truth.y)}
-    facts["guess"] = {"x_m": s.guess.x, "y_m": s.guess.y, "theta_deg": math.degrees(s.guess.theta),
-                      "distance_m": math.hypot(s.guess.x, s.guess.y)}
+        facts["truth"] = F.pose_facts(s.truth)
     return StepRun(step, runs, variant, facts, F.render(step.text, facts, str(step.path), "text"),
                    F.render(step.try_text, facts, str(step.path), "try"))
