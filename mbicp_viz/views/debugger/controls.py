@@ -18,6 +18,17 @@ from .. import scene, viser_draw
 from . import panels
 
 
+def set_boxes(control, values: dict) -> None:
+    """Put a control's checkboxes (``control.boxes``) on the model's values, with its callbacks
+    quiet meanwhile (``control.showing``): viser runs a box's callback as soon as its value is set."""
+    control.showing = True
+    try:
+        for key, box in control.boxes.items():
+            box.value = values[key]
+    finally:
+        control.showing = False
+
+
 class Playback:
     """The iteration slider, previous/next and the player (a thread per tab)."""
 
@@ -89,22 +100,16 @@ class Matchers:
 
     def show(self) -> None:
         """The boxes as the model holds them (after a pair was reopened with its own matcher)."""
-        self.showing = True
-        try:
-            for n, box in self.boxes.items():
-                box.value = n in self.s.state.algorithms
-        finally:
-            self.showing = False
+        set_boxes(self, {n: n in self.s.state.algorithms for n in self.boxes})
         self.edited = self.edit.value = self.s.state.algorithms[0]
         self._build_params()
 
     def _chosen(self) -> None:
-        if self.showing:  # the model sets the boxes one by one (``show``): no match in between
+        if self.showing:  # the model sets the boxes one by one (``set_boxes``): no match in between
             return
         error = self.s.state.set_algorithms([n for n, box in self.boxes.items() if box.value])
         if error:
-            for n, box in self.boxes.items():
-                box.value = n in self.s.state.algorithms
+            set_boxes(self, {n: n in self.s.state.algorithms for n in self.boxes})
         self.s.clear_scene()
         self.s.after_match(error)
 
@@ -247,15 +252,10 @@ class Layers:
 
     def show(self) -> None:
         """The boxes as the model holds them (a lesson step opens with its own layers)."""
-        self.showing = True
-        try:
-            for label, box in self.boxes.items():
-                box.value = self.s.state.visible[label]
-        finally:
-            self.showing = False
+        set_boxes(self, self.s.state.visible)
 
     def _toggled(self, label: str, value: bool) -> None:
-        if self.showing:  # the model sets the boxes (``show``): one redraw after, not one per box
+        if self.showing:  # the model sets the boxes (``set_boxes``): one redraw after, not one per box
             return
         self.s.state.visible[label] = bool(value)
         self.s.redraw()
@@ -281,7 +281,7 @@ class Layers:
         if self.s.state.iso_point is not None:
             for style in (scene.ISO_METRIC, scene.ISO_EUCLID):
                 self.s.state.visible[style.label] = True
-                self.boxes[style.label].value = True
+            self.show()
         self.s.redraw()
 
 
