@@ -12,13 +12,12 @@ import numpy as np
 
 from .errors import ScanError
 from .scan import Scan
-from .se2 import Pose2, relative
+from .se2 import Pose2
 
 
-def twist(a: Pose2, b: Pose2, dt: float) -> np.ndarray:
-    """The constant velocity (vx [m/s], vy [m/s], omega [rad/s]), in ``a``'s frame, that moves
-    ``a`` onto ``b`` in ``dt`` seconds (the SE(2) logarithm of the motion, over ``dt``)."""
-    m = relative(a, b)
+def twist(m: Pose2, dt: float) -> np.ndarray:
+    """The constant velocity (vx [m/s], vy [m/s], omega [rad/s]), in the frame the motion ``m``
+    starts from, that makes that motion in ``dt`` seconds (the SE(2) logarithm of ``m``, over ``dt``)."""
     th = m.theta
     s, c = (1.0, 0.0) if abs(th) < 1e-9 else (np.sin(th) / th, (1.0 - np.cos(th)) / th)
     vx, vy = np.array([[s, c], [-c, s]]) @ [m.x, m.y] / (s * s + c * c)

@@ -73,7 +73,7 @@ def velocities(log: ScanLog, mode: Deskew | str) -> list[np.ndarray | None]:
     for k in range(len(log.scans)):
         j = min(k, len(motions) - 1)
         dt = log.scans[j + 1].stamp - log.scans[j].stamp
-        out.append(twist(Pose2(), motions[j], dt) if motions[j] is not None and dt > 0 else None)
+        out.append(twist(motions[j], dt) if motions[j] is not None and dt > 0 else None)
     return out
 
 
