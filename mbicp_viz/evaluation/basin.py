@@ -60,11 +60,10 @@ def basin(ref: Scan, obj: Scan, params: dict[str, Params], truth: Pose2 | None, 
 
 
 def plot_png(atlas: Atlas, path: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from mbicp_viz.pyplot import pyplot
     from matplotlib.colors import ListedColormap
+
+    plt = pyplot()
 
     names = list(atlas.outcome)
     T = len(atlas.thetas)

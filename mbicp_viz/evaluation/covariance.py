@@ -109,11 +109,10 @@ def consistency_lines(name: str, c: Consistency) -> list[str]:
 
 def nees_png(results: dict[str, Consistency], path: str) -> None:
     """Each matcher's NEES distribution against chi^2(3)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from mbicp_viz.pyplot import pyplot
     from scipy.stats import chi2
+
+    plt = pyplot()
 
     shown = {k: c for k, c in results.items() if c.weighed}
     fig, ax = plt.subplots(figsize=(7, 4.5), dpi=100)

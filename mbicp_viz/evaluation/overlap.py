@@ -164,10 +164,9 @@ def csv_text(rows: list[OverlapRow]) -> str:
 
 
 def plot_png(tab: dict[str, list[dict]], path: str) -> None:
-    import matplotlib
+    from mbicp_viz.pyplot import pyplot
 
-    matplotlib.use("Agg")  # files only, never a window
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
     for m, lines in tab.items():

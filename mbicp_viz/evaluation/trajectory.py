@@ -110,10 +110,9 @@ def tum_text(poses: list[Pose2], stamps: list[float]) -> str:
 
 def plot_png(log: ScanLog, rows: list[dict], tracks: dict[str, list[Pose2]], path: str, map_track: str) -> None:
     """Trajectories, and the map: every scan drawn at its pose on ``map_track``."""
-    import matplotlib
+    from mbicp_viz.pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(8, 8))
     for i, pose in zip(scan_indices(rows), tracks[map_track]):

@@ -233,10 +233,9 @@ def best_params(study, base: Params, space: list[Dimension]) -> Params:
 
 def history_png(study, path: str) -> None:
     """Each trial's success rate, and the best so far."""
-    import matplotlib
+    from mbicp_viz.pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     done = [t for t in study.trials if t.value is not None]
     x = [t.number for t in done]
@@ -262,10 +261,9 @@ def importance(study) -> dict[str, float]:
 
 
 def importance_png(shares: dict[str, float], study_name: str, path: str) -> None:
-    import matplotlib
+    from mbicp_viz.pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     names = list(shares)[::-1]
     fig, ax = plt.subplots(figsize=(7, 0.4 * len(names) + 1.5), dpi=100)

@@ -10,30 +10,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mbicp_viz.pyplot import pyplot
+
 from . import scene
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _rgb(style: scene.Style):
-    return tuple(c / 255 for c in style.color)
+    return _unit(style.color)
+
+
+def _unit(rgb) -> tuple[float, ...]:
+    """A 0-255 colour as matplotlib's 0-1."""
+    return tuple(c / 255 for c in rgb)
 
 
 def draw_layers(ax, layers: list[scene.Layer], shown: dict[str, scene.Style]) -> None:
     """Every drawable layer on ``ax`` (points in metres, or a plot space's own units); the styles
     that drew something are added to ``shown`` (the legend). Dots keep the sizes the layers give
     them relative to each other (the known answer's larger dots ring the scans drawn over them)."""
-    radii = [ly.radius for ly in layers if isinstance(ly, scene.Points) and scene.has_content(ly)]
-    unit = min(radii) if radii else 1.0
     from matplotlib.collections import LineCollection
     from matplotlib.patches import Rectangle
+
+    radii = [ly.radius for ly in layers if isinstance(ly, scene.Points) and scene.has_content(ly)]
+    unit = min(radii) if radii else 1.0
 
     for ly in layers:
         if not isinstance(ly, scene.DRAWN) or not scene.has_content(ly):
@@ -55,9 +54,9 @@ def draw_layers(ax, layers: list[scene.Layer], shown: dict[str, scene.Style]) ->
                                        edgecolor=rgba[:3] / 255, linewidth=0.3, zorder=z))
         elif isinstance(ly, scene.Frame):
             p, n = ly.pose, ly.length
-            for angle, color in ((p.theta, (0.85, 0.1, 0.1)), (p.theta + np.pi / 2, (0.1, 0.65, 0.1))):
+            for angle, rgb in ((p.theta, scene.AXIS_X), (p.theta + np.pi / 2, scene.AXIS_Y)):
                 ax.annotate("", xy=(p.x + n * np.cos(angle), p.y + n * np.sin(angle)), xytext=(p.x, p.y),
-                            arrowprops=dict(arrowstyle="->", color=color, lw=1.2), zorder=z)
+                            arrowprops=dict(arrowstyle="->", color=_unit(rgb), lw=1.2), zorder=z)
         shown.setdefault(ly.style.label, ly.style)
 
 
@@ -104,7 +103,7 @@ def scene_png(panels: list[tuple[str, list[scene.Layer]]], side: Plot | None, ti
               window: tuple[float, float, float, float] | None = None) -> bytes:
     """PNG bytes: one scan-plane panel per (title, layers), side by side with the same window
     (``window``, else all they draw), and optionally a plot beside them; one legend for everything."""
-    plt = _plt()
+    plt = pyplot()
     n = len(panels) + (side is not None)
     fig, axes = plt.subplots(1, n, figsize=(4.6 * n, 4.8), squeeze=False)
     shown: dict[str, scene.Style] = {}

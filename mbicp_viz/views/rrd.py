@@ -26,7 +26,6 @@ from . import scene
 
 APP_ID = "mbicp-viz"
 ABOUT = "about"
-AXIS_X, AXIS_Y = (220, 30, 30), (30, 160, 30)  # a frame's x and y axes
 _Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -121,7 +120,7 @@ def log_layer(stream: rr.RecordingStream, root: str, layer: scene.Layer, static:
         # the frame's axes as the debugger draws them: x red, y green (the legend says so)
         stream.log(f"{path}/heading", rr.Arrows2D(origins=[[0.0, 0.0]] * 2, vectors=[[layer.length, 0.0],
                                                                                      [0.0, layer.length]],
-                                                  colors=[AXIS_X, AXIS_Y], radii=0.025 * layer.length,
+                                                  colors=[scene.AXIS_X, scene.AXIS_Y], radii=0.025 * layer.length,
                                                   draw_order=layer.style.order), static=static)
     else:
         raise TypeError(f"the rerun front end cannot draw a {type(layer).__name__} layer ({layer.path})")

@@ -138,6 +138,9 @@ class Boxes:
     labels: list[str]
 
 
+AXIS_X, AXIS_Y = (220, 30, 30), (30, 160, 30)  # a drawn frame: x axis red, y axis green, as viser draws it
+
+
 @dataclass(frozen=True)
 class Frame:
     """A pose drawn as axes: the object frame in the reference frame."""
