@@ -375,3 +375,20 @@ def test_lesson_mode_opens_each_step_and_refuses_a_forged_step(server):
     third = Session(server, step_source(steps[2], steps))  # `mbicp-viz lesson --step 3`
     assert "Step 3 of" in third.lesson.heading.content and third.state.iteration == steps[2].iteration
     third.close()
+
+
+def test_lesson_mode_compiles_every_steps_matchers_while_the_server_starts(monkeypatch):
+    """A later step must not stall on compilation: the warm-up runs every matcher of the lesson."""
+    import mbicp_viz.views.debugger.app as app_module
+    from mbicp_viz.views.debugger.lesson import step_source
+    from mbicp_viz.views.lesson.steps import load_lesson
+
+    warmed = []
+    monkeypatch.setattr(app_module, "run_match", lambda name, *a: warmed.append(name))
+    steps = tuple(load_lesson())
+    app = app_module.App(step_source(steps[0], steps), "127.0.0.1", 0)
+    try:
+        assert app.ready.wait(60)
+        assert set(warmed) == {name for s in steps for name in s.scenario.params} and len(warmed) == len(set(warmed))
+    finally:
+        app.stop()

@@ -50,12 +50,14 @@ class App:
         return self.server.get_port()
 
     def _warm_up(self) -> None:
-        """Compile (or load from numba's cache) every kernel the first match needs."""
+        """Compile (or load from numba's cache) every kernel the first match needs, and in lesson mode
+        every step's: a later step then opens without a compile stall."""
         try:
             from .state import DebugState
 
             state = DebugState(self.source)
-            for name in state.algorithms:
+            lesson = [name for step in self.source.lesson for name in step.scenario.params]  # every step's
+            for name in dict.fromkeys([*state.algorithms, *lesson]):
                 run_match(name, state.ref, state.obj, state.guess, state.params[name])
         except Exception:  # the session's own match will show what is wrong
             traceback.print_exc()
