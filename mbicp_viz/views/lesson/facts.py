@@ -85,17 +85,21 @@ def metric_facts(scan: Scan, L: float, L_try: float | None) -> dict[str, object]
     return out
 
 
+def _listed(values) -> str:
+    """Values as a text quotes them: largest first, as written (``%g``)."""
+    return ", ".join(f"{x:g}" for x in sorted(values, reverse=True))
+
+
 def distance_facts(d: np.ndarray, k: float) -> dict[str, object]:
     """Paper 000 §2.4.2's rejection rules on a list of distances: median + k MAD (eq. 5) against
     mean + 2 standard deviations."""
     thr = mad_threshold(d, k)
     median = float(np.median(d))
     sigma = float(d.mean() + 2.0 * d.std())
-    listed = lambda v: ", ".join(f"{x:g}" for x in sorted(v, reverse=True))  # noqa: E731
     return {"n": len(d), "median": median, "mad": float(np.median(np.abs(d - median))), "k": k, "threshold": thr,
-            "rejected": int(np.count_nonzero(d > thr)), "rejected_values": listed(d[d > thr]),
+            "rejected": int(np.count_nonzero(d > thr)), "rejected_values": _listed(d[d > thr]),
             "mean": float(d.mean()), "sigma_threshold": sigma, "sigma_rejected": int(np.count_nonzero(d > sigma)),
-            "sigma_rejected_values": listed(d[d > sigma])}
+            "sigma_rejected_values": _listed(d[d > sigma])}
 
 
 class _Lookup(string.Formatter):
