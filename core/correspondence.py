@@ -10,11 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from .events import PairKind
 from .metric import metric_sq
 from .scan import Scan
+from .tiers import kernel, run
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,7 +66,7 @@ def polar(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1])
 
 
-@njit(cache=True)
+@kernel
 def _first_at_least(eb, a: float, strict: bool) -> int:
     """``np.searchsorted(eb, a, "right" if strict else "left")``: the first index whose bearing is
     above (``strict``) or at least ``a``. Written out: numba's searchsorted costs half a second of
@@ -81,7 +81,7 @@ def _first_at_least(eb, a: float, strict: bool) -> int:
     return lo
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def _window_min(px: float, py: float, ex, ey, ek, lo: int, hi: int):
     """Metric-nearest of the reference points ext[lo, hi) to (px, py): (ext index, d^2); (-1, inf) if
     empty; the first of equal minima. ``ek`` holds the metric's denominators |q|^2 + L^2."""
@@ -93,7 +93,7 @@ def _window_min(px: float, py: float, ex, ey, ek, lo: int, hi: int):
     return best, d_best
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def _reaches(px, py, r, ux, uy, rho):
     """Whether the ray of direction u passes within rho of p (of range r)."""
     if r <= rho:
@@ -102,7 +102,7 @@ def _reaches(px, py, r, ux, uy, rho):
     return px * ux + py * uy > 0.0 and c * c <= rho * rho
 
 
-@njit(cache=True)
+@kernel
 def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int, Bw: float, Br: float, L: float,
                     max_factor: float, max_step: float):
     """The loop of ``nearest`` over the moved points (compiled: a handful of candidates per point,
@@ -155,9 +155,9 @@ def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: flo
     metric distance).
     """
     alpha, rng = moved_polar if moved_polar is not None else polar(moved)
-    return _nearest_kernel(moved, alpha, rng, ref.ext_bearings, ref.ext_x, ref.ext_y, ref.ext_sq_norm_L2,
-                           ref.ext_ux, ref.ext_uy, ref.ext_map, len(ref.points), float(Bw), float(Br), float(L), ref.max_factor,
-                           ref.max_step)
+    return run(_nearest_kernel, moved, alpha, rng, ref.ext_bearings, ref.ext_x, ref.ext_y, ref.ext_sq_norm_L2,
+               ref.ext_ux, ref.ext_uy, ref.ext_map, len(ref.points), float(Bw), float(Br), float(L), ref.max_factor,
+               ref.max_step)
 
 
 @dataclass(frozen=True, eq=False)
@@ -171,7 +171,7 @@ class Pairs:
     dist: np.ndarray  # (K,) metric distance [m]
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def _segment_candidate(px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter):
     """The C code's candidate on segment (J - 1, J): (d^2, x, y, j, other). lambda minimises the
     metric of the object point (MbICP §IV-B); the candidate is scored in the reference point's."""
@@ -195,7 +195,7 @@ def _segment_candidate(px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter
     return metric_sq(px, py, qx, qy, k), qx, qy, j, other
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def _ray_bound(px, py, ux, uy, mf2):
     """A lower bound of the squared metric distance from p to any reference point on the ray of
     direction u: Euclidean |p| sin(angle) (|p| past 90 degrees), shrunk by the metric's largest
@@ -206,7 +206,7 @@ def _ray_bound(px, py, ux, uy, mf2):
     return (px * px + py * py) / mf2
 
 
-@njit(cache=True)
+@kernel
 def _window_kernel(p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int, full: bool, Bw: float, L: float,
                    max_inter: float, max_factor: float):
     """The loop of ``mbicp_pairs``: per object point the target, d^2, kind and reference indices
@@ -259,7 +259,7 @@ def _window_kernel(p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int, full
     return target, d2, kind, ref_index
 
 
-@njit(cache=True)
+@kernel
 def candidates(point_line: bool, p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, points, neighbours, full: bool,
                max_factor: float, max_step: float, Bw: float, Br: float, L: float, max_inter: float):
     """The pairs of the points p (moved into the reference frame, with their bearings and ranges)
@@ -283,7 +283,7 @@ def candidates(point_line: bool, p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_ma
 
 
 def _pairs(point_line: bool, ref: ReferenceIndex, moved, moved_polar, rows, Bw, Br, L, max_dist_inter) -> Pairs:
-    found, target, kind, ref_index, d2 = candidates(
+    found, target, kind, ref_index, d2 = run(candidates, 
         point_line, moved[rows], moved_polar[0][rows], moved_polar[1][rows], ref.ext_bearings, ref.ext_x, ref.ext_y,
         ref.ext_sq_norm_L2, ref.ext_ux, ref.ext_uy, ref.ext_map, ref.points, ref.neighbours, ref.full_circle, ref.max_factor, ref.max_step,
         float(Bw), float(Br), float(L), float(max_dist_inter))
@@ -326,7 +326,7 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: 
     return _pairs(True, ref, moved, moved_polar, rows, Bw, Br, L, max_dist_inter)
 
 
-@njit(cache=True)
+@kernel
 def _share_targets(p, best, d2, points, sq_norm_L2, neighbours, L: float, max_len: float):
     """The loop of ``point_line_pairs``: target, kind, second reference point (-1: none) and d^2 per pair.
 
@@ -373,7 +373,7 @@ def _share_targets(p, best, d2, points, sq_norm_L2, neighbours, L: float, max_le
     return target, kind, second, d2
 
 
-@njit(cache=True)
+@kernel
 def visible_in_order(alpha: np.ndarray) -> np.ndarray:
     """The original MbICP's projection filter: walking the object points in scan order, a point
     whose bearing ``alpha`` falls below that of the last point kept is hidden (it went behind a
@@ -391,7 +391,7 @@ def visible_in_order(alpha: np.ndarray) -> np.ndarray:
     return vis
 
 
-@njit(cache=True)
+@kernel
 def visible_from_reference(alpha: np.ndarray, r: np.ndarray, bin_start: float, bin_width: float,
                            margin: float) -> np.ndarray:
     """Projection filter (Lu & Milios 1997, used by MbICP): which moved points the reference sees.

@@ -14,10 +14,11 @@ eigenvalue routine for seconds; the bisection is exact to the last bit all the s
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .tiers import kernel
 
 
-@njit(cache=True)
+@kernel
 def normal_terms(p, q, C):
     """A (4, 4) and b (4,) of the cost for correspondences p, q (K, 2) with weights C (K, 2, 2)."""
     A = np.zeros((4, 4))
@@ -36,7 +37,7 @@ def normal_terms(p, q, C):
     return A, b
 
 
-@njit(cache=True)
+@kernel
 def _norm2(s00, s01, s11, h0, h1, lam):
     """|(S + lam I)^-1 h|^2 for the symmetric 2x2 S."""
     k00, k11 = s00 + lam, s11 + lam
@@ -45,7 +46,7 @@ def _norm2(s00, s01, s11, h0, h1, lam):
     return r0 * r0 + r1 * r1
 
 
-@njit(cache=True)
+@kernel
 def _largest_root(s00, s01, s11, h0, h1):
     """The multiplier at which |(S + lam I)^-1 h| = 1, lam > -lambda_min(S): bisection between
     -lambda_min (norm infinite) and -lambda_min + |h| (norm at most 1)."""
@@ -62,7 +63,7 @@ def _largest_root(s00, s01, s11, h0, h1):
     return hi
 
 
-@njit(cache=True)
+@kernel
 def solve(A, b):
     """(t_x, t_y, theta) minimising x^T A x - 2 b^T x on the circle; ok False when the
     translation is unconstrained (A's translation block singular) or nothing fixes the rotation (h = 0)."""

@@ -21,7 +21,6 @@ with its iterations recorded (the same numbers: the loop is deterministic).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, StartEvent
 from .gpc import normal_terms, solve
@@ -30,6 +29,7 @@ from .params import IcpParams, PlIcpParams
 from .result import MatchResult, Termination
 from .scan import Scan
 from .se2 import Pose2
+from .tiers import kernel, run
 from .uncertainty import DEGENERACY_LENGTH_M, FinalSystem, build_result
 
 # CSM's icp_loop: fewer pairs than this share of the object's rays, before or after trimming, fails.
@@ -44,7 +44,7 @@ _KEPT, _OUTSIDE, _TRIMMED, _DOUBLE = (int(s) for s in (PairStatus.KEPT, PairStat
 _OK, _TOO_FEW, _SINGULAR = 0, 1, 2
 
 
-@njit(cache=True)
+@kernel
 def _nearest(rx, ry, rtheta, rcos, rsin, rvalid, px, py, phi):
     """The Euclidean-nearest valid reference ray to (px, py): walk outwards from the ray nearest
     in bearing, up and down, while a ray can still be nearer. Every point of a ray u_j lies at
@@ -89,7 +89,7 @@ def _nearest(rx, ry, rtheta, rcos, rsin, rvalid, px, py, phi):
     return best, d_best
 
 
-@njit(cache=True)
+@kernel
 def _on_branch(phi, rtheta):
     """A bearing turned by whole turns onto the scan's bearings: into [first, first + 2 pi), then
     back a turn when it lies nearer the first bearing than the last (so CSM's atan2 angle, for a
@@ -101,7 +101,7 @@ def _on_branch(phi, rtheta):
     return a
 
 
-@njit(cache=True)
+@kernel
 def _segment_foot(ax, ay, bx, by, px, py, clamp: bool):
     """The point of segment a-b (or of its line, ``clamp`` False) nearest to p."""
     ex, ey = bx - ax, by - ay
@@ -112,7 +112,7 @@ def _segment_foot(ax, ay, bx, by, px, py, clamp: bool):
     return ax + t * ex, ay + t * ey
 
 
-@njit(cache=True)
+@kernel
 def _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, max_dist, order, mult, max_perc,
            doubles: bool):
     """One iteration's correspondences at the pose (x, y, th): per object ray the moved point,
@@ -174,7 +174,7 @@ def _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, max_dis
     return wx, wy, j1, j2, status, dist, limit, k
 
 
-@njit(cache=True)
+@kernel
 def _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line: bool):
     """The kept pairs as the solver takes them: object point (sensor frame), target and weight.
     ICP: the foot on the segment, weight I; PL-ICP: the point j1 and n n^T of the segment's normal."""
@@ -197,7 +197,7 @@ def _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line: bool):
     return p, q, C
 
 
-@njit(cache=True)
+@kernel
 def _hash(j1, j2, status):
     """A 64-bit fingerprint of the kept pairs (PL-ICP's test for a repeated set of pairs)."""
     h = np.uint64(1469598103934665603)
@@ -207,7 +207,7 @@ def _hash(j1, j2, status):
     return h
 
 
-@njit(cache=True)
+@kernel
 def _loop(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, line: bool, max_iter: int, eps_xy: float,
           eps_th: float, max_dist: float, order: float, mult: float, max_perc: float, doubles: bool, trace):
     """CSM's icp_loop from (x, y, th): (outcome, x, y, th, total distance, kept pairs, iterations,
@@ -279,10 +279,10 @@ class _Scans:
 
     def run(self, start: Pose2, params: IcpParams, trace=None):
         p = params
-        return _loop(self.rx, self.ry, self.rtheta, self.rcos, self.rsin, self.rvalid, self.sx, self.sy, self.svalid, start.x, start.y,
-                     start.theta, isinstance(p, PlIcpParams), p.max_iterations, p.epsilon_xy, p.epsilon_theta,
-                     p.max_correspondence_dist, p.outliers_adaptive_order, p.outliers_adaptive_mult,
-                     p.outliers_maxPerc, p.outliers_remove_doubles, trace if trace is not None else _empty_trace(0, 0))
+        return run(_loop, self.rx, self.ry, self.rtheta, self.rcos, self.rsin, self.rvalid, self.sx, self.sy, self.svalid, start.x, start.y,
+                   start.theta, isinstance(p, PlIcpParams), p.max_iterations, p.epsilon_xy, p.epsilon_theta,
+                   p.max_correspondence_dist, p.outliers_adaptive_order, p.outliers_adaptive_mult,
+                   p.outliers_maxPerc, p.outliers_remove_doubles, trace if trace is not None else _empty_trace(0, 0))
 
 
 def _restarts(params: IcpParams, result: Pose2) -> list[tuple[Pose2, str]]:
@@ -373,7 +373,7 @@ def _result(name, scans, params, outcomes, best) -> MatchResult:
         return build_result(name, pose, reason, iterations, None, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M)
     reason = Termination.CONVERGED if converged else Termination.MAX_ITERATIONS
     kept = np.flatnonzero(status == PairStatus.KEPT)
-    p, _, C = _targets(scans.rx, scans.ry, scans.sx, scans.sy, wx, wy, j1, j2, status, isinstance(params, PlIcpParams))
+    p, _, C = run(_targets, scans.rx, scans.ry, scans.sx, scans.sy, wx, wy, j1, j2, status, isinstance(params, PlIcpParams))
     moved = pose.apply(p)
     J = np.zeros((len(p), 2, 3))
     J[:, 0, 0] = J[:, 1, 1] = 1.0

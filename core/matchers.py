@@ -21,7 +21,11 @@ class Matcher:
 
     def run(self, ref, obj, initial_guess, params, observer=None):
         check_inputs(ref, obj, initial_guess)
-        return importlib.import_module(f".{self.module}", __package__).match(ref, obj, initial_guess, params, observer)
+        return self.load().match(ref, obj, initial_guess, params, observer)
+
+    def load(self):
+        """The matcher's module (importing it defines its kernels; nothing is compiled yet)."""
+        return importlib.import_module(f".{self.module}", __package__)
 
 
 # A guess farther than this from the reference frame's origin is a damaged number, not a pose.

@@ -12,7 +12,6 @@ recorded (the same numbers: the loop is deterministic), and the recording become
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .correspondence import ReferenceIndex, candidates, visible_from_reference, visible_in_order
 from .events import Correspondences, FinishEvent, HeldDirection, IterationEvent, Observer, StartEvent
@@ -24,6 +23,7 @@ from .result import MatchResult, Termination
 from .scan import Scan
 from .se2 import Pose2
 from .stopping import CYCLE_PERIOD_MAX, remember, returned
+from .tiers import kernel, run
 from .uncertainty import FinalSystem, build_result, surface_tangents
 
 # Projection filter: a point more than this behind the nearest one in its bearing bin is hidden.
@@ -44,7 +44,7 @@ def projection_bin_width(bearings: np.ndarray) -> float:
     return max(2.0 * float(np.median(np.diff(bearings))), 2.0 * np.pi / (4 * len(bearings)))
 
 
-@njit(cache=True)
+@kernel
 def rejection_floor(Br: float, mad_floor: float, mad_anneal: float, iteration: int) -> float:
     """The distance below which MAD never rejects a pair at this (1-based) iteration [m].
 
@@ -59,7 +59,7 @@ def rejection_floor(Br: float, mad_floor: float, mad_anneal: float, iteration: i
     return max(mad_floor, Br * decay)
 
 
-@njit(cache=True)
+@kernel
 def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours, full, max_factor, max_step, bin_start,
           bin_width, projection, zbuffer, point_line, mad, p, ref_tangents, trace):
     """The iterations from (x, y, th). ``p``: (MaxIter, L, Bw, Br, MaxDistInter, filter, AsocError,
@@ -149,7 +149,7 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
     return x, y, th, end, it, solved, A_last, err_last, targets_last, ref_last, kept_last, rejected_last
 
 
-@njit(cache=True)
+@kernel
 def _hold_weak(targets, ref, ref_tangents, L, hold, step):
     """Solution remapping (Zhang, Kaess & Singh, ICRA 2016): when the pairs' point-to-line
     information (the surfaces they lie on, as the degeneracy indicator measures it) has a
@@ -175,7 +175,7 @@ def _hold_weak(targets, ref, ref_tangents, L, hold, step):
     return out
 
 
-@njit(cache=True)
+@kernel
 def _record(trace, k, poses_k, vis, rows, target, kind, ref_index, dist, status, thr, error, held):
     """Iteration ``k`` into the trace, element by element (slice assignments are slow to compile)."""
     poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors, holds = trace
@@ -211,10 +211,10 @@ def _run(R: ReferenceIndex, P: np.ndarray, guess: Pose2, params: MbicpParams, im
     bin_start = float(R.bearings[0]) if len(R.bearings) else 0.0
     hold = improved and params.hold_weak > 0
     tangents = surface_tangents(R.points, R.full_circle, np.arange(len(R.points))) if hold else np.zeros((0, 2))
-    return _loop(np.ascontiguousarray(P, float), guess.x, guess.y, guess.theta, R.ext_bearings, R.ext_x, R.ext_y,
-                 R.ext_sq_norm_L2, R.ext_ux, R.ext_uy, R.ext_map, R.points, R.neighbours, R.full_circle, R.max_factor, R.max_step,
-                 bin_start, projection_bin_width(R.bearings), params.ProjectionFilter, params.projection_zbuffer,
-                 point_line, mad, p, tangents, trace)
+    return run(_loop, np.ascontiguousarray(P, float), guess.x, guess.y, guess.theta, R.ext_bearings, R.ext_x, R.ext_y,
+               R.ext_sq_norm_L2, R.ext_ux, R.ext_uy, R.ext_map, R.points, R.neighbours, R.full_circle, R.max_factor, R.max_step,
+               bin_start, projection_bin_width(R.bearings), params.ProjectionFilter, params.projection_zbuffer,
+               point_line, mad, p, tangents, trace)
 
 
 def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpParams | None = None,

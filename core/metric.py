@@ -8,7 +8,8 @@ other (paper 000 eq. 3); linearising the rotation gives the closed form used her
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, vectorize
+
+from .tiers import elementwise, kernel, run
 
 
 def metric_distance_sq(p: np.ndarray, q: np.ndarray, L: float) -> np.ndarray:
@@ -19,10 +20,10 @@ def metric_distance_sq(p: np.ndarray, q: np.ndarray, L: float) -> np.ndarray:
     in the denominator. Broadcasts over leading axes.
     """
     px, py, qx, qy = p[..., 0], p[..., 1], q[..., 0], q[..., 1]
-    return metric_sq(px, py, qx, qy, qx * qx + qy * qy + L * L)
+    return run(metric_sq, px, py, qx, qy, qx * qx + qy * qy + L * L)
 
 
-@vectorize(cache=True)
+@elementwise
 def metric_sq(px, py, qx, qy, k):
     """``metric_distance_sq`` by component, k = |q|^2 + L^2: a ufunc (it broadcasts) that the
     compiled correspondence search calls too, so both round alike. Compiled for the types of its
@@ -52,7 +53,7 @@ def metric_exact_sq(p1: np.ndarray, p2: np.ndarray, L: float, max_theta: float =
     return float(minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}).fun)
 
 
-@njit(cache=True)
+@kernel
 def kth_smallest(a: np.ndarray, k: int) -> float:
     """``np.sort(a)[k]`` by selection (Hoare's quickselect on a copy): linear time, and a loop
     numba compiles in a tenth of a second where its sort, median and argsort take one each."""
@@ -79,13 +80,13 @@ def kth_smallest(a: np.ndarray, k: int) -> float:
     return b[k]
 
 
-@njit(cache=True)
+@kernel
 def median(a: np.ndarray) -> float:
     n = len(a)
     return 0.5 * (kth_smallest(a, (n - 1) // 2) + kth_smallest(a, n // 2))
 
 
-@njit(cache=True)
+@kernel
 def mad_threshold(distances: np.ndarray, k: float = 2.0) -> float:
     """Rejection threshold d_rej = median + k * MAD (paper 000 eq. 5, §2.4.2)."""
     med = median(distances)
@@ -103,7 +104,7 @@ def linearised_jacobians(points: np.ndarray) -> np.ndarray:
     return J
 
 
-@njit(cache=True)
+@kernel
 def metric_normal_equations(p: np.ndarray, c: np.ndarray, L: float) -> tuple[np.ndarray, np.ndarray]:
     """A, b of MbICP's metric least squares: A q = b minimises sum (c_i - q(p_i))^T M(c_i) (...).
 
@@ -132,7 +133,7 @@ def metric_normal_equations(p: np.ndarray, c: np.ndarray, L: float) -> tuple[np.
     return A, b
 
 
-@njit(cache=True)
+@kernel
 def solve3(A: np.ndarray, b: np.ndarray):
     """x with A x = b for the 3x3 normal equations (Cramer's rule, as small systems are solved),
     and whether A was invertible and x finite."""
@@ -157,7 +158,7 @@ def solve3(A: np.ndarray, b: np.ndarray):
     return x, bool(np.isfinite(x).all())
 
 
-@njit(cache=True)
+@kernel
 def weakest_direction(A: np.ndarray, L: float):
     """The condition number of the normal matrix A (in x, y, theta) in the coordinates
     (x, y, L theta), where translation and rotation share a unit, and its weakest direction

@@ -14,15 +14,14 @@ from functools import cached_property
 from typing import Callable, NamedTuple
 
 import numpy as np
-from numba import njit
 
-from .events import (Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, PolarStep,
-                     StartEvent)
+from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, PolarStep, StartEvent
 from .metric import kth_smallest
 from .result import MatchResult, Termination
 from .scan import Scan, ScanError
 from .se2 import Pose2
 from .stopping import CycleWatch
+from .tiers import kernel, run
 from .uncertainty import DEGENERACY_LENGTH_M, degeneracy, surface_tangents
 
 
@@ -51,10 +50,10 @@ def segment(r: np.ndarray, valid: np.ndarray, max_jump: float) -> np.ndarray:
     scans that links sparse far readings into false surfaces and lowers accuracy (40 seeded small
     displacements within 1 cm / 0.2 deg: 82.5 % with it, 97.5 % without), so it is left out.
     """
-    return _segment_kernel(r, valid, max_jump)
+    return run(_segment_kernel, r, valid, max_jump)
 
 
-@njit(cache=True)
+@kernel
 def _segment_kernel(r, valid, max_jump: float):
     """The loop of ``segment``: number the runs of valid readings, then drop the one-reading runs
     (their numbers stay unused)."""
@@ -79,7 +78,7 @@ def _segment_kernel(r, valid, max_jump: float):
     return seg
 
 
-@njit(cache=True)
+@kernel
 def median_nearest(x, window: int):
     """Running median of ``window`` values with the ends repeated: scipy.ndimage.median_filter(x,
     size=window, mode="nearest") (for an even window the upper of the two middle values), as one
@@ -109,7 +108,7 @@ def preprocess(scan: Scan, median_window: int, min_range: float, max_range: floa
     r = scan.ranges.copy()
     idx = np.flatnonzero(valid)
     if len(idx) and median_window > 1:
-        r[idx] = median_nearest(scan.ranges[idx], median_window)
+        r[idx] = run(median_nearest, scan.ranges[idx], median_window)
     seg = segment(r, valid, max_jump)
     rays = np.column_stack((np.cos(scan.bearings), np.sin(scan.bearings)))
     return PolarScan(r, scan.bearings, seg >= 0, seg, rays, r[:, None] * rays,
@@ -153,12 +152,12 @@ def project(grid: Grid, cur: PolarScan, pose: Pose2, pad: int = 0) -> np.ndarray
     reference viewpoint: it still hides what lies behind it, but a bearing whose closest surface is
     such a back face is not compared (NaN), as is a bearing where nothing projects.
     """
-    out = _project_kernel(cur.xy, cur.edges, pose.x, pose.y, math.cos(pose.theta), math.sin(pose.theta),
-                          grid.b0, grid.step, grid.n, grid.full, pad)
+    out = run(_project_kernel, cur.xy, cur.edges, pose.x, pose.y, math.cos(pose.theta), math.sin(pose.theta),
+              grid.b0, grid.step, grid.n, grid.full, pad)
     return np.concatenate((out[grid.n - pad:], out, out[:pad])) if grid.full and pad else out
 
 
-@njit(cache=True)
+@kernel
 def _project_kernel(xy, edges, tx: float, ty: float, c: float, s: float, b0: float, step: float, n: int,
                     full: bool, pad: int):
     """The loop of ``project``: move the scan by (tx, ty, angle with cosine c and sine s), then walk
@@ -206,10 +205,10 @@ def shift_costs(ref_r: np.ndarray, proj_ext: np.ndarray, K: int, min_pairs: int,
     mean (a nearly flat curve whose minimum wanders); capped, a bearing that compares different
     surfaces costs the same at every shift and the agreeing ones decide.
     """
-    return _shift_costs_kernel(ref_r, proj_ext, K, min_pairs, np.inf if cap is None else float(cap))
+    return run(_shift_costs_kernel, ref_r, proj_ext, K, min_pairs, np.inf if cap is None else float(cap))
 
 
-@njit(cache=True)
+@kernel
 def _shift_costs_kernel(ref_r, proj_ext, K: int, min_pairs: int, cap: float):
     """Sum over the bearings with both ranges of min(|difference|, cap) / their count, per shift
     (NaN with fewer than min_pairs)."""
@@ -244,11 +243,11 @@ def refine_v(a: float, b: float, c: float) -> float:
 
 def least(cost: np.ndarray) -> int | None:
     """Index of the smallest cost, NaN meaning "too few pairs at that shift"; None if all are NaN."""
-    j = _least_kernel(cost)
+    j = run(_least_kernel, cost)
     return j if j >= 0 else None
 
 
-@njit(cache=True)
+@kernel
 def _least_kernel(cost) -> int:
     """First index of the smallest finite cost (NaN and inf skipped); -1 if there is none."""
     j, best = -1, np.inf
@@ -298,10 +297,10 @@ def translation_residuals(ref: PolarScan, proj_r: np.ndarray, max_error: float, 
     is still corrected (the weights keep the far ones weak) instead of ending with too few pairs.
     """
     relaxed = 0 if min_pairs is None else min_pairs
-    return Residuals(*_residuals_kernel(ref.ranges, ref.valid, proj_r, max_error, C, relaxed))
+    return Residuals(*run(_residuals_kernel, ref.ranges, ref.valid, proj_r, max_error, C, relaxed))
 
 
-@njit(cache=True)
+@kernel
 def _residuals_kernel(ref_r, valid, proj_r, max_error: float, C: float, min_pairs: int):
     """``translation_residuals`` as one loop (min_pairs 0: no relaxed cut)."""
     i = np.empty(len(ref_r), dtype=np.int64)
@@ -358,8 +357,8 @@ def translation_step(ref: PolarScan, iu: np.ndarray, eu: np.ndarray, wu: np.ndar
     corridors, where Diosi's under-estimates the range change of the walls, over-corrects and
     drifts (his code's own limitation note; `eval ceiling` measures it).
     """
-    rows, rhs, sums = _translation_kernel(iu, eu, wu, ref.rays, ref.rays if normals is None else normals,
-                                          normals is not None)
+    rows, rhs, sums = run(_translation_kernel, iu, eu, wu, ref.rays, ref.rays if normals is None else normals,
+                          normals is not None)
     a, b, d, rx, ry, e2, e1 = sums
     det = a * d - b * b
     m = len(eu)
@@ -368,7 +367,7 @@ def translation_step(ref: PolarScan, iu: np.ndarray, eu: np.ndarray, wu: np.ndar
     return TranslationStep(rows, rhs, dt, float(e2 / m), float(e1 / m))
 
 
-@njit(cache=True)
+@kernel
 def _translation_kernel(iu, eu, wu, rays, normals, surface: bool):
     """Rows, right-hand sides and the sums of the normal equations (see ``translation_step``):
     sum w r0^2, w r0 r1, w r1^2, w r0 rhs, w r1 rhs, e^2, |e|."""

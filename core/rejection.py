@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .events import PairStatus
 from .metric import kth_smallest, mad_threshold
+from .tiers import kernel
 
 KEPT, OUTSIDE_BR, TRIMMED, MAD = (int(s) for s in (PairStatus.KEPT, PairStatus.OUTSIDE_BR, PairStatus.TRIMMED,
                                                   PairStatus.MAD))
 
 
-@njit(cache=True)
+@kernel
 def reject(dist: np.ndarray, max_dist: float, keep_fraction: float, use_mad: bool, mad_k: float,
            mad_floor: float):
     """Status of each pair and the distance threshold applied after the hard cut (NaN: none).

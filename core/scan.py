@@ -89,8 +89,10 @@ def make_scan(
     closing beams. Raises ScanError for inconsistent arrays, UnusableScan when nothing is valid.
     """
     source = source or ScanSource()
-    r = np.asarray(ranges, dtype=float).reshape(-1)
-    b = np.asarray(bearings, dtype=float).reshape(-1)
+    # Copies, C-contiguous and writable whatever the reader gave (a broadcast or a buffer's view):
+    # numba compiles a kernel once per array kind, and the warm-up compiles these (core/tiers.py).
+    r = np.array(ranges, dtype=float).reshape(-1)
+    b = np.array(bearings, dtype=float).reshape(-1)
     if r.shape != b.shape:
         raise ScanError(source, f"{len(r)} ranges but {len(b)} bearings")
     if len(r) == 0:

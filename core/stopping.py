@@ -11,16 +11,16 @@ cannot.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .params import Params
 from .se2 import Pose2
+from .tiers import kernel, run
 
 # Cycles of the estimate up to this period (in iterations) are recognised.
 CYCLE_PERIOD_MAX = 4
 
 
-@njit(cache=True)
+@kernel
 def returned(recent: np.ndarray, n: int, x: float, y: float, th: float, errx: float, erry: float,
              errt: float) -> bool:
     """Whether the estimate (x, y, th) lies within the stopping thresholds of one of the ``n``
@@ -37,7 +37,7 @@ def returned(recent: np.ndarray, n: int, x: float, y: float, th: float, errx: fl
     return False
 
 
-@njit(cache=True)
+@kernel
 def remember(recent: np.ndarray, n: int, x: float, y: float, th: float) -> int:
     """Push (x, y, th) in front of ``recent`` (the oldest falls off); the new count."""
     for k in range(len(recent) - 1, 0, -1):
@@ -61,7 +61,7 @@ class CycleWatch:
     def step(self, before: Pose2, after: Pose2) -> int:
         """Record one iteration's move from ``before`` to ``after``; the current count."""
         p = self.params
-        back = returned(self.recent, self.n, after.x, after.y, after.theta, p.errx_out, p.erry_out, p.errt_out)
-        self.n = remember(self.recent, self.n, before.x, before.y, before.theta)
+        back = run(returned, self.recent, self.n, after.x, after.y, after.theta, p.errx_out, p.erry_out, p.errt_out)
+        self.n = run(remember, self.recent, self.n, before.x, before.y, before.theta)
         self.count = self.count + 1 if back else 0
         return self.count

@@ -9,6 +9,10 @@ from hypothesis import settings
 
 from mbicp_viz.readers import read_log
 
+# The suite's numbers must not depend on how far a background compile has come: every process it
+# starts compiles its kernels itself (core/tiers.py; tests/test_tiers.py starts the quick tier).
+os.environ["MBICP_VIZ_JIT"] = "eager"
+
 # No deadline: a test's first example may compile a matcher's kernels (numba), which takes
 # seconds on a cold cache; a deadline there measures the compiler, not the code.
 settings.register_profile("mbicp-viz", deadline=None)
@@ -118,3 +122,24 @@ def laserazos():
 @pytest.fixture(scope="session")
 def hokuyo():
     return read_log(HOKUYO_BAG)
+
+
+
+@contextlib.contextmanager
+def interpreted_kernels():
+    """This process in core/tiers.py's quick start with a background compile "running" (a lock
+    held here): every kernel runs interpreted inside the block."""
+    import fcntl
+    import tempfile
+
+    from mbicp_viz.core import tiers
+
+    t = tiers._TIERS
+    saved = t.quick, t.lock, t.ready
+    with tempfile.TemporaryDirectory() as d, open(Path(d) / tiers.LOCK_NAME, "w") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        t.quick, t.lock, t.ready = True, Path(held.name), set()
+        try:
+            yield
+        finally:
+            t.quick, t.lock, t.ready = saved

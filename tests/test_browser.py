@@ -13,7 +13,7 @@ from mbicp_viz.views.debugger.app import App
 from mbicp_viz.views.debugger.state import Source
 from mbicp_viz.views.scene import OBJECT, REFERENCE
 
-from .conftest import DATA, EXAMPLES, wait_for
+from .conftest import DATA, EXAMPLES, interpreted_kernels, wait_for
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--disable-background-networking",
@@ -290,3 +290,18 @@ def test_the_lesson_step_by_step(browser, tmp_path):
     finally:
         app.stop()
 
+
+
+def test_a_tab_that_matches_interpreted_says_so_until_the_kernels_are_compiled(browser, app):
+    """After an install (core/tiers.py's quick start) the page tells why a match is slow, and stops
+    once the background compile has ended."""
+    from mbicp_viz.views.debugger.session import INTERPRETED
+
+    with interpreted_kernels():
+        page, session = open_tab(browser, app)
+        notice = page.get_by_text(INTERPRETED)
+        notice.wait_for(timeout=30000)
+        assert "converged" in session.h_result.content
+    session.compiled()  # what the server does when the background compile ends
+    notice.wait_for(state="detached", timeout=30000)
+    page.close()

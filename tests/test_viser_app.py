@@ -18,7 +18,7 @@ from mbicp_viz.views.debugger.session import Session
 from mbicp_viz.views.debugger.sources import files_source, scenario_source
 from mbicp_viz.views.debugger.state import DebugState, Source, parse_entry
 
-from .conftest import EXAMPLES, INTEL, LASERAZOS, wait_for
+from .conftest import EXAMPLES, INTEL, LASERAZOS, interpreted_kernels, wait_for
 
 PAIR = EXAMPLES / "hokuyo-125-130.npz"
 
@@ -351,6 +351,21 @@ def test_a_tab_says_it_waits_for_the_kernels_then_shows_its_result(server):
     ready.set()
     s.first_match(ready)
     assert s.state.runs and s.h_status.content == "" and "converged" in s.h_result.content
+    s.close()
+
+
+def test_while_the_kernels_compile_in_the_background_a_tab_matches_interpreted_and_says_so(server):
+    from mbicp_viz.core import tiers
+    from mbicp_viz.views.debugger.session import INTERPRETED
+
+    source = Source("hokuyo pair", read_log(PAIR), guess=Pose2())
+    compiled = Session(server, source).state.runs[0].result
+    with interpreted_kernels():
+        s = Session(server, source)
+        assert tiers.compiling() and s.h_status.content == f"⚠ {INTERPRETED}" and "converged" in s.h_result.content
+    assert s.state.runs[0].result.pose == compiled.pose and s.state.runs[0].result.iterations == compiled.iterations
+    s.compiled()  # the background compile ended
+    assert s.h_status.content == ""
     s.close()
 
 

@@ -35,10 +35,12 @@ def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, a
               topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None,
               upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None):
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
+    from mbicp_viz.core import tiers
     from mbicp_viz.evaluation import single
     from mbicp_viz.readers.params_toml import make_params
     from mbicp_viz.views.text import match_report
 
+    tiers.quick_start()  # a person waits on this command: never a compile stall
     p = make_params(algo.value, params)
     sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down, deskew), guess, init,
                             search, truth, params)
@@ -52,6 +54,7 @@ def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, a
         truth_pose = frames.reported(s.truth, base) if s.truth is not None else None
         typer.echo("\n".join(match_report(sp.label, s, outcome, single.reported(outcome.result, frames, base),
                                            frames.frame_text(base), truth_pose)))
+    _say_if_interpreted()
     if rrd or connect or serve:
         from mbicp_viz.views.rrd import Run
 
@@ -65,19 +68,30 @@ def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
                 typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False,
                 deskew: DeskewOpt = None):
     """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
+    from mbicp_viz.core import tiers
     from mbicp_viz.evaluation.compare import compare_table
     from mbicp_viz.views.rrd import Run
 
     from .options import params_for
 
+    tiers.quick_start()
     ps = params_for(algos, params)
     sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down, deskew), guess, init,
                             search, truth, params)
     typer.echo(f"{sp.label}\ninitial guess {s.guess} (from: {s.guess_source}); poses: the laser frame")
     typer.echo(f"errors against: {s.truth_source or 'nothing (no known answer; give --truth X Y THETA_DEG)'}\n")
     typer.echo(compare_table(sp.ref, sp.obj, s.guess, ps, s.truth))
+    _say_if_interpreted()
     if rrd or connect or serve:
         _record([Run(a, sp.ref, sp.obj, s.guess, p, s.truth) for a, p in ps.items()], rrd, connect, serve, port, teach)
+
+
+def _say_if_interpreted() -> None:
+    from mbicp_viz.core import tiers
+
+    if tiers.compiling():
+        say("numba is compiling the matchers' kernels in the background (the first run after an install): this "
+            "run's ran interpreted, with the same results; the next runs use the compiled code")
 
 
 def _record(runs, rrd, connect, serve, port, teach) -> None:

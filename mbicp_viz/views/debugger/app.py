@@ -3,8 +3,9 @@
 Safe by default: the server binds 127.0.0.1, and a websocket whose ``Origin`` is not the
 debugger's own page is closed before anything is sent to it or read from it (viser itself
 accepts any origin, so a page open in the same browser could otherwise drive the debugger and
-read the scans). The matchers' kernels compile while the server starts; a tab that connects
-meanwhile says so and shows its first result when they are ready.
+read the scans). The matchers' kernels compile (or load from numba's cache) while the server
+starts; a tab that connects meanwhile says so. After an install they compile in a background
+process and the tabs match at once, interpreted, saying so until the compiled code is ready.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import threading
 import traceback
 
 import viser
+
+from mbicp_viz.core import tiers
 
 from .camera import TopDownCamera
 from .session import Session
@@ -37,6 +40,7 @@ class App:
         self.sessions: dict[int, Session] = {}
         self.refused: dict[int, str] = {}  # client id -> the origin whose websocket was closed
         self._lock = threading.Lock()
+        tiers.quick_start()  # a person waits on this page: never a compile stall
         self.ready = threading.Event()
         threading.Thread(target=self._warm_up, daemon=True).start()
         # viser has no origin hook of its own: the websocket layer's connect callbacks run, in the
@@ -50,19 +54,33 @@ class App:
         return self.server.get_port()
 
     def _warm_up(self) -> None:
-        """Compile (or load from numba's cache) every kernel the first match needs, and in lesson mode
-        every step's: a later step then opens without a compile stall."""
+        """Make every kernel the tabs will run ready, and in lesson mode every step's (a later step
+        then opens without a compile stall): compiled here, or loaded from numba's cache. After an
+        install (core/tiers.py's quick start) a background process compiles them while the tabs
+        match at once, interpreted; then they are loaded from the cache it wrote."""
         try:
+            from mbicp_viz.core import MATCHERS, tiers
+
             from .state import DebugState
 
             state = DebugState(self.source)
             lesson = [name for step in self.source.lesson for name in step.scenario.params]  # every step's
-            for name in dict.fromkeys([*state.algorithms, *lesson]):
+            names = list(dict.fromkeys([*state.algorithms, *lesson]))
+            for name in names:
+                MATCHERS[name].load()
+            if tiers.compile_in_background():
+                self.ready.set()
+                tiers.wait_compiled()
+            for name in names:
                 run_match(name, state.ref, state.obj, state.guess, state.params[name])
         except Exception:  # the session's own match will show what is wrong
             traceback.print_exc()
         finally:
             self.ready.set()
+            with self._lock:
+                sessions = list(self.sessions.values())
+            for s in sessions:
+                s.compiled()
 
     async def _check_origin(self, conn) -> None:
         connection = self.server._websock_server._live_connections.get(conn.client_id)

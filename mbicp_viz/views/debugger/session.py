@@ -12,6 +12,7 @@ import traceback
 import numpy as np
 import viser
 
+from mbicp_viz.core import tiers
 from mbicp_viz.readers.params_toml import params_to_toml
 
 from .. import scene, viser_draw
@@ -26,6 +27,8 @@ def grid_cell(extent_m: float) -> float:
 
 
 COMPILING = "Compiling the matchers' kernels (the first start after an install takes a few seconds)…"
+INTERPRETED = ("numba is compiling the matchers' kernels in the background (the first start after an install): "
+               "until it is done they run interpreted — the same results, slower")
 
 
 class Session:
@@ -102,9 +105,15 @@ class Session:
     def say(self, text: str) -> None:
         self.h_status.content = f"⚠ {text}" if text else ""
 
+    def compiled(self) -> None:
+        """The kernels are ready: the notice that they run interpreted goes (an error stays)."""
+        with self.lock:
+            if self.h_status.content == f"⚠ {INTERPRETED}":
+                self.say("")
+
     def after_match(self, error: str | None) -> None:
         """Show a new match, or say why it failed (the last good one stays on screen)."""
-        self.say(error or "")
+        self.say(error or (INTERPRETED if tiers.compiling() else ""))
         if error:
             return
         self.playback.show(self.state.max_iteration())

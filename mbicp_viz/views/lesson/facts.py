@@ -14,6 +14,7 @@ import numpy as np
 
 from mbicp_viz.core import IterationEvent, PairKind, PairStatus, Pose2, Scan, pose_error
 from mbicp_viz.core.metric import mad_threshold
+from mbicp_viz.core.tiers import run
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.recorded import Run
 
@@ -93,7 +94,7 @@ def _listed(values) -> str:
 def distance_facts(d: np.ndarray, k: float) -> dict[str, object]:
     """Paper 000 §2.4.2's rejection rules on a list of distances: median + k MAD (eq. 5) against
     mean + 2 standard deviations."""
-    thr = mad_threshold(d, k)
+    thr = run(mad_threshold, d, k)
     median = float(np.median(d))
     sigma = float(d.mean() + 2.0 * d.std())
     return {"n": len(d), "median": median, "mad": float(np.median(np.abs(d - median))), "k": k, "threshold": thr,

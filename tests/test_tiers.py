@@ -1,0 +1,89 @@
+"""The kernels' two tiers (core/tiers.py): interpreted while numba compiles them in a background
+process, compiled after; a first match after an install that does not wait for the compiler."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from mbicp_viz.core import MATCHERS, Pose2, Recorder, tiers
+from mbicp_viz.readers import read_log
+
+from .conftest import EXAMPLES, INTEL, interpreted_kernels, wait_for
+
+HOKUYO = EXAMPLES / "hokuyo-125-130.npz"
+
+
+def _cases():
+    """Real pairs from guesses off the answer: the Hokuyo pair, two Intel corridor pairs."""
+    hokuyo, intel = read_log(HOKUYO), read_log(INTEL)
+    return [(hokuyo.scans[0], hokuyo.scans[1], Pose2(0.05, -0.02, -0.25)),
+            (intel.scans[3], intel.scans[4], Pose2(0.1, 0.05, 0.1)),
+            (intel.scans[10], intel.scans[11], Pose2(-0.1, 0.1, -0.15))]
+
+
+@pytest.mark.parametrize("name", list(MATCHERS))
+def test_interpreted_kernels_compute_what_the_compiled_ones_do(name):
+    """Same poses (numpy may sum in another order than the compiled loop: 1e-12), iterations,
+    ending and recorded iterations, on real scans."""
+    m = MATCHERS[name]
+    for ref, obj, guess in _cases():
+        compiled, events = m.run(ref, obj, guess, m.params_type()), Recorder()
+        with interpreted_kernels():
+            assert tiers.compiling()
+            interpreted = m.run(ref, obj, guess, m.params_type(), events)
+        assert np.allclose(interpreted.pose.as_array(), compiled.pose.as_array(), rtol=0, atol=1e-12)
+        assert (interpreted.iterations, interpreted.reason) == (compiled.iterations, compiled.reason)
+        assert len(events.iterations) == compiled.iterations
+
+
+def _background_pid(cache) -> int | None:
+    """The pid the background compile's lock names, while it holds the lock."""
+    locks = list(cache.rglob(tiers.LOCK_NAME))
+    return int(locks[0].read_text()) if locks and tiers.held(locks[0]) else None
+
+
+def test_a_first_match_after_an_install_answers_at_once_and_the_next_ones_run_compiled(tmp_path):
+    """The quick tier end to end, as after ``pip install``: an empty kernel cache, the real command.
+    The first match runs interpreted (and says so) while one background process compiles every
+    kernel; after it, matching real scans with every matcher compiles nothing."""
+    env = {k: v for k, v in os.environ.items() if k != "MBICP_VIZ_JIT"} | {"NUMBA_CACHE_DIR": str(tmp_path)}
+    command = [sys.executable, "-m", "mbicp_viz", "match", str(HOKUYO), "--pair", "0", "1", "--guess", "identity",
+               "--json"]
+    expected = MATCHERS["improved"].run(*[read_log(HOKUYO).scans[i] for i in (0, 1)], Pose2(),
+                                        MATCHERS["improved"].params_type())
+    try:
+        t0 = time.monotonic()
+        first = subprocess.run(command, env=env, capture_output=True, text=True, timeout=120)
+        took = time.monotonic() - t0
+        assert first.returncode == 0, first.stderr
+        assert "compiling the matchers' kernels in the background" in first.stderr
+        row = json.loads(first.stdout)
+        assert np.allclose([row["x"], row["y"], row["theta"]], expected.pose.as_array(), rtol=0, atol=1e-12)
+        assert row["iterations"] == expected.iterations
+        assert _background_pid(tmp_path) is not None, f"no background compile ({took:.1f} s)"
+        assert wait_for(lambda: _background_pid(tmp_path) is None, timeout=300)
+        second = subprocess.run(command, env=env, capture_output=True, text=True, timeout=120)
+        assert second.returncode == 0 and "background" not in second.stderr and json.loads(second.stdout) == row | {
+            "time_ms": json.loads(second.stdout)["time_ms"]}
+        check = ("from numba.core import event\n"
+                 "from tests.test_tiers import _cases\n"
+                 "from mbicp_viz.core import MATCHERS, Recorder\n"
+                 "with event.install_recorder('numba:compile') as rec:\n"
+                 "    for ref, obj, guess in _cases():\n"
+                 "        for m in MATCHERS.values():\n"
+                 "            m.run(ref, obj, guess, m.params_type()); m.run(ref, obj, guess, m.params_type(), Recorder())\n"
+                 "print(len(rec.buffer))\n")
+        compiled = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True, timeout=300,
+                                  cwd=str(EXAMPLES.parent.parent))
+        assert compiled.returncode == 0 and compiled.stdout.split() == ["0"], compiled.stdout + compiled.stderr
+    finally:
+        pid = _background_pid(tmp_path)
+        if pid is not None:
+            os.killpg(pid, signal.SIGTERM)
+            wait_for(lambda: _background_pid(tmp_path) is None, timeout=30)
