@@ -68,12 +68,13 @@ class _Tiers:
     def __init__(self):
         self.quick = False
         self.lock: Path | None = None  # the background compile's lock, once one was started or found
+        self.tried = False  # one background compile per process: after it, kernels compile here if need be
         self.ready: set[int] = set()  # ids of kernels known compiled or cached in this process
         self.twins: dict[int, types.FunctionType] = {}
 
     def run(self, k, args):
         if self.quick and id(k) not in self.ready:
-            if self.compiling() or (not cached(k) and self.start(k)):
+            if self.compiling() or (not self.tried and not cached(k) and self.start(k)):
                 with np.errstate(all="ignore"):  # compiled code wraps and divides without a warning
                     return self.twin(k)(*args)
             self.ready.add(id(k))  # cached, or the background compile ended: numba loads (or compiles)
@@ -85,6 +86,7 @@ class _Tiers:
 
     def start(self, k) -> bool:
         """Start the background compile (unless one already runs for this cache); whether one runs."""
+        self.tried = True
         try:
             self.lock = lock_path(k)
             return start_background(self.lock) or held(self.lock)
@@ -126,8 +128,10 @@ def compiling() -> bool:
 def compile_in_background() -> bool:
     """In quick start, start the background compile now if a kernel imported so far is missing
     from the cache (a front end that knows it will match soon); whether one runs."""
-    cold = next((k for k in _KERNELS if not cached(k)), None) if _TIERS.quick else None
-    return cold is not None and (_TIERS.compiling() or _TIERS.start(cold))
+    if _TIERS.compiling():
+        return True
+    cold = next((k for k in _KERNELS if not cached(k)), None) if _TIERS.quick and not _TIERS.tried else None
+    return cold is not None and _TIERS.start(cold)
 
 
 def wait_compiled() -> None:
