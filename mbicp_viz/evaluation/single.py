@@ -49,14 +49,18 @@ class Outcome:
     time_ms: float
     on_ref: float  # fraction of object points within INLIER_RADIUS_M of a reference point
     recorder: Recorder | None
+    interpreted: bool = False  # run while numba compiled the kernels in the background (core/tiers.py)
 
 
 def run(ref: Scan, obj: Scan, guess: Pose2, params: Params, record: bool = False) -> Outcome:
+    from mbicp_viz.core import tiers
+
     rec = Recorder() if record else None
+    compiling = tiers.compiling()  # a compile the match's first kernel starts runs at its end
     t0 = time.perf_counter()
     result = match(ref, obj, guess, params, rec)
     ms = 1000.0 * (time.perf_counter() - t0)
-    return Outcome(result, ms, inlier_fraction(ref, obj, result.pose), rec)
+    return Outcome(result, ms, inlier_fraction(ref, obj, result.pose), rec, compiling or tiers.compiling())
 
 
 def reported(result: MatchResult, frames: Frames, base: bool) -> MatchResult:
@@ -75,7 +79,8 @@ def row(indices: tuple[int, int], s: Setup, o: Outcome, frames: Frames, base: bo
     """The JSON record of ``match --json`` (the keys of ``eval sequence``'s rows, and more)."""
     r = reported(o.result, frames, base)
     out = result_row(*indices, r, o.time_ms) | r.as_dict() | {"on_ref": o.on_ref, "guess": s.guess_source,
-                                                              "frame": frames.frame_name(base)}
+                                                              "frame": frames.frame_name(base),
+                                                              "interpreted": o.interpreted}
     if s.truth is not None:
         et, er = pose_error(r.pose, frames.reported(s.truth, base))
         out |= {"error_xy": et, "error_theta": er, "truth": s.truth_source}

@@ -99,5 +99,6 @@ def match_report(label: str, setup, outcome, result: MatchResult, frame: str, tr
     lines += ["", *result_lines(result, frame), f"{'on ref':<11} {agreement_line(outcome.on_ref, INLIER_RADIUS_M)}"]
     if truth is not None:
         lines.append(f"{'truth':<11} {truth_line(result.pose, truth)} ({setup.truth_source})")
-    lines.append(f"{'time':<11} {outcome.time_ms:.1f} ms (with the recording observer)")
+    how = "; interpreted while numba compiled the kernels" if outcome.interpreted else ""
+    lines.append(f"{'time':<11} {outcome.time_ms:.1f} ms (with the recording observer{how})")
     return lines
