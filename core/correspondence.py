@@ -283,7 +283,7 @@ def candidates(point_line: bool, p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_ma
 
 
 def _pairs(point_line: bool, ref: ReferenceIndex, moved, moved_polar, rows, Bw, Br, L, max_dist_inter) -> Pairs:
-    found, target, kind, ref_index, d2 = run(candidates, 
+    found, target, kind, ref_index, d2 = run(candidates,
         point_line, moved[rows], moved_polar[0][rows], moved_polar[1][rows], ref.ext_bearings, ref.ext_x, ref.ext_y,
         ref.ext_sq_norm_L2, ref.ext_ux, ref.ext_uy, ref.ext_map, ref.points, ref.neighbours, ref.full_circle, ref.max_factor, ref.max_step,
         float(Bw), float(Br), float(L), float(max_dist_inter))
