@@ -28,6 +28,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 import types
 from pathlib import Path
 
@@ -194,6 +195,7 @@ def start_background(lock: Path) -> bool:
                                  env=os.environ | {"MBICP_VIZ_JIT": "eager"})
         os.ftruncate(fd, 0)
         os.write(fd, f"{child.pid}\n".encode())
+        threading.Thread(target=child.wait, daemon=True).start()  # reaped when it ends (a server lives on)
     finally:
         os.close(fd)
     return True
