@@ -43,18 +43,34 @@ class ReferenceIndex:
     def build(scan: Scan, L: float) -> "ReferenceIndex":
         pts = scan.points()
         b = scan.bearings[scan.valid]
-        n = len(b)
-        ext_b = np.concatenate((b - 2 * np.pi, b, b + 2 * np.pi))
-        ext_map = np.tile(np.arange(n), 3)
         full = scan.is_full_circle()
-        sq = np.einsum("ij,ij->i", pts, pts)
-        k = sq + L * L
-        nb = np.arange(n)[:, None] + np.array([-1, 1])
-        nb = nb % n if full else np.where((nb >= 0) & (nb < n), nb, -1)
-        return ReferenceIndex(pts, b, ext_b, ext_map, np.tile(pts[:, 0], 3), np.tile(pts[:, 1], 3), np.tile(k, 3),
-                              np.cos(ext_b), np.sin(ext_b),
-                              float(np.sqrt(k.max()) / L) if n else 1.0,
-                              float(np.diff(ext_b).max()) if n else 2 * np.pi, full, nb)
+        k = np.einsum("ij,ij->i", pts, pts) + L * L
+        ext_b, ext_map, ext_x, ext_y, ext_k, nb, max_factor, max_step = run(_extended, b, pts, k, L, full)
+        return ReferenceIndex(pts, b, ext_b, ext_map, ext_x, ext_y, ext_k, np.cos(ext_b), np.sin(ext_b), max_factor,
+                              max_step, full, nb)
+
+
+@kernel
+def _extended(b, pts, k, L: float, full: bool):
+    """``ReferenceIndex``'s arrays over the three turns (bearings, point index, x, y, |q|^2 + L^2),
+    the scan neighbours, sqrt(max k) / L and the widest bearing step (1 and 2 pi without points)."""
+    n = len(b)
+    ext_b, ext_map = np.empty(3 * n), np.empty(3 * n, dtype=np.int64)
+    ext_x, ext_y, ext_k = np.empty(3 * n), np.empty(3 * n), np.empty(3 * n)
+    for t in range(3):
+        for i in range(n):
+            ext_b[t * n + i] = b[i] + (t - 1) * (2 * np.pi) if t != 1 else b[i]
+            ext_map[t * n + i], ext_x[t * n + i], ext_y[t * n + i], ext_k[t * n + i] = i, pts[i, 0], pts[i, 1], k[i]
+    nb = np.empty((n, 2), dtype=np.int64)
+    for i in range(n):
+        for c, j in enumerate((i - 1, i + 1)):
+            nb[i, c] = j % n if full else (j if 0 <= j < n else -1)
+    if n == 0:
+        return ext_b, ext_map, ext_x, ext_y, ext_k, nb, 1.0, 2 * np.pi
+    max_step = -np.inf
+    for i in range(1, 3 * n):
+        max_step = max(max_step, ext_b[i] - ext_b[i - 1])
+    return ext_b, ext_map, ext_x, ext_y, ext_k, nb, np.sqrt(k.max()) / L, max_step
 
 
 # Candidates tried first around each point's bearing: the K reference beams on either side.

@@ -46,8 +46,9 @@ def check_inputs(ref, obj, guess) -> None:
         raise ValueError(f"the initial guess lies {max(abs(guess.x), abs(guess.y)):.3g} m away: more than "
                          f"{MAX_GUESS_M:g} m is no pose between two scans")
     for name, scan in (("reference", ref), ("object", obj)):
-        pts = scan.points()
-        if len(pts) == 0 or not np.all(np.isfinite(pts)):
+        # a point r (cos b, sin b) is finite exactly when r and b are (|r cos b| <= |r|)
+        r, b = scan.ranges[scan.valid], scan.bearings[scan.valid]
+        if len(r) == 0 or not (np.isfinite(r).all() and np.isfinite(b).all()):
             raise ValueError(f"the {name} scan ({scan.source}) has no finite valid points")
 
 

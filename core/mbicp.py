@@ -15,7 +15,7 @@ import numpy as np
 
 from .correspondence import ReferenceIndex, candidates, visible_from_reference, visible_in_order
 from .events import Correspondences, FinishEvent, HeldDirection, IterationEvent, Observer, StartEvent
-from .metric import metric_normal_equations, solve3, weakest_direction
+from .metric import median, metric_normal_equations, solve3, weakest_direction
 from .params import ImprovedParams, MbicpParams
 from .rejection import KEPT, OUTSIDE_BR, reject
 from .resample import grid_resample
@@ -41,7 +41,8 @@ def projection_bin_width(bearings: np.ndarray) -> float:
     1/step (a damaged scan's bearings can be nanoradians apart)."""
     if len(bearings) < 2:
         return 2.0 * np.pi
-    return max(2.0 * float(np.median(np.diff(bearings))), 2.0 * np.pi / (4 * len(bearings)))
+    step = run(median, np.diff(bearings))  # np.median's value (the same two middle elements, halved)
+    return max(2.0 * step, 2.0 * np.pi / (4 * len(bearings)))
 
 
 @kernel

@@ -12,40 +12,65 @@ from __future__ import annotations
 import numpy as np
 
 from .events import Resampling
+from .tiers import kernel, run
 
 
-def regular_picks(n: np.ndarray, n_keep: np.ndarray, rank: np.ndarray) -> np.ndarray:
+@kernel(inline="always")
+def regular_pick(n: int, n_keep: int, rank: int) -> bool:
     """Whether position ``rank`` of a run of ``n`` items is among ``n_keep`` regularly spaced picks.
 
     The picks are round(m (n - 1) / (n_keep - 1)), m = 0 .. n_keep - 1: first and last included
     when n_keep >= 2, only the first when n_keep == 1, none when n_keep == 0.
     """
-    n = n.astype(float)
-    k = n_keep.astype(float)
-    step = np.where(k > 1, (n - 1) / np.maximum(k - 1, 1), 0.0)
-    m = np.where(step > 0, np.floor(rank / np.where(step > 0, step, 1) + 0.5), 0)
-    pick = np.floor(m * step + 0.5)
-    return (k >= 1) & (pick == rank) & (m < np.maximum(k, 1))
+    k = float(n_keep)
+    step = (n - 1.0) / max(k - 1.0, 1.0) if k > 1.0 else 0.0
+    m = np.floor(rank / step + 0.5) if step > 0.0 else 0.0
+    return k >= 1.0 and np.floor(m * step + 0.5) == rank and m < max(k, 1.0)
+
+
+@kernel
+def _resample(points, cell_size: float):
+    """The grid of ``grid_resample``: (origin, cells, sensor cell, ratio, count, kept count, kept)."""
+    n = len(points)
+    origin = np.empty(2)
+    origin[0], origin[1] = points[:, 0].min(), points[:, 1].min()
+    rc = np.empty((n, 2), dtype=np.int64)  # (row = y, col = x)
+    for i in range(n):
+        rc[i, 0] = int(np.floor((points[i, 1] - origin[1]) / cell_size))
+        rc[i, 1] = int(np.floor((points[i, 0] - origin[0]) / cell_size))
+    sensor = np.empty(2, dtype=np.int64)
+    sensor[0], sensor[1] = int(np.floor((0.0 - origin[1]) / cell_size)), int(np.floor((0.0 - origin[0]) / cell_size))
+    cell_id = rc[:, 0] * (rc[:, 1].max() + 1) + rc[:, 1]
+    order = np.argsort(cell_id, kind="mergesort")  # stable: scan order inside each cell
+    n_cells = 1
+    for i in range(1, n):
+        n_cells += cell_id[order[i]] != cell_id[order[i - 1]]
+    cells, count = np.empty((n_cells, 2), dtype=np.int64), np.zeros(n_cells, dtype=np.int64)
+    dist = np.empty(n_cells)
+    c = -1
+    for i in range(n):
+        if i == 0 or cell_id[order[i]] != cell_id[order[i - 1]]:
+            c += 1
+            cells[c, 0], cells[c, 1] = rc[order[i], 0], rc[order[i], 1]
+            dist[c] = np.hypot(float(cells[c, 0] - sensor[0]), float(cells[c, 1] - sensor[1]))
+        count[c] += 1
+    d_max = dist.max()
+    ratio = dist / d_max if d_max > 0 else np.ones(n_cells)
+    # a tiny tolerance keeps ceil(n * eta) from jumping up on round-off (e.g. 3 * 1/3)
+    n_keep = np.empty(n_cells, dtype=np.int64)
+    for c in range(n_cells):
+        n_keep[c] = int(np.ceil(count[c] * ratio[c] - 1e-9))
+    keep = np.zeros(n, dtype=np.bool_)
+    i = 0
+    for c in range(n_cells):
+        for rank in range(count[c]):
+            keep[order[i]] = regular_pick(count[c], n_keep[c], rank)
+            i += 1
+    return origin, cells, sensor, ratio, count, n_keep, np.flatnonzero(keep)
 
 
 def grid_resample(points: np.ndarray, cell_size: float) -> Resampling:
     """Resample sensor-frame ``points`` (scan order) on a grid of ``cell_size`` metres."""
-    origin = points.min(axis=0)
-    rc = np.floor((points - origin) / cell_size).astype(np.int64)[:, ::-1]  # (row=y, col=x)
-    sensor = np.floor((np.zeros(2) - origin) / cell_size).astype(np.int64)[::-1]
-    ncols = int(rc[:, 1].max()) + 1
-    cell_id = rc[:, 0] * ncols + rc[:, 1]
-    order = np.argsort(cell_id, kind="stable")  # stable: scan order inside each cell
-    sid = cell_id[order]
-    starts = np.flatnonzero(np.concatenate(([True], sid[1:] != sid[:-1])))
-    count = np.diff(np.append(starts, len(sid)))
-    cells = rc[order][starts]
-    dist = np.hypot(*(cells - sensor).T.astype(float))
-    ratio = dist / dist.max() if dist.max() > 0 else np.ones(len(cells))
-    # a tiny tolerance keeps ceil(n * eta) from jumping up on round-off (e.g. 3 * 1/3)
-    n_keep = np.ceil(count * ratio - 1e-9).astype(np.int64)
-    cell_of = np.repeat(np.arange(len(cells)), count)
-    rank = np.arange(len(sid)) - starts[cell_of]
-    keep_sorted = regular_picks(count[cell_of], n_keep[cell_of], rank)
-    kept = np.sort(order[keep_sorted])
+    origin, cells, sensor, ratio, count, n_keep, kept = run(_resample, np.ascontiguousarray(points, float),
+                                                            float(cell_size))
     return Resampling(origin, float(cell_size), cells, sensor, ratio, count, n_keep, kept)
