@@ -29,19 +29,10 @@ def regular_pick(n: int, n_keep: int, rank: int) -> bool:
 
 
 @kernel
-def _resample(points, cell_size: float):
-    """The grid of ``grid_resample``: (origin, cells, sensor cell, ratio, count, kept count, kept)."""
-    n = len(points)
-    origin = np.empty(2)
-    origin[0], origin[1] = points[:, 0].min(), points[:, 1].min()
-    rc = np.empty((n, 2), dtype=np.int64)  # (row = y, col = x)
-    for i in range(n):
-        rc[i, 0] = int(np.floor((points[i, 1] - origin[1]) / cell_size))
-        rc[i, 1] = int(np.floor((points[i, 0] - origin[0]) / cell_size))
-    sensor = np.empty(2, dtype=np.int64)
-    sensor[0], sensor[1] = int(np.floor((0.0 - origin[1]) / cell_size)), int(np.floor((0.0 - origin[0]) / cell_size))
-    cell_id = rc[:, 0] * (rc[:, 1].max() + 1) + rc[:, 1]
-    order = np.argsort(cell_id, kind="mergesort")  # stable: scan order inside each cell
+def _resample(rc, sensor, order, cell_id):
+    """The rest of ``grid_resample`` once the points' cells are sorted (numpy's stable argsort:
+    numba's costs seconds of compilation): cells, ratio, count, kept count and kept points."""
+    n = len(rc)
     n_cells = 1
     for i in range(1, n):
         n_cells += cell_id[order[i]] != cell_id[order[i - 1]]
@@ -54,23 +45,38 @@ def _resample(points, cell_size: float):
             cells[c, 0], cells[c, 1] = rc[order[i], 0], rc[order[i], 1]
             dist[c] = np.hypot(float(cells[c, 0] - sensor[0]), float(cells[c, 1] - sensor[1]))
         count[c] += 1
-    d_max = dist.max()
-    ratio = dist / d_max if d_max > 0 else np.ones(n_cells)
-    # a tiny tolerance keeps ceil(n * eta) from jumping up on round-off (e.g. 3 * 1/3)
-    n_keep = np.empty(n_cells, dtype=np.int64)
+    d_max = 0.0
     for c in range(n_cells):
+        d_max = max(d_max, dist[c])
+    # plain loops: numba compiles them in a fraction of the time of array expressions
+    ratio, n_keep = np.empty(n_cells), np.empty(n_cells, dtype=np.int64)
+    for c in range(n_cells):
+        ratio[c] = dist[c] / d_max if d_max > 0 else 1.0
+        # a tiny tolerance keeps ceil(n * eta) from jumping up on round-off (e.g. 3 * 1/3)
         n_keep[c] = int(np.ceil(count[c] * ratio[c] - 1e-9))
     keep = np.zeros(n, dtype=np.bool_)
-    i = 0
+    n_kept, i = 0, 0
     for c in range(n_cells):
         for rank in range(count[c]):
             keep[order[i]] = regular_pick(count[c], n_keep[c], rank)
+            n_kept += keep[order[i]]
             i += 1
-    return origin, cells, sensor, ratio, count, n_keep, np.flatnonzero(keep)
+    kept = np.empty(n_kept, dtype=np.int64)
+    k = 0
+    for i in range(n):
+        if keep[i]:
+            kept[k] = i
+            k += 1
+    return cells, ratio, count, n_keep, kept
 
 
 def grid_resample(points: np.ndarray, cell_size: float) -> Resampling:
     """Resample sensor-frame ``points`` (scan order) on a grid of ``cell_size`` metres."""
-    origin, cells, sensor, ratio, count, n_keep, kept = run(_resample, np.ascontiguousarray(points, float),
-                                                            float(cell_size))
+    origin = points.min(axis=0)
+    rc = np.floor((points - origin) / cell_size).astype(np.int64)[:, ::-1]  # (row=y, col=x)
+    sensor = np.floor((np.zeros(2) - origin) / cell_size).astype(np.int64)[::-1]
+    cell_id = rc[:, 0] * (int(rc[:, 1].max()) + 1) + rc[:, 1]
+    order = np.argsort(cell_id, kind="stable")  # stable: scan order inside each cell
+    cells, ratio, count, n_keep, kept = run(_resample, np.ascontiguousarray(rc), np.ascontiguousarray(sensor), order,
+                                            cell_id)
     return Resampling(origin, float(cell_size), cells, sensor, ratio, count, n_keep, kept)
