@@ -283,8 +283,17 @@ def test_the_lesson_step_by_step(browser, tmp_path):
         page.get_by_text(f"Step 3 of {len(steps)}").first.wait_for(timeout=30000)
         session = next(iter(app.sessions.values()))
         before = session.state.runs[0].result.pose
+
+        def shows_the_steps_L() -> bool:  # the box is step 3's (L = 1.5), not the panel it replaced
+            try:
+                return float(box(page, "L [m]").input_value()) == session.state.params["mbicp"].L == 1.5
+            except ValueError:
+                return False
+
+        assert wait_for(shows_the_steps_L), box(page, "L [m]").input_value()
         type_into(page, "L [m]", "0.5")
-        assert wait_for(lambda: session.state.params["mbicp"].L == 0.5 and session.state.runs[0].result.pose != before)
+        assert wait_for(lambda: session.state.params["mbicp"].L == 0.5 and session.state.runs[0].result.pose != before), \
+            (box(page, "L [m]").input_value(), session.state.params["mbicp"].L, session.h_status.content)
         page.get_by_text(run_step(steps[2]).text[:60]).first.wait_for(timeout=10000)  # the step's own numbers
         page.close()
     finally:
