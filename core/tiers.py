@@ -136,10 +136,9 @@ def compile_in_background() -> bool:
 
 
 def wait_compiled() -> None:
-    """Block until no background compile runs for this process's kernel cache."""
-    lock = _TIERS.lock or (lock_path(_KERNELS[0]) if _KERNELS else None)
-    if lock is not None:
-        wait_unlocked(lock)
+    """Block until the background compile this process started or found has ended (if any)."""
+    if _TIERS.lock is not None:
+        wait_unlocked(_TIERS.lock)
 
 
 def wait_unlocked(lock: Path) -> None:
