@@ -122,7 +122,7 @@ class Matchers:
         state = self.s.state
         error = state.set_params(self.edited, {name: text})
         refused = error is not None and error != state.message  # a value, not the match, is wrong
-        self.params.message.content = f"⚠ {error} — the last good value is kept" if refused else ""
+        self.params.message.content = panels.warning(f"{error} — the last good value is kept" if refused else "")
         self.params.show(state.params[self.edited])
         if not refused:
             self.s.after_match(error)
@@ -176,7 +176,7 @@ class Guess:
 
     def _search_typed(self, name: str, text: str) -> None:
         error = self.s.state.set_search({name: text})
-        self.search.message.content = f"⚠ {error} — the last good value is kept" if error else ""
+        self.search.message.content = panels.warning(f"{error} — the last good value is kept" if error else "")
         self.search.show(self.s.state.search)
 
 

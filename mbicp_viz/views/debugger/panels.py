@@ -23,6 +23,11 @@ from .. import scene
 from .state import DebugState, box_label, parse_entry, shown_value
 
 
+def warning(text: str) -> str:
+    """A status line that something went wrong or is slow ("" clears it)."""
+    return f"⚠ {text}" if text else ""
+
+
 class CommitBox:
     """A text box whose value is applied when the user presses Enter, exactly as typed.
 

@@ -103,12 +103,12 @@ class Session:
 
     # ---- showing the model ------------------------------------------------------------------
     def say(self, text: str) -> None:
-        self.h_status.content = f"⚠ {text}" if text else ""
+        self.h_status.content = panels.warning(text)
 
     def compiled(self) -> None:
         """The kernels are ready: the notice that they run interpreted goes (an error stays)."""
         with self.lock:
-            if self.h_status.content == f"⚠ {INTERPRETED}":
+            if self.h_status.content == panels.warning(INTERPRETED):
                 self.say("")
 
     def after_match(self, error: str | None) -> None:
