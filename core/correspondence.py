@@ -41,36 +41,38 @@ class ReferenceIndex:
 
     @staticmethod
     def build(scan: Scan, L: float) -> "ReferenceIndex":
-        pts = scan.points()
+        pts, c, s = scan.points_and_directions()
         b = scan.bearings[scan.valid]
         full = scan.is_full_circle()
         k = np.einsum("ij,ij->i", pts, pts) + L * L
-        ext_b, ext_map, ext_x, ext_y, ext_k, nb, max_factor, max_step = run(_extended, b, pts, k, L, full)
-        return ReferenceIndex(pts, b, ext_b, ext_map, ext_x, ext_y, ext_k, np.cos(ext_b), np.sin(ext_b), max_factor,
-                              max_step, full, nb)
+        ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, nb, max_factor, max_step = run(_extended, b, pts, k, c, s,
+                                                                                            L, full)
+        return ReferenceIndex(pts, b, ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, max_factor, max_step, full, nb)
 
 
 @kernel
-def _extended(b, pts, k, L: float, full: bool):
-    """``ReferenceIndex``'s arrays over the three turns (bearings, point index, x, y, |q|^2 + L^2),
-    the scan neighbours, sqrt(max k) / L and the widest bearing step (1 and 2 pi without points)."""
+def _extended(b, pts, k, c, s, L: float, full: bool):
+    """``ReferenceIndex``'s arrays over the three turns (bearings, point index, x, y, |q|^2 + L^2,
+    the bearing's cosine and sine, ``c`` and ``s``), the scan neighbours, sqrt(max k) / L and the
+    widest bearing step (1 and 2 pi without points)."""
     n = len(b)
     ext_b, ext_map = np.empty(3 * n), np.empty(3 * n, dtype=np.int64)
-    ext_x, ext_y, ext_k = np.empty(3 * n), np.empty(3 * n), np.empty(3 * n)
+    ext_x, ext_y, ext_k, ext_ux, ext_uy = np.empty(3 * n), np.empty(3 * n), np.empty(3 * n), np.empty(3 * n), np.empty(3 * n)
     for t in range(3):
         for i in range(n):
-            ext_b[t * n + i] = b[i] + (t - 1) * (2 * np.pi) if t != 1 else b[i]
-            ext_map[t * n + i], ext_x[t * n + i], ext_y[t * n + i], ext_k[t * n + i] = i, pts[i, 0], pts[i, 1], k[i]
+            e = t * n + i
+            ext_b[e] = b[i] + (t - 1) * (2 * np.pi) if t != 1 else b[i]
+            ext_map[e], ext_x[e], ext_y[e], ext_k[e], ext_ux[e], ext_uy[e] = i, pts[i, 0], pts[i, 1], k[i], c[i], s[i]
     nb = np.empty((n, 2), dtype=np.int64)
     for i in range(n):
-        for c, j in enumerate((i - 1, i + 1)):
-            nb[i, c] = j % n if full else (j if 0 <= j < n else -1)
+        for m, j in enumerate((i - 1, i + 1)):
+            nb[i, m] = j % n if full else (j if 0 <= j < n else -1)
     if n == 0:
-        return ext_b, ext_map, ext_x, ext_y, ext_k, nb, 1.0, 2 * np.pi
+        return ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, nb, 1.0, 2 * np.pi
     max_step = -np.inf
     for i in range(1, 3 * n):
         max_step = max(max_step, ext_b[i] - ext_b[i - 1])
-    return ext_b, ext_map, ext_x, ext_y, ext_k, nb, np.sqrt(k.max()) / L, max_step
+    return ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, nb, np.sqrt(k.max()) / L, max_step
 
 
 # Candidates tried first around each point's bearing: the K reference beams on either side.
@@ -144,10 +146,13 @@ def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int
                 (hi < len(eb) and eb[hi] - a <= reach and _reaches(px, py, r, eux[hi], euy[hi], rho)):
             half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw) + 1e-12
             wlo = _first_at_least(eb, a - half, False)
-            whi = min(_first_at_least(eb, a + half, True), wlo + n_ref)  # a point once
-            b, d = _window_min(px, py, ex, ey, ek, wlo, min(whi, len(eb)))
-            if d < d2:
-                best, d2 = b, d
+            whi = min(_first_at_least(eb, a + half, True), wlo + n_ref, len(eb))  # a point once
+            # [lo, hi) is searched: its two sides only (a tie there keeps the first search's point,
+            # as a search of the whole window would)
+            for s_lo, s_hi in ((wlo, min(lo, whi)), (max(hi, wlo), whi)):
+                b, d = _window_min(px, py, ex, ey, ek, s_lo, s_hi)
+                if d < d2:
+                    best, d2 = b, d
         if d2 < np.inf:
             idx[i], out[i] = ext_map[best], max(d2, 0.0)
         else:

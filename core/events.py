@@ -169,6 +169,7 @@ class IterationEvent:
     polar: PolarStep | None = None  # PSM / PMWN only
     note: str = ""  # what else happened, in words (ICP / PL-ICP: a restart began, the run kept)
     held: HeldDirection | None = None  # improved MbICP with hold_weak: the direction its step left alone
+    extrapolated: float = 0.0  # improved MbICP with extrapolate: the step went on by this many times its own length
 
 
 @dataclass(frozen=True, eq=False)

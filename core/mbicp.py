@@ -24,7 +24,7 @@ from .scan import Scan
 from .se2 import Pose2
 from .stopping import CYCLE_PERIOD_MAX, remember, returned
 from .tiers import kernel, run
-from .uncertainty import FinalSystem, build_result, surface_tangents
+from .uncertainty import FinalSystem, build_result, surface_information, surface_tangents
 
 # Projection filter: a point more than this behind the nearest one in its bearing bin is hidden.
 PROJECTION_MARGIN_M = 0.2
@@ -64,12 +64,12 @@ def rejection_floor(Br: float, mad_floor: float, mad_anneal: float, iteration: i
 def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours, full, max_factor, max_step, bin_start,
           bin_width, projection, zbuffer, point_line, mad, p, ref_tangents, trace):
     """The iterations from (x, y, th). ``p``: (MaxIter, L, Bw, Br, MaxDistInter, filter, AsocError,
-    errorRatio, IterSmoothConv, errx, erry, errt, mad_k, mad_floor, mad_anneal, hold_weak). Returns the
+    errorRatio, IterSmoothConv, errx, erry, errt, mad_k, mad_floor, mad_anneal, hold_weak, extrapolate). Returns the
     estimate, how it ended, the iterations run and the last solved system. ``trace`` records each
     iteration when it has rows (see ``_trace``)."""
     max_iter, L, Bw, Br, max_inter, keep, asoc = int(p[0]), p[1], p[2], p[3], p[4], p[5], p[6]
     ratio, smooth, errx, erry, errt, mad_k, mad_floor, mad_anneal = p[7], p[8], p[9], p[10], p[11], p[12], p[13], p[14]
-    hold = p[15]
+    hold, accelerate = p[15], p[16]
     record = len(trace[0]) > 0
     n = len(P)
     recent = np.zeros((CYCLE_PERIOD_MAX - 1, 3))
@@ -77,6 +77,7 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
     A_last, err_last, targets_last = np.zeros((3, 3)), np.nan, np.zeros((0, 2))
     ref_last, kept_last, rejected_last, solved = np.zeros(0, np.int64), 0, 0, False
     moved, alpha, rng = np.empty((n, 2)), np.empty(n), np.empty(n)
+    d_prev, have_prev = np.zeros(3), False
     for it in range(1, max_iter + 1):
         c, s = np.cos(th), np.sin(th)
         for i in range(n):
@@ -100,6 +101,7 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
         step_ok = False
         ix, iy, ith, error = 0.0, 0.0, 0.0, np.nan
         held = np.zeros(4)
+        factor = 0.0
         A = np.zeros((3, 3))
         if n_within >= asoc * len(rows) and len(kept) >= 3:
             pk, ck = moved[obj_rows[kept]], target[kept]
@@ -109,6 +111,9 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
                 held = _hold_weak(ck, ref_index[kept, 0], ref_tangents, L, hold, step)
             if step_ok:
                 ix, iy, ith = step[0], step[1], (step[2] + np.pi) % (2.0 * np.pi) - np.pi
+                if accelerate > 0.0 and not (abs(ix) < errx and abs(iy) < erry and abs(ith) < errt):
+                    ix, iy, ith, factor = _extrapolate(x, y, th, ix, iy, ith, d_prev, have_prev, L, accelerate)
+                    have_prev = True
                 ci, si = np.cos(ith), np.sin(ith)
                 err = 0.0
                 for k in range(len(kept)):
@@ -124,7 +129,7 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
         nth = (ith + th + np.pi) % (2.0 * np.pi) - np.pi
         if record:
             _record(trace, it - 1, (x, y, th, nx, ny, nth, ix, iy, ith), vis, obj_rows, target, kind, ref_index, dist,
-                    status, thr, error, held)
+                    status, thr, error, held, factor)
         if not step_ok:
             break
         bx, by, bth = x, y, th
@@ -159,13 +164,7 @@ def _hold_weak(targets, ref, ref_tangents, L, hold, step):
     axis, paper 000 §3.3): the estimate keeps its value there. MbICP's point pairs constrain every
     direction, wrongly where a wall offers no point opposite: they are why a corridor shortens.
     (condition, direction) when held, else zeros."""
-    H = np.zeros((3, 3))
-    for k in range(len(targets)):
-        nx, ny = -ref_tangents[ref[k], 1], ref_tangents[ref[k], 0]
-        row = (nx, ny, (nx * -targets[k, 1] + ny * targets[k, 0]) / L)  # n^T J in (x, y, L theta)
-        for i in range(3):
-            for j in range(3):
-                H[i, j] += row[i] * row[j]
+    H = surface_information(targets, ref_tangents[ref], L)
     cond, v = weakest_direction(H, 1.0)
     out = np.zeros(4)
     if cond > hold:
@@ -177,9 +176,35 @@ def _hold_weak(targets, ref, ref_tangents, L, hold, step):
 
 
 @kernel
-def _record(trace, k, poses_k, vis, rows, target, kind, ref_index, dist, status, thr, error, held):
+def _extrapolate(x, y, th, ix, iy, ith, d_prev, have_prev, L, most):
+    """Aitken's extrapolation of a linearly converging iteration, as Besl & McKay's accelerated ICP
+    (PAMI 1992, §IV-C) applies it: MbICP's steps shrink by a near-constant ratio r along a
+    corridor-like slow direction (its point pairs slide), so when this step d (in x, y, L theta)
+    points within 90 degrees of the previous one and is shorter, the estimate moves on by
+    d r / (1 - r) (the rest of the geometric series), at most ``most`` times d. Returns the
+    composed increment and the factor applied (0: none); ``d_prev`` becomes this step."""
+    ci, si = np.cos(ith), np.sin(ith)
+    d = np.array([ix + ci * x - si * y - x, iy + si * x + ci * y - y, L * ith])
+    factor = 0.0
+    if have_prev:
+        n2, p2, dp = d @ d, d_prev @ d_prev, d @ d_prev
+        if dp > 0.0 and n2 < p2:
+            r = np.sqrt(n2 / p2)
+            factor = min(r / (1.0 - r), most)
+    d_prev[:] = d
+    if factor == 0.0:
+        return ix, iy, ith, 0.0
+    nx, ny = x + (1.0 + factor) * d[0], y + (1.0 + factor) * d[1]
+    jth = ((1.0 + factor) * ith + np.pi) % (2.0 * np.pi) - np.pi
+    cj, sj = np.cos(jth), np.sin(jth)
+    return nx - (cj * x - sj * y), ny - (sj * x + cj * y), jth, factor
+
+
+@kernel
+def _record(trace, k, poses_k, vis, rows, target, kind, ref_index, dist, status, thr, error, held, factor):
     """Iteration ``k`` into the trace, element by element (slice assignments are slow to compile)."""
-    poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors, holds = trace
+    poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors, holds, factors = trace
+    factors[k] = factor
     for c in range(4):
         holds[k, c] = held[c]
     for c in range(9):
@@ -199,7 +224,7 @@ def _trace(iterations: int, n: int):
     return (np.zeros((iterations, 9)), np.zeros((iterations, n), np.bool_), np.zeros(iterations, np.int64),
             np.zeros((iterations, n), np.int64), np.zeros((iterations, n, 2)), np.zeros((iterations, n), np.int8),
             np.zeros((iterations, n, 2), np.int64), np.zeros((iterations, n)), np.zeros((iterations, n), np.int8),
-            np.zeros(iterations), np.zeros(iterations), np.zeros((iterations, 4)))
+            np.zeros(iterations), np.zeros(iterations), np.zeros((iterations, 4)), np.zeros(iterations))
 
 
 def _run(R: ReferenceIndex, P: np.ndarray, guess: Pose2, params: MbicpParams, improved: bool, trace):
@@ -208,7 +233,8 @@ def _run(R: ReferenceIndex, P: np.ndarray, guess: Pose2, params: MbicpParams, im
     p = np.array([params.MaxIter, params.L, params.Bw, params.Br, params.MaxDistInter, params.filter,
                   params.AsocError, params.errorRatio, params.IterSmoothConv, params.errx_out, params.erry_out,
                   params.errt_out, params.mad_k if improved else 0.0, params.mad_floor if improved else 0.0,
-                  params.mad_anneal if improved else 0.0, params.hold_weak if improved else 0.0])
+                  params.mad_anneal if improved else 0.0, params.hold_weak if improved else 0.0,
+                  params.extrapolate if improved else 0.0])
     bin_start = float(R.bearings[0]) if len(R.bearings) else 0.0
     hold = improved and params.hold_weak > 0
     tangents = surface_tangents(R.points, R.full_circle, np.arange(len(R.points))) if hold else np.zeros((0, 2))
@@ -250,7 +276,7 @@ def _replay(observer, R, P, used, guess, params, improved, iterations) -> None:
     """The loop again, recorded, as one IterationEvent per iteration."""
     trace = _trace(iterations, len(P))
     _run(R, P, guess, params, improved, trace)
-    poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors, holds = trace
+    poses, visible, count, prow, ptarget, pkind, pref, pdist, pstatus, thresholds, errors, holds, factors = trace
     for k in range(iterations):
         before, after, inc = Pose2(*poses[k, :3]), Pose2(*poses[k, 3:6]), Pose2(*poses[k, 6:])
         moved = before.apply(P)
@@ -261,4 +287,4 @@ def _replay(observer, R, P, used, guess, params, improved, iterations) -> None:
         held = HeldDirection(float(holds[k, 0]), tuple(float(c) for c in holds[k, 1:]), params.L) if holds[k, 0] else None
         observer(IterationEvent(k + 1, before, after, moved, used[~visible[k]], pairs,
                                 None if np.isnan(thresholds[k]) else float(thresholds[k]), float(errors[k]), inc,
-                                held=held))
+                                held=held, extrapolated=float(factors[k])))

@@ -54,10 +54,9 @@ def metric_exact_sq(p1: np.ndarray, p2: np.ndarray, L: float, max_theta: float =
 
 
 @kernel
-def kth_smallest(a: np.ndarray, k: int) -> float:
-    """``np.sort(a)[k]`` by selection (Hoare's quickselect on a copy): linear time, and a loop
-    numba compiles in a tenth of a second where its sort, median and argsort take one each."""
-    b = a.copy()
+def _select(b: np.ndarray, k: int) -> float:
+    """Hoare's quickselect in place: afterwards b[k] = np.sort(b)[k], nothing after it is smaller
+    and nothing before it larger."""
     lo, hi = 0, len(b) - 1
     while lo < hi:
         pivot = b[(lo + hi) // 2]
@@ -81,9 +80,26 @@ def kth_smallest(a: np.ndarray, k: int) -> float:
 
 
 @kernel
+def kth_smallest(a: np.ndarray, k: int) -> float:
+    """``np.sort(a)[k]`` by selection on a copy: linear time, and a loop numba compiles in a tenth
+    of a second where its sort, median and argsort take one each."""
+    return _select(a.copy(), k)
+
+
+@kernel
 def median(a: np.ndarray) -> float:
+    """``np.median(a)``: the middle element, or the two middle ones halved; one selection finds
+    the lower, the smallest of what lies after it is the upper."""
     n = len(a)
-    return 0.5 * (kth_smallest(a, (n - 1) // 2) + kth_smallest(a, n // 2))
+    b = a.copy()
+    k = (n - 1) // 2
+    low = _select(b, k)
+    if n % 2 == 1:
+        return low
+    high = b[k + 1]
+    for i in range(k + 2, n):
+        high = min(high, b[i])
+    return 0.5 * (low + high)
 
 
 @kernel
@@ -91,17 +107,6 @@ def mad_threshold(distances: np.ndarray, k: float = 2.0) -> float:
     """Rejection threshold d_rej = median + k * MAD (paper 000 eq. 5, §2.4.2)."""
     med = median(distances)
     return med + k * median(np.abs(distances - med))
-
-
-def linearised_jacobians(points: np.ndarray) -> np.ndarray:
-    """(N, 2, 3) Jacobians of q(p) ~ p + (x - theta p_y, y + theta p_x) at q = 0."""
-    n = len(points)
-    J = np.zeros((n, 2, 3))
-    J[:, 0, 0] = 1.0
-    J[:, 1, 1] = 1.0
-    J[:, 0, 2] = -points[:, 1]
-    J[:, 1, 2] = points[:, 0]
-    return J
 
 
 @kernel

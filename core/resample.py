@@ -70,13 +70,32 @@ def _resample(rc, sensor, order, cell_id):
     return cells, ratio, count, n_keep, kept
 
 
+@kernel
+def _cells(points, cell_size: float):
+    """Each point's cell (row = y, column = x) counted from the bounding rectangle's corner, the
+    sensor's cell, a cell id in row-major order, and that corner."""
+    n = len(points)
+    origin = np.empty(2)
+    for c in range(2):
+        origin[c] = np.inf
+        for i in range(n):
+            origin[c] = min(origin[c], points[i, c])
+    rc, cell_id = np.empty((n, 2), dtype=np.int64), np.empty(n, dtype=np.int64)
+    n_cols = 0
+    for i in range(n):
+        rc[i, 0] = int(np.floor((points[i, 1] - origin[1]) / cell_size))
+        rc[i, 1] = int(np.floor((points[i, 0] - origin[0]) / cell_size))
+        n_cols = max(n_cols, rc[i, 1] + 1)
+    for i in range(n):
+        cell_id[i] = rc[i, 0] * n_cols + rc[i, 1]
+    sensor = np.empty(2, dtype=np.int64)
+    sensor[0], sensor[1] = int(np.floor((0.0 - origin[1]) / cell_size)), int(np.floor((0.0 - origin[0]) / cell_size))
+    return rc, sensor, cell_id, origin
+
+
 def grid_resample(points: np.ndarray, cell_size: float) -> Resampling:
     """Resample sensor-frame ``points`` (scan order) on a grid of ``cell_size`` metres."""
-    origin = points.min(axis=0)
-    rc = np.floor((points - origin) / cell_size).astype(np.int64)[:, ::-1]  # (row=y, col=x)
-    sensor = np.floor((np.zeros(2) - origin) / cell_size).astype(np.int64)[::-1]
-    cell_id = rc[:, 0] * (int(rc[:, 1].max()) + 1) + rc[:, 1]
+    rc, sensor, cell_id, origin = run(_cells, np.ascontiguousarray(points, dtype=float), float(cell_size))
     order = np.argsort(cell_id, kind="stable")  # stable: scan order inside each cell
-    cells, ratio, count, n_keep, kept = run(_resample, np.ascontiguousarray(rc), np.ascontiguousarray(sensor), order,
-                                            cell_id)
+    cells, ratio, count, n_keep, kept = run(_resample, rc, sensor, order, cell_id)
     return Resampling(origin, float(cell_size), cells, sensor, ratio, count, n_keep, kept)

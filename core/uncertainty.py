@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .metric import linearised_jacobians
 from .result import Degeneracy, MatchResult, Termination
 from .se2 import Pose2
+from .tiers import kernel, run
 
 # Length that scales rotation in the degeneracy indicator of the matchers without a metric length
 # (ICP, PSM, PMWN): MbICP's default L, so that indicators compare across matchers.
@@ -34,33 +34,47 @@ def surface_tangents(points: np.ndarray, full_circle: bool, at: np.ndarray) -> n
     """Unit surface direction at the scan points ``at`` (central differences in scan order; one-sided
     at the ends of a partial scan); (1, 0) where neighbours coincide. Only where asked: the final
     pairs' targets are a fraction of the scan."""
+    return run(_tangents, points, bool(full_circle), np.asarray(at, dtype=np.int64))
+
+
+@kernel
+def _tangents(points, full_circle, at):
     n = len(points)
-    after, before = at + 1, at - 1
-    if full_circle:
-        after %= n
-        before %= n
-    else:
-        np.minimum(after, n - 1, out=after)
-        np.maximum(before, 0, out=before)
-    t = points[after] - points[before]
-    norm = np.hypot(t[:, 0], t[:, 1])
-    return np.where(norm[:, None] > 0, t / np.where(norm > 0, norm, 1.0)[:, None], np.array([1.0, 0.0]))
+    out = np.empty((len(at), 2))
+    for k in range(len(at)):
+        after, before = at[k] + 1, at[k] - 1
+        if full_circle:
+            after, before = after % n, before % n
+        else:
+            after, before = min(after, n - 1), max(before, 0)
+        tx, ty = points[after, 0] - points[before, 0], points[after, 1] - points[before, 1]
+        norm = np.hypot(tx, ty)
+        out[k, 0], out[k, 1] = (tx / norm, ty / norm) if norm > 0 else (1.0, 0.0)
+    return out
+
+
+@kernel
+def surface_information(targets: np.ndarray, tangents: np.ndarray, L: float) -> np.ndarray:
+    """H = sum of r_i r_i^T with r_i = n_i^T J_i in (x, y, L theta): what the surfaces under the
+    targets fix of the motion (n_i the normal, perpendicular to the tangent; J_i the Jacobian of the
+    moved target, ``metric.linearised_jacobians``). A pair constrains its surface's normal only:
+    motion along a wall is free."""
+    H = np.zeros((3, 3))
+    for k in range(len(targets)):
+        nx, ny = -tangents[k, 1], tangents[k, 0]
+        row = (nx, ny, (nx * -targets[k, 1] + ny * targets[k, 0]) / L)
+        for i in range(3):
+            for j in range(3):
+                H[i, j] += row[i] * row[j]
+    return H
 
 
 def degeneracy(targets: np.ndarray, tangents: np.ndarray, L: float) -> Degeneracy | None:
-    """Point-to-line information of the final pairs, in (x, y, L*theta) (see ``Degeneracy``).
-
-    ``tangents`` are the reference surface directions at the targets; the normal n_i is their
-    perpendicular, and each pair constrains n_i^T J_i q only: motion along a wall is free.
-    """
+    """Point-to-line information of the final pairs, in (x, y, L*theta) (see ``Degeneracy``):
+    its condition number, eigenvalues and weakest direction."""
     if len(targets) < 3:
         return None
-    n = np.column_stack((-tangents[:, 1], tangents[:, 0]))
-    J = linearised_jacobians(targets)
-    J[:, :, 2] /= L  # coordinates (x, y, L*theta)
-    rows = np.einsum("ij,ijk->ik", n, J)  # n_i^T J_i, (N, 3)
-    H = rows.T @ rows
-    w, V = np.linalg.eigh(H)
+    w, V = np.linalg.eigh(run(surface_information, targets, tangents, float(L)))
     w = np.maximum(w, 0.0)
     cond = float(w[-1] / w[0]) if w[0] > 1e-12 * max(w[-1], 1e-300) else float("inf")
     v = V[:, 0] * (1 if V[np.argmax(np.abs(V[:, 0])), 0] >= 0 else -1)

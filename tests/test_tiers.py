@@ -13,8 +13,9 @@ import pytest
 
 from mbicp_viz.core import MATCHERS, Pose2, Recorder, tiers
 from mbicp_viz.readers import read_log
+from mbicp_viz.readers.params_toml import load_params
 
-from .conftest import EXAMPLES, INTEL, interpreted_kernels, wait_for
+from .conftest import DATA, EXAMPLES, INTEL, interpreted_kernels, wait_for
 
 HOKUYO = EXAMPLES / "hokuyo-125-130.npz"
 
@@ -40,6 +41,18 @@ def test_interpreted_kernels_compute_what_the_compiled_ones_do(name):
         assert np.allclose(interpreted.pose.as_array(), compiled.pose.as_array(), rtol=0, atol=1e-12)
         assert (interpreted.iterations, interpreted.reason) == (compiled.iterations, compiled.reason)
         assert len(events.iterations) == compiled.iterations
+
+
+@pytest.mark.parametrize("option", ["poor-guess.toml", "hold-corridor.toml"])
+def test_interpreted_kernels_follow_the_compiled_ones_through_improved_mbicps_options(option):
+    """The options' code paths too (extrapolated steps, held directions): the same iterations."""
+    params = load_params(DATA / option, "improved")
+    for ref, obj, guess in _cases():
+        compiled, events = MATCHERS["improved"].run(ref, obj, guess, params), Recorder()
+        with interpreted_kernels():
+            interpreted = MATCHERS["improved"].run(ref, obj, guess, params, events)
+        assert np.allclose(interpreted.pose.as_array(), compiled.pose.as_array(), rtol=0, atol=1e-12)
+        assert (interpreted.iterations, interpreted.reason) == (compiled.iterations, compiled.reason)
 
 
 def _background_pid(cache) -> int | None:
