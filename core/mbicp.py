@@ -177,11 +177,12 @@ def _hold_weak(targets, ref, ref_tangents, L, hold, step):
 
 @kernel
 def _extrapolate(x, y, th, ix, iy, ith, d_prev, have_prev, L, most):
-    """Aitken's extrapolation of a linearly converging iteration, as Besl & McKay's accelerated ICP
-    (PAMI 1992, §IV-C) applies it: MbICP's steps shrink by a near-constant ratio r along a
-    corridor-like slow direction (its point pairs slide), so when this step d (in x, y, L theta)
-    points within 90 degrees of the previous one and is shorter, the estimate moves on by
-    d r / (1 - r) (the rest of the geometric series), at most ``most`` times d. Returns the
+    """Aitken's extrapolation of a linearly converging iteration, in the spirit of Besl & McKay's
+    accelerated ICP (PAMI 1992), which extrapolates along successive steps that keep their
+    direction. MbICP's steps shrink by a near-constant ratio r while its point pairs slide (they
+    pull towards reference points, not lines), so when this step d (in x, y, L theta) points
+    within 90 degrees of the previous one and is shorter, the estimate moves on by d r / (1 - r),
+    the rest of the geometric series, at most ``most`` times d. Returns the
     composed increment and the factor applied (0: none); ``d_prev`` becomes this step."""
     ci, si = np.cos(ith), np.sin(ith)
     d = np.array([ix + ci * x - si * y - x, iy + si * x + ci * y - y, L * ith])

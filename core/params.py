@@ -225,7 +225,7 @@ class ImprovedParams(MbicpParams):
     extrapolate: float = param(0.0, unit="1", lo=0.0, hi=100.0,
         help="0: off, as published; else an iteration whose step points within 90 degrees of the previous one and "
              "is shorter (ratio r) goes on by r/(1-r) times its length, at most this many: Aitken's extrapolation, "
-             "as in Besl & McKay's accelerated ICP (1992); fewer iterations along slowly converging directions")
+             "after Besl & McKay's accelerated ICP (1992); fewer iterations along slowly converging directions")
 
 
 @dataclass(frozen=True)

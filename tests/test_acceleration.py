@@ -1,4 +1,4 @@
-"""Improved MbICP's ``extrapolate`` (Aitken, as Besl & McKay's accelerated ICP): a step that follows
+"""Improved MbICP's ``extrapolate`` (Aitken, after Besl & McKay's accelerated ICP): a step that follows
 the previous one and is shorter goes on by the rest of their geometric series; fewer iterations to
 the same answers on real pairs, and every front end says which steps were extrapolated."""
 
@@ -95,3 +95,32 @@ def test_off_by_default_as_published(laserazos):
     rec = Recorder()
     match(laserazos.scan(0), laserazos.scan(1), Pose2(0.2, -0.1, 0.2), ImprovedParams(), rec)
     assert rec.iterations and not any(ev.extrapolated for ev in rec.iterations)
+
+
+def test_match_and_the_debugger_say_which_steps_went_on(laserazos):
+    """``match``'s iteration lines and the debugger's playback text (the recordings' text log is
+    the same sentence) name the extrapolated steps and their factor."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app
+    from mbicp_viz.views.debugger.state import DebugState, Source
+
+    option = DATA / "poor-guess.toml"
+    res = CliRunner().invoke(app, ["match", str(DATA / "laserazosSM3-40.log"), "--pair", "5", "6", "--algo", "improved",
+                                   "--params", str(option), "--init", "0.2", "-0.1", "10"])
+    assert res.exit_code == 0, res.output
+    marked = [line for line in res.stdout.splitlines() if "extrapolated x" in line]
+    assert marked and all(float(line.rsplit("x", 1)[1]) > 1.0 for line in marked)
+
+    params = load_params(option, "improved")
+    state = DebugState(Source("laserazos", laserazos, guess=Pose2(0.2, -0.1, math.radians(10.0)),
+                              params={"improved": params}))
+    assert state.set_pair(5, 6) is None
+    assert state.set_guess(Pose2(0.2, -0.1, math.radians(10.0))) is None
+    texts = []
+    for k in range(1, state.max_iteration() + 1):
+        state.iteration = k
+        ev = state.event(state.runs[0])
+        texts.append((ev.extrapolated, state.iteration_text(state.runs[0])))
+    assert any(f for f, _ in texts)
+    assert all(("extrapolated" in t) == bool(f) for f, t in texts)

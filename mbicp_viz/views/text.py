@@ -70,7 +70,8 @@ def iteration_line(e: IterationEvent) -> str:
     n = len(p.kind)
     kept = p.count(status=PairStatus.KEPT)
     return (f"{e.iteration:>3} {n:>5} {p.count(kind=PairKind.INTERPOLATED):>6} {kept:>5} {n - kept:>8} {thr:>11} "
-            f"{e.error:>10.3e} {e.increment.x:>+9.4f} {e.increment.y:>+9.4f} {math.degrees(e.increment.theta):>+10.4f}")
+            f"{e.error:>10.3e} {e.increment.x:>+9.4f} {e.increment.y:>+9.4f} {math.degrees(e.increment.theta):>+10.4f}"
+            + (f"  extrapolated x{1.0 + e.extrapolated:.2f}" if e.extrapolated else ""))
 
 
 def iteration_text(ev: IterationEvent) -> str:
