@@ -314,3 +314,23 @@ def test_a_tab_that_matches_interpreted_says_so_until_the_kernels_are_compiled(b
     session.compiled()  # what the server does when the background compile ends
     notice.wait_for(state="detached", timeout=30000)
     page.close()
+
+
+def test_extrapolated_steps_are_named_in_the_playback_text(browser, app):
+    """Typing ``extrapolate`` re-matches with it (the box sends the number), and the playback text
+    of an extrapolated iteration says so, with its factor, as a person reads it."""
+    page, session = open_tab(browser, app)
+    assert not any(e.extrapolated for e in session.state.runs[0].iterations)  # off by default
+    type_into(page, "extrapolate", "3")
+    assert wait_for(lambda: session.state.params["improved"].extrapolate == 3.0)
+    assert wait_for(lambda: any(e.extrapolated for e in session.state.runs[0].iterations))
+    ev = next(e for e in session.state.runs[0].iterations if e.extrapolated)
+    slider = page.get_by_role("slider").first
+    slider.focus()
+    slider.press("Home")
+    for _ in range(ev.iteration):
+        slider.press("ArrowRight")
+    assert wait_for(lambda: session.state.iteration == ev.iteration)
+    page.get_by_text(f"went on to {1.0 + ev.extrapolated:.2f} times its length").first.wait_for(timeout=10000)
+    assert float(box(page, "extrapolate").input_value()) == session.state.params["improved"].extrapolate
+    page.close()

@@ -86,8 +86,8 @@ def iteration_text(ev: IterationEvent) -> str:
             f"step ({ev.increment.x:+.4f} m, {ev.increment.y:+.4f} m, {math.degrees(ev.increment.theta):+.3f} deg)"
             + (f"; held along heading {ev.held.heading_deg:+.0f} deg (surface condition number "
                f"{ev.held.condition_number:.0f}): the step left the guess's value there" if ev.held else "")
-            + (f"; extrapolated: the step is {1.0 + ev.extrapolated:.2f} times MbICP's own, which was shorter than "
-               f"the one before in about the same direction (Aitken)" if ev.extrapolated else "")
+            + (f"; extrapolated (Aitken): MbICP's own step was shorter than the one before and within 90 deg of it, "
+               f"so the step went on to {1.0 + ev.extrapolated:.2f} times its length" if ev.extrapolated else "")
             + (f"; {ev.note}" if ev.note else ""))
 
 
