@@ -50,3 +50,19 @@ def test_regular_picks_are_first_last_and_evenly_spaced(n, data):
         assert picked[-1] == n - 1
         gaps = np.diff(picked)
         assert gaps.max() - gaps.min() <= 1
+
+
+def test_no_points_no_cells(laserazos):
+    """An object scan with nothing within the matcher's range: no cells, and the match ends as one
+    with too few pairs (no traceback, no undefined sensor cell)."""
+    import dataclasses
+
+    from mbicp_viz.core import ImprovedParams, Pose2, Recorder, Termination, match
+
+    rs = grid_resample(np.zeros((0, 2)), 0.1)
+    assert len(rs.cells) == 0 and len(rs.kept) == 0 and rs.sensor_cell.tolist() == [0, 0]
+    far = dataclasses.replace(laserazos.scan(1), ranges=laserazos.scan(1).ranges + 50.0)
+    rec = Recorder()
+    r = match(laserazos.scan(0), far, Pose2(), ImprovedParams(max_range=20.0), rec)
+    assert r.reason is Termination.TOO_FEW_PAIRS and not r.converged
+    assert len(rec.start.resampling.kept) == 0
