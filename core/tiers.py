@@ -2,7 +2,7 @@
 
 numba compiles a kernel at its first call and keeps the machine code in its cache (beside the
 module, or under ``NUMBA_CACHE_DIR``). The matchers' loops take 9 s (improved MbICP) to 21 s (all
-six) to compile on a 2-core machine: after an install, a person's first match would stall that
+six) to compile on a 2-core machine (the background compile, 23 s as last measured): after an install, a person's first match would stall that
 long. So there are two tiers, as in a JIT-compiled language runtime:
 
 - **eager** (the default, and what batch work wants: evaluations, tuning, tests): a kernel is
