@@ -77,6 +77,7 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
     A_last, err_last, targets_last = np.zeros((3, 3)), np.nan, np.zeros((0, 2))
     ref_last, kept_last, rejected_last, solved = np.zeros(0, np.int64), 0, 0, False
     moved, alpha, rng = np.empty((n, 2)), np.empty(n), np.empty(n)
+    rows_all, v_moved, v_alpha, v_rng = np.empty(n, np.int64), np.empty((n, 2)), np.empty(n), np.empty(n)
     d_prev, have_prev = np.zeros(3), False
     for it in range(1, max_iter + 1):
         c, s = np.cos(th), np.sin(th)
@@ -89,10 +90,15 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
             vis = visible_from_reference(alpha, rng, bin_start, bin_width, PROJECTION_MARGIN_M)
         else:
             vis = visible_in_order(alpha)
-        rows = np.flatnonzero(vis)
+        m = 0
+        for i in range(n):  # the visible points, gathered into buffers kept across iterations
+            if vis[i]:
+                rows_all[m], v_moved[m, 0], v_moved[m, 1], v_alpha[m], v_rng[m] = i, moved[i, 0], moved[i, 1], alpha[i], rng[i]
+                m += 1
+        rows = rows_all[:m]
         found, target, kind, ref_index, d2 = candidates(
-            point_line, moved[rows], alpha[rows], rng[rows], eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours, full,
-            max_factor, max_step, Bw, Br, L, max_inter)
+            point_line, v_moved[:m], v_alpha[:m], v_rng[:m], eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours,
+            full, max_factor, max_step, Bw, Br, L, max_inter)
         obj_rows, dist = rows[found], np.sqrt(np.maximum(d2, 0.0))
         status, thr = reject(dist, Br, keep, mad, mad_k, rejection_floor(Br, mad_floor, mad_anneal, it) if mad else 0.0)
         kept = np.flatnonzero(status == KEPT)

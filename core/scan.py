@@ -38,13 +38,8 @@ class Scan:
 
     def points(self) -> np.ndarray:
         """(M, 2) Cartesian points of the valid readings, in scan order, sensor frame."""
-        return self.points_and_directions()[0]
-
-    def points_and_directions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``points()`` and the cosines and sines of the valid readings' bearings it was made of."""
         r, b = self.ranges[self.valid], self.bearings[self.valid]
-        c, s = np.cos(b), np.sin(b)
-        return np.column_stack((r * c, r * s)), c, s
+        return np.column_stack((r * np.cos(b), r * np.sin(b)))
 
     def within(self, max_range: float) -> "Scan":
         """This scan without the readings at or beyond ``max_range`` (a matcher's range limit)."""
