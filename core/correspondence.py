@@ -41,47 +41,39 @@ class ReferenceIndex:
 
     @staticmethod
     def build(scan: Scan, L: float) -> "ReferenceIndex":
+        pts, b = scan.points(), scan.bearings[scan.valid]
         full = scan.is_full_circle()
-        r, b, v = (np.ascontiguousarray(a) for a in (scan.ranges, scan.bearings, scan.valid))  # one compiled layout
-        *fields, neighbours = run(_reference, r, b, v, float(L), full)
-        return ReferenceIndex(*fields, full, neighbours)
+        *extended, neighbours = run(_extended, pts, b, float(L), full)
+        return ReferenceIndex(pts, b, *extended, full, neighbours)
 
 
 @kernel
-def _reference(ranges, bearings, valid, L: float, full: bool):
-    """``ReferenceIndex``'s fields but ``full_circle``, in one pass: the valid readings' points
-    (``Scan.points()``: r cos b, r sin b), their bearings, and over the three turns the bearings,
-    point index, x, y, |q|^2 + L^2 and the bearing's cosine and sine; sqrt(max |q|^2 + L^2) / L,
-    the widest bearing step (1 and 2 pi without points) and the scan neighbours."""
-    n = 0
-    for i in range(len(ranges)):
-        n += valid[i]
-    pts, b, c, s, k = np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    m = 0
-    for i in range(len(ranges)):
-        if valid[i]:
-            b[m], c[m], s[m] = bearings[i], np.cos(bearings[i]), np.sin(bearings[i])
-            pts[m, 0], pts[m, 1] = ranges[i] * c[m], ranges[i] * s[m]
-            k[m] = pts[m, 0] * pts[m, 0] + pts[m, 1] * pts[m, 1] + L * L
-            m += 1
+def _extended(pts, b, L: float, full: bool):
+    """``ReferenceIndex``'s arrays over the three turns (bearings, point index, x, y, |q|^2 + L^2,
+    the bearing's unit direction), sqrt(max |q|^2 + L^2) / L, the widest bearing step (1 and
+    2 pi without points) and the scan neighbours (-1 past the ends of a partial scan)."""
+    n = len(b)
     ext_b, ext_map = np.empty(3 * n), np.empty(3 * n, dtype=np.int64)
     ext_x, ext_y, ext_k, ext_ux, ext_uy = np.empty(3 * n), np.empty(3 * n), np.empty(3 * n), np.empty(3 * n), np.empty(3 * n)
-    for t in range(3):
-        for i in range(n):
+    k_max = 0.0
+    for i in range(n):
+        k = pts[i, 0] * pts[i, 0] + pts[i, 1] * pts[i, 1] + L * L
+        c, s = np.cos(b[i]), np.sin(b[i])
+        k_max = max(k_max, k)
+        for t in range(3):
             e = t * n + i
             ext_b[e] = b[i] + (t - 1) * (2 * np.pi) if t != 1 else b[i]
-            ext_map[e], ext_x[e], ext_y[e], ext_k[e], ext_ux[e], ext_uy[e] = i, pts[i, 0], pts[i, 1], k[i], c[i], s[i]
+            ext_map[e], ext_x[e], ext_y[e], ext_k[e], ext_ux[e], ext_uy[e] = i, pts[i, 0], pts[i, 1], k, c, s
     nb = np.empty((n, 2), dtype=np.int64)
     for i in range(n):
         for q, j in enumerate((i - 1, i + 1)):
             nb[i, q] = j % n if full else (j if 0 <= j < n else -1)
-    max_factor, max_step = 1.0, 2 * np.pi
-    if n > 0:
-        max_step = -np.inf
-        for i in range(1, 3 * n):
-            max_step = max(max_step, ext_b[i] - ext_b[i - 1])
-        max_factor = np.sqrt(k.max()) / L
-    return pts, b, ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, max_factor, max_step, nb
+    if n == 0:
+        return ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, 1.0, 2 * np.pi, nb
+    max_step = -np.inf
+    for i in range(1, 3 * n):
+        max_step = max(max_step, ext_b[i] - ext_b[i - 1])
+    return ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, np.sqrt(k_max) / L, max_step, nb
 
 
 # Candidates tried first around each point's bearing: the K reference beams on either side.

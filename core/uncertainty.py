@@ -56,9 +56,9 @@ def _tangents(points, full_circle, at):
 @kernel
 def surface_information(targets: np.ndarray, tangents: np.ndarray, L: float) -> np.ndarray:
     """H = sum of r_i r_i^T with r_i = n_i^T J_i in (x, y, L theta): what the surfaces under the
-    targets fix of the motion (n_i the normal, perpendicular to the tangent; J_i the Jacobian of the
-    moved target, ``metric.linearised_jacobians``). A pair constrains its surface's normal only:
-    motion along a wall is free."""
+    targets fix of the motion (n_i the normal, perpendicular to the tangent; J_i = [[1, 0, -y_i],
+    [0, 1, x_i]] the Jacobian of the target moved by a small (x, y, theta)). A pair constrains its
+    surface's normal only: motion along a wall is free."""
     H = np.zeros((3, 3))
     for k in range(len(targets)):
         nx, ny = -tangents[k, 1], tangents[k, 0]

@@ -83,8 +83,9 @@ def main() -> None:
     ap.add_argument("--params", type=Path, help="improved MbICP's parameters (a --params file) for its last line")
     a = ap.parse_args()
     log = read_log(a.log)
-    log.scans = [dataclasses.replace(s, ranges=s.ranges[::a.every], bearings=s.bearings[::a.every],
-                                     valid=s.valid[::a.every], beam_times=None) for s in log.scans]
+    if a.every > 1:  # copies: the kernels take contiguous arrays (a strided view would compile them anew)
+        log.scans = [dataclasses.replace(s, ranges=s.ranges[::a.every].copy(), bearings=s.bearings[::a.every].copy(),
+                                         valid=s.valid[::a.every].copy(), beam_times=None) for s in log.scans]
     idx = log.consecutive_pairs(a.limit)
     guesses = bench_guesses(log, idx, (a.perturb[0], math.radians(a.perturb[1])), a.seed)
     pairs = [(log.scan(i), log.scan(j), g) for (i, j), g in zip(idx, guesses)]
