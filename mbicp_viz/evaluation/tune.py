@@ -160,6 +160,8 @@ def suggested(trial, base: Params, space: list[Dimension]) -> Params:
 
 
 SQLITE_WAIT_S = 60.0
+# PostgreSQL's errors for an object another worker created first: duplicate type, duplicate table
+RACED = {"42710", "42P07"}
 
 
 def open_study(storage: str, name: str):
@@ -178,8 +180,12 @@ def open_study(storage: str, name: str):
             engine = {"connect_args": {"timeout": SQLITE_WAIT_S}} if storage.startswith("sqlite") else {}
             rdb = optuna.storages.RDBStorage(storage, engine_kwargs=engine)
             return optuna.create_study(storage=rdb, study_name=name, direction="maximize", load_if_exists=True)
-        except sqlalchemy.exc.IntegrityError:
-            # workers started together race to create the tables or the study: the loser tries again
+        except (sqlalchemy.exc.IntegrityError, sqlalchemy.exc.ProgrammingError) as e:
+            # workers started together race to create the tables (PostgreSQL: also their enum types)
+            # or the study: the loser tries again; any other programming error is the user's URL
+            if isinstance(e, sqlalchemy.exc.ProgrammingError) and getattr(e.orig, "sqlstate", None) not in RACED:
+                raise InputError(f"cannot open the study {name!r} there: {type(e).__name__}: "
+                                 f"{str(e).splitlines()[0][:200]}", field="--storage") from None
             time.sleep(0.2 * (attempt + 1))
         except Exception as e:  # a URL nothing answers at, a driver missing, a file that is no database
             raise InputError(f"cannot open the study {name!r} there: {type(e).__name__}: "
