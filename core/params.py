@@ -77,10 +77,11 @@ def check_value(spec: FieldSpec, value) -> Any:
         value = float(value)
         if not math.isfinite(value):
             raise ParamError(spec.name, f"must be finite, got {value!r}")
+    unit = "" if spec.unit == "1" else f" {spec.unit}"  # a ratio has no unit to name
     if spec.lo is not None and value < spec.lo:
-        raise ParamError(spec.name, f"{value!r} is below the minimum {spec.lo} {spec.unit}")
+        raise ParamError(spec.name, f"{value!r} is below the minimum {spec.lo}{unit}")
     if spec.hi is not None and value > spec.hi:
-        raise ParamError(spec.name, f"{value!r} is above the maximum {spec.hi} {spec.unit}")
+        raise ParamError(spec.name, f"{value!r} is above the maximum {spec.hi}{unit}")
     return value
 
 

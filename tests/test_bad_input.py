@@ -74,6 +74,10 @@ def test_nan_and_unknown_parameters(tmp_path):
     assert_clean_error(*run("match", INTEL, "--pair", 0, 1, "--params", p), "p.toml", "Br", "finite")
     p = write(tmp_path, "p.toml", "Bw_deg = -5\n")
     assert_clean_error(*run("match", INTEL, "--pair", 0, 1, "--params", p), "Bw", "below the minimum")
+    p = write(tmp_path, "p.toml", "[improved]\nextrapolate = -1\n")
+    code, out = run("match", INTEL, "--pair", 0, 1, "--params", p)
+    assert_clean_error(code, out, "improved.extrapolate", "below the minimum 0.0")
+    assert out.strip().endswith("minimum 0.0")  # a ratio: no unit to name after the bound
     p = write(tmp_path, "p.toml", "bogus = 1\n")
     assert_clean_error(*run("match", INTEL, "--pair", 0, 1, "--params", p), "bogus", "unknown parameter")
     p = write(tmp_path, "p.toml", "Br = [1\n")
