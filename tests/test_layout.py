@@ -1,6 +1,7 @@
 """The house: the matchers under the project's own import name, every package shipped, and a
 command line that loads nothing heavy before a command runs."""
 
+import re
 import subprocess
 import sys
 import tomllib
@@ -40,6 +41,7 @@ def test_the_command_line_loads_nothing_heavy_before_a_command_runs(tmp_path):
 
 
 def test_every_command_answers_help(tmp_path):
+    import typer
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app
@@ -47,6 +49,18 @@ def test_every_command_answers_help(tmp_path):
 
     names = command_names(app)
     assert {"match", "serve", "eval sequence", "bench startup", "params"} <= set(names)
+    root = typer.main.get_command(app)
+    shown = 0
     for name in names:
-        res = CliRunner().invoke(app, [*name.split(), "--help"])
+        res = CliRunner().invoke(app, [*name.split(), "--help"], terminal_width=400)
         assert res.exit_code == 0 and "Usage" in res.output and "<bool>" not in res.output, (name, res.output)
+        # units and table names in brackets ("[m]", "[deg]", "a [search] table") are shown as written, not
+        # taken for markup and dropped
+        command = root
+        for part in name.split():
+            command = command.commands[part]
+        for param in command.params:
+            for bracket in re.findall(r"\[[^\]]*\]", getattr(param, "help", None) or ""):
+                assert bracket in res.output, (name, param.name, bracket)
+                shown += 1
+    assert shown >= 10

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 
 import typer
-from typer.core import TyperGroup, TyperOption
+from typer.core import TyperGroup
 
 from . import bench, evaluate, files, lesson, match, serve, tune
 
@@ -37,12 +37,8 @@ class OneLineErrors(TyperGroup):
         sys.exit(code if isinstance(code, int) else 0)
 
 
-# typer labels every flag "<bool>" in help, as if it took a value (``--json true`` then fails on
-# something else): a flag shows no value type.
-_display_type = TyperOption.display_type_rich
-TyperOption.display_type_rich = lambda self, ctx: None if self.is_flag else _display_type(self, ctx)
-
 app = typer.Typer(cls=OneLineErrors, no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
+                  rich_markup_mode=None,
                   help="Visual debugger and teaching tool for 2-D laser scan matching (ICP, PL-ICP, MbICP, improved "
                        "MbICP, PSM, PMWN).")
 for group in (match, serve, lesson, evaluate, bench, files, tune):
