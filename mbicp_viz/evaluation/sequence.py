@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from mbicp_viz.core import MatchResult, Params, Pose2, Scan, SearchParams, match, pose_error, relative
+from mbicp_viz.core import Params, Pose2, Scan, SearchParams, match, pose_error, relative
 from mbicp_viz.core.agreement import inlier_fraction
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
