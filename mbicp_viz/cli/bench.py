@@ -37,11 +37,7 @@ def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt 
     before = speed_probe_us()
     moved = None
     if perturb is not None:
-        import math
-
-        if not all(math.isfinite(v) and v >= 0 for v in perturb):
-            raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
-        moved = (perturb[0], math.radians(perturb[1]))
+        moved = check_perturb(perturb)
         typer.echo(f"guesses: the stored ones moved within +/-{perturb[0]:g} m, +/-{perturb[1]:g} deg (seed {seed})")
     timings = bench(lg, p, limit, repeat, moved, seed)
     after = speed_probe_us()
@@ -56,6 +52,52 @@ def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt 
         t, sizes = time_recordings(lg, p, limit, 1, teach)
         typer.echo(t.line())
         typer.echo(f".rrd size              median {np.median(sizes) / 1e6:.2f} MB   max {sizes.max() / 1e6:.2f} MB")
+
+
+def originals(built: Annotated[Path, typer.Argument(help="the folder tools/originals/build.sh built the C originals "
+                                                       "in")],
+              log: Annotated[str, typer.Argument(help="scan log")],
+              limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs")] = 300,
+              repeat: Annotated[int, typer.Option("--repeat", min=1, help="runs of all the pairs; the best is "
+                                                  "kept")] = 3,
+              perturb: Annotated[tuple[float, float], typer.Option(
+                  "--perturb", metavar="XY_M THETA_DEG", help="move each stored guess uniformly within +/-XY_M in x "
+                  "and y and +/-THETA_DEG (seeded)")] = (0.3, 15.0),
+              seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0,
+              every: Annotated[int, typer.Option("--every", min=1, help="keep one beam in K (the C MbICP takes at "
+                                                 "most 361)")] = 1,
+              params: Annotated[Optional[Path], typer.Option(
+                  "--params", help="improved MbICP's parameters (TOML): a last line with them")] = None):
+    """This MbICP, ICP and PL-ICP against the original C code on the same pairs (agreement, successes,
+    time per match); improved MbICP against CSM's PL-ICP."""
+    from mbicp_viz.evaluation.bench import machine_line, speed_probe_us
+    from mbicp_viz.evaluation.originals import (check_built, compare, every_kth_beam, improved_against_plicp,
+                                                protocol_pairs)
+    from mbicp_viz.readers import read_log
+    from mbicp_viz.readers.params_toml import make_params
+
+    check_built(built)  # a missing build or a bad file stops here, before minutes of matching
+    improved = make_params("improved", params)
+    pairs = protocol_pairs(every_kth_beam(read_log(log), every), limit, check_perturb(perturb), seed)
+    typer.echo(f"{log}: {len(pairs)} pairs of {len(pairs[0][0].bearings)} beams, guesses within +/-{perturb[0]:g} m, "
+               f"+/-{perturb[1]:g} deg (seed {seed}); {machine_line()}")
+    before = speed_probe_us()
+    rows = compare(built, pairs, repeat)
+    for row in rows:
+        typer.echo(row.line())
+    plicp = next(r for r in rows if r.name == "plicp")
+    for label, p in [("as published", make_params("improved", None))] + ([(str(params), improved)] if params else []):
+        typer.echo(improved_against_plicp(pairs, p, label, plicp, repeat))
+    typer.echo(f"machine speed probe {before:.2f} us before, {speed_probe_us():.2f} us after (lower is faster)")
+
+
+def check_perturb(perturb: tuple[float, float]) -> tuple[float, float]:
+    """--perturb XY_M THETA_DEG as (metres, radians), refused unless finite and >= 0."""
+    import math
+
+    if not all(math.isfinite(v) and v >= 0 for v in perturb):
+        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+    return perturb[0], math.radians(perturb[1])
 
 
 def gui(scans: Annotated[Path, typer.Argument(help="scan file")] = DEMO_PAIR, pair: PairOpt = None):
@@ -97,6 +139,6 @@ def command_names(app: typer.Typer) -> list[str]:
 
 def register(app: typer.Typer) -> None:
     group = typer.Typer(no_args_is_help=True, help="Time the matchers, the debugger and the start-up.")
-    for name, fn in (("matches", matches), ("gui", gui), ("startup", startup)):
+    for name, fn in (("matches", matches), ("originals", originals), ("gui", gui), ("startup", startup)):
         group.command(name)(user_errors(fn))
     app.add_typer(group, name="bench")
