@@ -132,11 +132,13 @@ def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int
     for i in range(len(alpha)):
         a, r, px, py = alpha[i], rng[i], p[i, 0], p[i, 1]
         pos = _first_at_least(eb, a, False)
-        lo, hi = pos - _NEAR_K, pos + _NEAR_K
-        if clip_to_bw:
-            lo = max(lo, _first_at_least(eb, a - Bw, False))
-            hi = max(min(hi, _first_at_least(eb, a + Bw, True)), lo)
-        lo, hi = max(lo, 0), min(hi, len(eb))
+        lo, hi = max(pos - _NEAR_K, 0), min(pos + _NEAR_K, len(eb))
+        # clipping to +/-Bw changes the 2K beams only where their first lies below a - Bw or their
+        # last above a + Bw (a partial scan's seam makes max_step wide: most points need no clip)
+        if clip_to_bw and ((lo < len(eb) and eb[lo] < a - Bw) or (hi > 0 and eb[hi - 1] > a + Bw)):
+            lo = max(pos - _NEAR_K, _first_at_least(eb, a - Bw, False))
+            hi = max(min(pos + _NEAR_K, _first_at_least(eb, a + Bw, True)), lo)
+            lo, hi = max(lo, 0), min(hi, len(eb))
         best, d2 = _window_min(px, py, ex, ey, ek, lo, hi)
         # the window that can hold anything closer (see ``nearest``), never wider than +/-Bw: only
         # when a ray just outside the 2K beams passes within rho of the point is it searched
