@@ -90,3 +90,14 @@ def test_a_bad_perturbation_or_params_file_is_one_line(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[improved]\nextrapolate = -1\n")
     assert_clean_error(*run(tmp_path, LASERAZOS, "--params", bad), "extrapolate")
+
+
+def test_a_driver_that_never_answers_is_stopped_and_named(tmp_path, monkeypatch):
+    from mbicp_viz.evaluation import originals
+
+    stand_ins(tmp_path)
+    (tmp_path / "mbicp_pairs").write_text(f"#!{sys.executable}\nimport signal, sys\nsys.stdin.read()\nsignal.pause()\n")
+    monkeypatch.setattr(originals, "DRIVER_TIMEOUT_S", 1)
+    code, out = run(tmp_path, LASERAZOS, "--limit", 2, "--repeat", 1)
+    error = out.strip().splitlines()[-1]
+    assert code == 2 and "mbicp_pairs: no answer within 1 s for 2 pairs" in error, out

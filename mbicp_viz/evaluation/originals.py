@@ -27,6 +27,8 @@ from .pairs import stored_truth
 
 # Player's mbicp driver calls its library with MAXLASERPOINTS = 361 rays
 MAX_RAYS = 361
+# An original that has not answered by then is stuck (300 pairs take seconds)
+DRIVER_TIMEOUT_S = 600
 # Two poses agree within these (the issue's 1 mm and 0.01 deg)
 AGREE_M, AGREE_RAD = 1e-3, math.radians(0.01)
 
@@ -146,9 +148,11 @@ def time_ours(pairs: list[Pair], params: Params) -> tuple[list[Pose2], float]:
 def run_driver(exe: Path, args: tuple[str, ...], text: str, n: int) -> tuple[list[Pose2], float]:
     """The original's poses and its mean time per match [ms] (timed by the driver around its call)."""
     try:
-        out = subprocess.run([str(exe), *args], input=text, capture_output=True, text=True, timeout=3600)
+        out = subprocess.run([str(exe), *args], input=text, capture_output=True, text=True, timeout=DRIVER_TIMEOUT_S)
     except OSError as e:
         raise InputError(f"cannot run it: {e.strerror}", path=str(exe)) from None
+    except subprocess.TimeoutExpired:
+        raise InputError(f"no answer within {DRIVER_TIMEOUT_S} s for {n} pairs", path=str(exe)) from None
     lines = [line.split() for line in out.stdout.splitlines() if line.strip()]
     times = out.stderr.split()[-2:]
     if out.returncode != 0 or len(lines) != n or len(times) != 2:
