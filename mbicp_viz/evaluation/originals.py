@@ -14,6 +14,7 @@ import dataclasses
 import math
 import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,18 +38,12 @@ Pair = tuple[Scan, Scan, Pose2]
 
 @dataclass(frozen=True)
 class Original:
-    """One original matcher: the driver built by build.sh and its arguments."""
+    """One original matcher: the driver built by build.sh, its arguments and what it reads."""
 
     name: str  # this project's matcher of the same algorithm
     driver: str
     args: tuple[str, ...]
-
-    def input(self, pairs: list[Pair]) -> str:
-        return _mbicp_input(pairs, MbicpParams()) if self.driver == "mbicp_pairs" else _csm_input(pairs)
-
-
-ORIGINALS = (Original("mbicp", "mbicp_pairs", ()), Original("icp", "csm_pairs", ("0",)),
-             Original("plicp", "csm_pairs", ("1",)))
+    input: Callable[[list[Pair]], str]  # the driver's stdin for these pairs
 
 
 @dataclass(frozen=True)
@@ -65,10 +60,12 @@ class Comparison:
 
     def line(self) -> str:
         return (f"{self.name:6s} agree within 1 mm / 0.01 deg: {self.agree}/{self.pairs} "
-                f"({100 * self.agree / self.pairs:.1f} %); "
-                f"{successes_text(f'original {self.successes_original}, ours {self.successes_ours}', self.successes_ours)}; "
+                f"({100 * self.agree / self.pairs:.1f} %); {self.successes()}; "
                 f"mean time per match original {self.ms_original:.3f} ms, ours "
                 f"{self.ms_ours:.3f} ms (ratio {self.ms_ours / self.ms_original:.2f})")
+
+    def successes(self) -> str:
+        return successes_text(f"original {self.successes_original}, ours {self.successes_ours}", self.successes_ours)
 
 
 def every_kth_beam(log: ScanLog, k: int) -> ScanLog:
@@ -188,3 +185,7 @@ def _csm_input(pairs: list[Pair]) -> str:
             lines += [f"{r if v else 0.0:.6f} {t:.9f} {int(v)}" for r, t, v in zip(s.ranges, s.bearings, s.valid)]
         lines.append(f"{float(g.x)!r} {float(g.y)!r} {float(g.theta)!r}")
     return "\n".join(lines) + "\n"
+
+
+ORIGINALS = (Original("mbicp", "mbicp_pairs", (), lambda pairs: _mbicp_input(pairs, MbicpParams())),
+             Original("icp", "csm_pairs", ("0",), _csm_input), Original("plicp", "csm_pairs", ("1",), _csm_input))
