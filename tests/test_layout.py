@@ -60,6 +60,9 @@ def test_every_command_answers_help(tmp_path):
         for part in name.split():
             command = command.commands[part]
         for param in command.params:
+            # a metavar names as many values as the option takes (X Y THETA_DEG: three)
+            if param.metavar is not None and param.nargs > 0:
+                assert len(param.metavar.split()) == param.nargs, (name, param.name, param.metavar)
             for bracket in re.findall(r"\[[^\]]*\]", getattr(param, "help", None) or ""):
                 assert bracket in res.output, (name, param.name, bracket)
                 shown += 1

@@ -38,7 +38,7 @@ def sequence(log: LogArg,
              out: Annotated[Path, typer.Option("--out", help="JSON file: one object per consecutive pair")],
              algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None, limit: LimitOpt = None, rrd: RrdOpt = None,
              guess: GuessOpt = Guess.stored,
-             truth: Annotated[Optional[str], typer.Option("--truth", metavar="X Y THETA_DEG", help="'pose': score against the log's scan poses "
+             truth: Annotated[Optional[str], typer.Option("--truth", help="'pose': score against the log's scan poses "
                                                                           "(corrected logs)")] = None,
              png: Annotated[Optional[Path], typer.Option("--png", help="plot the trajectories and the map")] = None,
              tum: Annotated[Optional[Path], typer.Option("--tum", help="write the trajectory in TUM format (for evo)")]
@@ -265,7 +265,8 @@ def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps
 
 def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
           truth: Annotated[Optional[tuple[float, float, float]], typer.Option(
-              "--truth", metavar="X Y THETA_DEG", help="the answer X Y THETA_DEG (default: the stored poses, else each matcher's own)")] = None,
+              "--truth", metavar="X Y THETA_DEG",
+              help="the answer X Y THETA_DEG (default: the stored poses, else each matcher's own)")] = None,
           algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None,
           range_xy: Annotated[float, typer.Option("--range-xy", min=0.0, callback=finite,
                                                   help="largest |dx|, |dy| offset [m]")] = 1.0,

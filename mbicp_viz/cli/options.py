@@ -40,21 +40,22 @@ ParamsOpt = Annotated[Optional[Path], typer.Option(
 PairOpt = Annotated[Optional[tuple[int, int]], typer.Option(
     "--pair", metavar="I J", help="scan numbers I J of one log (ref obj; -1 is the last)")]
 InitOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
-    "--init", metavar="X Y THETA_DEG", help="initial guess X Y THETA_DEG: object frame in the reference frame (m, m, deg); "
-                   "overrides --guess")]
+    "--init", metavar="X Y THETA_DEG", help="initial guess X Y THETA_DEG: object frame in the reference frame (m, m, "
+                                            "deg); overrides --guess")]
 GuessOpt = Annotated[Guess, typer.Option(
     "--guess", help="initial guess: stored (the log's scan poses, else its odometry, else the identity), pose, "
                     f"odometry, identity, or search (a correlative search within {SEARCH} of the identity)")]
 TruthOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
-    "--truth", metavar="X Y THETA_DEG", help="the known answer X Y THETA_DEG (default: the log's scan poses when the guess is not "
-                    "taken from them)")]
+    "--truth", metavar="X Y THETA_DEG", help="the known answer X Y THETA_DEG (default: the log's scan poses when "
+                                             "the guess is not taken from them)")]
 TopicOpt = Annotated[Optional[str], typer.Option("--topic", help="a bag's LaserScan topic (needed when it has "
                                                                  "several)")]
 TypestoreOpt = Annotated[str, typer.Option("--typestore", help="the ROS distro whose message types decode a ROS 2 "
                                                                "bag recorded without them (e.g. ROS2_HUMBLE, "
                                                                "ROS2_FOXY, ROS1_NOETIC)")]
 MountOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
-    "--mount", metavar="X Y THETA_DEG", help="the laser's pose on the robot X Y THETA_DEG (base frame; m, m, deg), for files without tf")]
+    "--mount", metavar="X Y THETA_DEG",
+    help="the laser's pose on the robot X Y THETA_DEG (base frame; m, m, deg), for files without tf")]
 DeskewOpt = Annotated[Optional[Deskew], typer.Option(
     "--deskew", help="correct each scan for the motion while it was measured (bags whose LaserScans give "
                      "time_increment): the velocity from the log's odometry, or from matching consecutive scans")]
@@ -82,7 +83,7 @@ def finite(value: float) -> float:
 
 
 # The cases an evaluation scores (tune, eval covariance; evaluation/cases.py)
-CaseTruthOpt = Annotated[str, typer.Option("--truth", metavar="X Y THETA_DEG", help="'pose': the logs' scan poses (corrected logs); "
+CaseTruthOpt = Annotated[str, typer.Option("--truth", help="'pose': the logs' scan poses (corrected logs); "
                                                         "'relations': Kümmerle's (--relations)")]
 RelationsOpt = Annotated[Optional[str], typer.Option("--relations", help="relations file of the (one) log "
                                                                          "(--truth relations)")]
