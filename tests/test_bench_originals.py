@@ -101,3 +101,11 @@ def test_a_driver_that_never_answers_is_stopped_and_named(tmp_path, monkeypatch)
     code, out = run(tmp_path, LASERAZOS, "--limit", 2, "--repeat", 1)
     error = out.strip().splitlines()[-1]
     assert code == 2 and "mbicp_pairs: no answer within 1 s for 2 pairs" in error, out
+
+
+def test_a_log_without_stored_poses_says_so_instead_of_zero_successes(tmp_path):
+    code, out = run(stand_ins(tmp_path), HOKUYO_BAG, "--every", 2, "--limit", 2, "--repeat", 1)
+    assert code == 0, out
+    rows = [line for line in out.splitlines() if line.startswith(("mbicp ", "icp ", "plicp ", "improved "))]
+    assert len(rows) == 4 and all("no stored poses to count successes" in r and "successes " not in r for r in rows), out
+    assert "2 pairs of 341 beams" in out.splitlines()[0]

@@ -18,20 +18,21 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from mbicp_viz.core import MATCHERS, MbicpParams, Params, Pose2, Scan, match, pose_error
+from mbicp_viz.core import MATCHERS, MbicpParams, Params, Pose2, Scan, match
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
 
 from .bench import bench_guesses
-from .criteria import PAPER_000
+from .criteria import PAPER_000, Criteria
 from .pairs import stored_truth
 
 # Player's mbicp driver calls its library with MAXLASERPOINTS = 361 rays
 MAX_RAYS = 361
 # An original that has not answered by then is stuck (300 pairs take seconds)
 DRIVER_TIMEOUT_S = 600
-# Two poses agree within these (the issue's 1 mm and 0.01 deg)
-AGREE_M, AGREE_RAD = 1e-3, math.radians(0.01)
+# When this project's pose and the original's agree (issue 21: 1 mm and 0.01 deg)
+AGREE = Criteria("agreement with the original", 1e-3, math.radians(0.01))
+NO_POSES = "no stored poses to count successes"
 
 Pair = tuple[Scan, Scan, Pose2]
 
@@ -65,7 +66,9 @@ class Comparison:
                 f"{self.ms_ours:.3f} ms (ratio {self.ms_ours / self.ms_original:.2f})")
 
     def successes(self) -> str:
-        return successes_text(f"original {self.successes_original}, ours {self.successes_ours}", self.successes_ours)
+        if self.successes_ours is None:
+            return NO_POSES
+        return f"successes original {self.successes_original}, ours {self.successes_ours}"
 
 
 def every_kth_beam(log: ScanLog, k: int) -> ScanLog:
@@ -106,7 +109,7 @@ def compare(built: Path, pairs: list[Pair], repeat: int) -> list[Comparison]:
         params = MATCHERS[original.name].params_type()
         mine = [time_ours(pairs, params) for _ in range(repeat)]
         theirs, ours = runs[0][0], mine[0][0]
-        agree = sum(e < AGREE_M and r < AGREE_RAD for e, r in (pose_error(x, y) for x, y in zip(ours, theirs)))
+        agree = sum(AGREE.judge(x, y) for x, y in zip(ours, theirs))
         out.append(Comparison(original.name, len(pairs), agree, successes(pairs, theirs), successes(pairs, ours),
                               min(r[1] for r in runs), min(m[1] for m in mine)))
     return out
@@ -117,7 +120,7 @@ def improved_against_plicp(pairs: list[Pair], params: Params, label: str, plicp:
     runs = [time_ours(pairs, params) for _ in range(repeat)]
     ms, ok = min(r[1] for r in runs), successes(pairs, runs[0][0])
     return (f"improved MbICP ({label}) {ms:.3f} ms against CSM's PL-ICP {plicp.ms_original:.3f} ms per match "
-            f"(ratio {ms / plicp.ms_original:.2f}); {successes_text(ok, ok)}")
+            f"(ratio {ms / plicp.ms_original:.2f}); {NO_POSES if ok is None else f'successes {ok}'}")
 
 
 def successes(pairs: list[Pair], poses: list[Pose2]) -> int | None:
@@ -126,11 +129,6 @@ def successes(pairs: list[Pair], poses: list[Pose2]) -> int | None:
     if all(t is None for t in truths):
         return None
     return sum(t is not None and PAPER_000.judge(p, t) for p, t in zip(poses, truths))
-
-
-def successes_text(counts, n: int | None) -> str:
-    """``successes COUNTS``, or that the log stores no poses to judge them by (``n`` None)."""
-    return f"successes {counts}" if n is not None else "no stored poses to count successes"
 
 
 def time_ours(pairs: list[Pair], params: Params) -> tuple[list[Pose2], float]:
