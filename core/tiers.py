@@ -44,6 +44,9 @@ except ImportError:  # not POSIX: no background compile, every process eager
     fcntl = None
 
 LOCK_NAME = "mbicp-viz-compiling.lock"  # held by the background compile while it runs
+# What the front ends say while it runs (the command line on stderr, the debugger on its page)
+INTERPRETED = ("numba is compiling the matchers' kernels in the background (the first run after an install): "
+               "until it is done they run interpreted — the same results, slower")
 _KERNELS: list = []  # every kernel (with a cache entry of its own) of the modules imported so far
 
 

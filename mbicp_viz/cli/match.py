@@ -90,8 +90,7 @@ def _say_if_interpreted() -> None:
     from mbicp_viz.core import tiers
 
     if tiers.compiling():
-        say("numba is compiling the matchers' kernels in the background (the first run after an install): this "
-            "run's ran interpreted, with the same results; the next runs use the compiled code")
+        say(tiers.INTERPRETED)
 
 
 def _record(runs, rrd, connect, serve, port, teach) -> None:

@@ -59,7 +59,7 @@ class App:
         install (core/tiers.py's quick start) a background process compiles them while the tabs
         match at once, interpreted; then they are loaded from the cache it wrote."""
         try:
-            from mbicp_viz.core import MATCHERS, tiers
+            from mbicp_viz.core import MATCHERS
 
             from .state import DebugState
 

@@ -13,6 +13,7 @@ import numpy as np
 import viser
 
 from mbicp_viz.core import tiers
+from mbicp_viz.core.tiers import INTERPRETED
 from mbicp_viz.readers.params_toml import params_to_toml
 
 from .. import scene, viser_draw
@@ -27,8 +28,6 @@ def grid_cell(extent_m: float) -> float:
 
 
 COMPILING = "Compiling the matchers' kernels (the first start after an install takes a few seconds)…"
-INTERPRETED = ("numba is compiling the matchers' kernels in the background (the first start after an install): "
-               "until it is done they run interpreted — the same results, slower")
 
 
 class Session:
