@@ -124,7 +124,6 @@ def hokuyo():
     return read_log(HOKUYO_BAG)
 
 
-
 @contextlib.contextmanager
 def interpreted_kernels():
     """This process in core/tiers.py's quick start with a background compile "running" (a lock
