@@ -300,7 +300,6 @@ def test_the_lesson_step_by_step(browser, tmp_path):
         app.stop()
 
 
-
 def test_a_tab_that_matches_interpreted_says_so_until_the_kernels_are_compiled(browser, app):
     """After an install (core/tiers.py's quick start) the page tells why a match is slow, and stops
     once the background compile has ended."""
