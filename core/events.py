@@ -17,6 +17,7 @@ from typing import Callable, Union
 
 import numpy as np
 
+from .result import MatchResult
 from .se2 import Pose2
 
 
@@ -174,7 +175,7 @@ class IterationEvent:
 
 @dataclass(frozen=True, eq=False)
 class FinishEvent:
-    result: "MatchResult"  # noqa: F821 - defined in core.result
+    result: MatchResult
 
 
 Event = Union[StartEvent, IterationEvent, FinishEvent]
