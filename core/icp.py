@@ -372,15 +372,32 @@ def _result(name, scans, params, outcomes, best) -> MatchResult:
         reason = Termination.TOO_FEW_PAIRS if code == _TOO_FEW else Termination.SINGULAR
         return build_result(name, pose, reason, iterations, None, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M)
     reason = Termination.CONVERGED if converged else Termination.MAX_ITERATIONS
-    kept = np.flatnonzero(status == PairStatus.KEPT)
-    p, _, C = run(_targets, scans.rx, scans.ry, scans.sx, scans.sy, wx, wy, j1, j2, status, isinstance(params, PlIcpParams))
-    moved = pose.apply(p)
-    J = np.zeros((len(p), 2, 3))
-    J[:, 0, 0] = J[:, 1, 1] = 1.0
-    J[:, 0, 2], J[:, 1, 2] = -moved[:, 1], moved[:, 0]
-    A = np.einsum("kji,kjl,klm->im", J, C, J)
-    foot = _feet(ref_pts[ref_of_ray[j1[kept]]], ref_pts[ref_of_ray[j2[kept]]], moved, clamp=True)
-    err = float(np.mean(np.sum((moved - foot) ** 2, axis=1)))
+    A, err, foot, first = run(_final_system, scans.rx, scans.ry, scans.sx, scans.sy, wx, wy, j1, j2, status, x, y, th,
+                              isinstance(params, PlIcpParams))
     n_candidates = int(np.count_nonzero(status != PairStatus.OUTSIDE_BR))
-    last = FinalSystem(A, err, foot, ref_of_ray[j1[kept]], len(kept), n_candidates - len(kept))
+    last = FinalSystem(A, err, foot, ref_of_ray[first], len(first), n_candidates - len(first))
     return build_result(name, pose, reason, iterations, last, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M)
+
+
+@kernel
+def _final_system(rx, ry, sx, sy, wx, wy, j1, j2, status, x, y, th, line: bool):
+    """The kept pairs seen from the final pose (x, y, th): the normal matrix A = sum J^T C J in
+    (x, y, theta) (C: the pair's weight as ``_targets`` gives it; J = [[1, 0, -y], [0, 1, x]] at
+    the moved point), the mean squared distance of the moved points to their segments' feet, the
+    feet, and each pair's j1 ray."""
+    p, _, C = _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line)
+    idx = np.flatnonzero(status == _KEPT)
+    c, s = np.cos(th), np.sin(th)
+    A, foot, err = np.zeros((3, 3)), np.empty((len(idx), 2)), 0.0
+    for k in range(len(idx)):
+        mx, my = c * p[k, 0] - s * p[k, 1] + x, s * p[k, 0] + c * p[k, 1] + y
+        jac = ((1.0, 0.0, -my), (0.0, 1.0, mx))
+        for i in range(3):
+            for m in range(3):
+                for a in range(2):
+                    for b in range(2):
+                        A[i, m] += jac[a][i] * C[k, a, b] * jac[b][m]
+        i = idx[k]
+        foot[k, 0], foot[k, 1] = _segment_foot(rx[j1[i]], ry[j1[i]], rx[j2[i]], ry[j2[i]], mx, my, True)
+        err += (mx - foot[k, 0]) ** 2 + (my - foot[k, 1]) ** 2
+    return A, err / len(idx), foot, j1[idx]
