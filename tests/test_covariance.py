@@ -1,11 +1,14 @@
 """``eval covariance``: NEES of real matches against the truth, split along and across the weakest direction."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import IcpParams, PlIcpParams, match
+from mbicp_viz.core.events import IterationEvent, PairStatus
 from mbicp_viz.evaluation.covariance import chi2_mean_bounds, nees
 
 from .conftest import DATA
@@ -44,3 +47,32 @@ def test_eval_covariance_on_real_pairs(tmp_path):
     assert "along the weakest direction" in out and "scale the covariance by" in out
     assert "psm: no covariance reported" in out
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("params", [IcpParams(restart=False), PlIcpParams(restart=False)], ids=["icp", "plicp"])
+def test_csm_covariance_is_sigma2_A_inverse_of_the_last_pairs_seen_from_the_result(params, intel, laserazos):
+    """ICP's and PL-ICP's covariance, recomputed here from the pairs of the last iteration's event:
+    A = sum J^T C J at the points moved by the result (C: I for ICP, n n^T of the segment for
+    PL-ICP), the error the mean squared distance to the segments' feet, sigma^2 A^-1."""
+    for log in (intel, laserazos):
+        for i in range(5):
+            events = []
+            result = match(log.scan(i), log.scan(i + 1), log.scan(i).pose.inverse() @ log.scan(i + 1).pose, params,
+                           events.append)
+            start, last = events[0], [e for e in events if isinstance(e, IterationEvent)][-1]
+            kept = last.pairs.status == PairStatus.KEPT
+            moved = result.pose.apply(start.obj_points[last.pairs.obj_index[kept]])
+            a, b = (start.ref_points[last.pairs.ref_index[kept, k]] for k in (0, 1))
+            e = b - a
+            t = np.clip(np.einsum("ij,ij->i", moved - a, e) / np.einsum("ij,ij->i", e, e), 0.0, 1.0)
+            err = np.mean(np.sum((moved - (a + t[:, None] * e)) ** 2, axis=1))
+            n = np.column_stack((e[:, 1], -e[:, 0])) / np.linalg.norm(e, axis=1)[:, None]
+            line = isinstance(params, PlIcpParams)
+            C = np.einsum("ki,kj->kij", n, n) if line else np.broadcast_to(np.eye(2), (len(n), 2, 2))
+            J = np.zeros((len(moved), 2, 3))
+            J[:, 0, 0] = J[:, 1, 1] = 1.0
+            J[:, 0, 2], J[:, 1, 2] = -moved[:, 1], moved[:, 0]
+            A = np.einsum("kji,kjl,klm->im", J, C, J)
+            K = len(moved)
+            assert result.pairs_kept == K and np.isclose(result.error, err, rtol=1e-9)
+            np.testing.assert_allclose(result.covariance, err * K / (2 * K - 3) * np.linalg.inv(A), rtol=1e-6)
