@@ -65,7 +65,7 @@ def test_fewer_iterations_to_the_same_answers_on_real_pairs(laserazos):
     file's improved MbICP succeeds as often with fewer iterations, and says which steps went on."""
     pairs = laserazos.consecutive_pairs(39)
     guesses = bench_guesses(laserazos, pairs, (0.3, math.radians(15.0)), 0)
-    option = load_params(DATA / "poor-guess.toml", "improved")
+    option = load_params("poor-guess", "improved")
     assert option.extrapolate > 0.0
     annealed = option.replace(extrapolate=0.0)
     counts = {"on": [0, 0], "off": [0, 0]}
@@ -105,9 +105,9 @@ def test_match_and_the_debugger_say_which_steps_went_on(laserazos):
     from mbicp_viz.cli import app
     from mbicp_viz.views.debugger.state import DebugState, Source
 
-    option = DATA / "poor-guess.toml"
+    option = "poor-guess"
     res = CliRunner().invoke(app, ["match", str(DATA / "laserazosSM3-40.log"), "--pair", "5", "6", "--algo", "improved",
-                                   "--params", str(option), "--init", "0.2", "-0.1", "10"])
+                                   "--params", option, "--init", "0.2", "-0.1", "10"])
     assert res.exit_code == 0, res.output
     marked = [line for line in res.stdout.splitlines() if "extrapolated x" in line]
     assert marked and all(float(line.rsplit("x", 1)[1]) > 1.0 for line in marked)

@@ -82,7 +82,7 @@ def test_failed_match_is_valid_json_with_its_reason():
 
 
 def test_eval_protocol_reports_the_success_rate():
-    out = ok("eval", "protocol", LASERAZOS, "--algo", "mbicp", "--params", DATA / "mbicp-protocol.toml",
+    out = ok("eval", "protocol", LASERAZOS, "--algo", "mbicp", "--params", "mbicp-protocol",
              "--cases", 20, "--seed", 3)
     assert out.startswith("mbicp: 20/20 within 1 cm and 0.1 deg (100.0 %)")
 

@@ -17,7 +17,7 @@ from mbicp_viz.readers import read_log
 from .conftest import DATA
 
 ALGOS = list(MATCHERS)
-PROTOCOL_PARAMS = DATA / "mbicp-protocol.toml"
+PROTOCOL_PARAMS = "mbicp-protocol"
 
 
 def moved_scan(scan, T: Pose2):
@@ -84,7 +84,7 @@ def test_matching_is_equivariant_under_a_common_rotation(algo, intel, phi):
 
 def protocol(algo: str, n: int = 200):
     scans = read_log(DATA / "laserazosSM3-40.log").scans
-    params = load_params(str(PROTOCOL_PARAMS), algo)
+    params = load_params(PROTOCOL_PARAMS, algo)
     cases = displaced_self_matches(scans, n, params, seed=24)
     ok = sum(c.error_m < 0.01 and c.error_rad < math.radians(0.1) for c in cases)
     return ok / n, cases

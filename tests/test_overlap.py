@@ -9,7 +9,7 @@ from mbicp_viz.evaluation.overlap import case_pair, classify, make_cases, run_ov
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.params_toml import load_params
 
-from .conftest import DATA, LASERAZOS
+from .conftest import LASERAZOS
 
 
 def test_classes_follow_the_paper():
@@ -42,7 +42,7 @@ def test_the_reference_loses_the_points_so_object_points_lack_counterparts():
 
 
 # Standard MbICP as paper 000 runs it: the parameters it shares with improved MbICP identical (§3.1).
-COMMON = load_params(DATA / "paper000-common.toml", "mbicp")
+COMMON = load_params("paper000-common", "mbicp")
 
 
 def test_thinning_the_reference_is_what_makes_standard_mbicp_degrade():

@@ -15,7 +15,7 @@ from mbicp_viz.core import MATCHERS, Pose2, Recorder, tiers
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.params_toml import load_params
 
-from .conftest import DATA, EXAMPLES, INTEL, interpreted_kernels, wait_for
+from .conftest import EXAMPLES, INTEL, interpreted_kernels, wait_for
 
 HOKUYO = EXAMPLES / "hokuyo-125-130.npz"
 
@@ -43,10 +43,10 @@ def test_interpreted_kernels_compute_what_the_compiled_ones_do(name):
         assert len(events.iterations) == compiled.iterations
 
 
-@pytest.mark.parametrize("option", ["poor-guess.toml", "hold-corridor.toml"])
+@pytest.mark.parametrize("option", ["poor-guess", "hold-corridor"])
 def test_interpreted_kernels_follow_the_compiled_ones_through_improved_mbicps_options(option):
     """The options' code paths too (extrapolated steps, held directions): the same iterations."""
-    params = load_params(DATA / option, "improved")
+    params = load_params(option, "improved")
     for ref, obj, guess in _cases():
         compiled, events = MATCHERS["improved"].run(ref, obj, guess, params), Recorder()
         with interpreted_kernels():

@@ -30,11 +30,17 @@ def record(names: Annotated[Optional[list[str]], typer.Argument(help="scenario n
 
 
 def params(algo: AlgoOpt = DEFAULT_ALGO,
-           out: Annotated[Optional[Path], typer.Option("--out", help="write to this file")] = None):
+           out: Annotated[Optional[Path], typer.Option("--out", help="write to this file")] = None,
+           presets: Annotated[bool, typer.Option("--presets", help="list the presets --params NAME reads, with "
+                                                                   "their files, and stop")] = False):
     """Print (or write) the default parameters of a matcher and of the search, as a file for --params."""
     from mbicp_viz.core import SearchParams
-    from mbicp_viz.readers.params_toml import make_params, params_to_toml
+    from mbicp_viz.readers.params_toml import PRESETS, make_params, params_to_toml, preset_names
 
+    if presets:
+        for name in preset_names():
+            typer.echo(f"{name:<18} {PRESETS / name}.toml")
+        return
     text = params_to_toml(make_params(algo.value, None), SearchParams())
     if out:
         out.write_text(text)

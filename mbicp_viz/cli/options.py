@@ -36,7 +36,8 @@ SecondArg = Annotated[Optional[str], typer.Argument(help="object scan file")]
 AlgoOpt = Annotated[Algo, typer.Option("--algo", help="matcher")]
 AlgosOpt = Annotated[str, typer.Option("--algos", help=f"comma-separated matchers of: {ALL_ALGOS}")]
 ParamsOpt = Annotated[Optional[Path], typer.Option(
-    "--params", help="TOML file of matcher parameters (and a [search] table for the correlative search)")]
+    "--params", help="TOML file of matcher parameters (and a [search] table for the correlative search), or the "
+                     "name of a preset shipped with the tool (mbicp-viz params --presets)")]
 PairOpt = Annotated[Optional[tuple[int, int]], typer.Option(
     "--pair", metavar="I J", help="scan numbers I J of one log (ref obj; -1 is the last)")]
 InitOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(

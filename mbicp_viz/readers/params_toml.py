@@ -4,6 +4,8 @@ Keys are the parameter names of the matcher (``Bw``, ``Br``, ``L``, ...), flat o
 named after the matcher (``[improved]``); the correlative search's parameters sit in a
 ``[search]`` table. A field in radians may be given in degrees instead by suffixing its name with
 ``_deg`` (``Bw_deg = 45``); files written here use that form, since degrees are what people type.
+``--params`` also takes the name of a preset shipped in ``mbicp_viz/presets`` (``--params poor-guess``):
+the parameter sets the README and docs/results.md measure, each saying in its comments what it is for.
 """
 
 from __future__ import annotations
@@ -19,6 +21,21 @@ from .text import opening
 
 SEARCH_TABLE = "search"
 MAX_FILE_BYTES = 1_000_000  # a parameter file is a few hundred bytes
+PRESETS = Path(__file__).resolve().parent.parent / "presets"
+
+
+def preset_names() -> list[str]:
+    return sorted(p.stem for p in PRESETS.glob("*.toml"))
+
+
+def params_file(path: str | Path) -> Path:
+    """The file ``--params`` names: a path, or else a bare name (no folder, no suffix) of a preset."""
+    p = Path(path)
+    if p.exists() or p.suffix or len(p.parts) > 1:
+        return p
+    if (PRESETS / f"{p}.toml").is_file():
+        return PRESETS / f"{p}.toml"
+    raise InputError(f"no such file, nor a preset of that name (presets: {', '.join(preset_names())})", str(path))
 
 
 def params_from_mapping(params_type: type, values: dict, path: str | None = None, table: str | None = None) -> Params:
@@ -59,7 +76,9 @@ def read_toml(path: str | Path) -> dict:
 
 
 def load_params(path: str | Path, algorithm: str) -> Params:
-    """Parameters for ``algorithm`` from a TOML file (flat keys, or a table named after the algorithm)."""
+    """Parameters for ``algorithm`` from a TOML file or preset (flat keys, or a table named after the
+    algorithm)."""
+    path = params_file(path)
     data = read_toml(path)
     if isinstance(data.get(algorithm), dict):
         return params_from_mapping(MATCHERS[algorithm].params_type, data[algorithm], str(path), algorithm)
@@ -71,6 +90,7 @@ def load_search(path: str | Path | None) -> SearchParams:
     """The correlative search's parameters: the file's ``[search]`` table, else the defaults."""
     if path is None:
         return SearchParams()
+    path = params_file(path)
     table = read_toml(path).get(SEARCH_TABLE, {})
     if not isinstance(table, dict):
         raise InputError("expected a table [search]", str(path), field=SEARCH_TABLE)
