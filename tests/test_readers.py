@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from mbicp_viz.readers import read_log
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers import ReadOptions, read_log
 from mbicp_viz.readers.plain import read_npz, write_npz
 
 from .conftest import DATA, HOKUYO_BAG
@@ -166,3 +167,40 @@ def test_rawlaser_and_robotlaser_lines_read_like_flaser(tmp_path, intel):
             assert a.stamp == pytest.approx(b.stamp)
         if name == "robot.log":
             assert log.scans[1].pose.as_array() == pytest.approx(intel.scans[1].pose.as_array())
+
+
+def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_path, intel):
+    """FLASER and RAWLASER1 of the same instants (one laser, logged twice) and RAWLASER2 of another
+    laser, interleaved as a logger writes them: a pair across two of them is no motion, so the log
+    is read one type at a time, named like a bag's topic."""
+    lines = []
+    for k, s in enumerate(intel.scans[:4]):
+        n, ranges = len(s.ranges), " ".join(str(float(v)) for v in s.ranges)
+        p, o = s.pose, s.odometry
+        other = " ".join(str(float(v)) for v in intel.scans[10 + k].ranges)
+        head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n}"
+        lines += [f"FLASER {n} {ranges} {p.x} {p.y} {p.theta} {o.x} {o.y} {o.theta} {s.stamp} host {s.stamp}",
+                  f"RAWLASER1 {head} {ranges} 0 {s.stamp} host {s.stamp}",
+                  f"RAWLASER2 {head} {other} 0 {s.stamp} host {s.stamp}"]
+    path = tmp_path / "two-lasers.log"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError) as e:
+        read_log(path)
+    assert e.value.field == "--topic"
+    assert "3 laser message types, choose one with --topic: FLASER (4 scans); RAWLASER1 (4 scans); " \
+           "RAWLASER2 (4 scans)" in str(e.value)
+    for kind, first in (("FLASER", 0), ("RAWLASER1", 0), ("RAWLASER2", 10)):
+        log = read_log(path, ReadOptions(topic=kind))
+        assert len(log) == 4 and log.topic == kind and list(log.scan_topics) == ["FLASER", "RAWLASER1", "RAWLASER2"]
+        for a, b in zip(log.scans, intel.scans[first:first + 4]):
+            np.testing.assert_allclose(a.points(), b.points(), atol=1e-9)
+    with pytest.raises(InputError, match="no 'ROBOTLASER1' scans; the log has: FLASER"):
+        read_log(path, ReadOptions(topic="ROBOTLASER1"))
+    assert read_log(DATA / "laserazosSM3-40.log").topic is None  # one type: nothing to choose
+
+    from mbicp_viz.views.debugger.sources import files_source
+    from mbicp_viz.views.debugger.state import DebugState
+
+    state = DebugState(files_source(str(path), None, guess="identity", options=ReadOptions(topic="FLASER")))
+    assert state.rematch() is None and state.set_topic("RAWLASER2") is None  # the debugger's picker
+    assert state.pair == (0, 1) and np.allclose(state.ref.points(), intel.scans[10].points(), atol=1e-9)

@@ -49,8 +49,9 @@ GuessOpt = Annotated[Guess, typer.Option(
 TruthOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
     "--truth", metavar="X Y THETA_DEG", help="the known answer X Y THETA_DEG (default: the log's scan poses when "
                                              "the guess is not taken from them)")]
-TopicOpt = Annotated[Optional[str], typer.Option("--topic", help="a bag's LaserScan topic (needed when it has "
-                                                                 "several)")]
+TopicOpt = Annotated[Optional[str], typer.Option("--topic", help="a bag's LaserScan topic, or a CARMEN log's laser "
+                                                                 "message type (FLASER, ROBOTLASER1, RAWLASER1-4): "
+                                                                 "needed when it has several")]
 TypestoreOpt = Annotated[str, typer.Option("--typestore", help="the ROS distro whose message types decode a ROS 2 "
                                                                "bag recorded without them (e.g. ROS2_HUMBLE, "
                                                                "ROS2_FOXY, ROS1_NOETIC)")]

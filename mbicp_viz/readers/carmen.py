@@ -4,6 +4,11 @@ Layouts as written by CARMEN's logger (every message ends ``ipc_timestamp ipc_ho
 logger_timestamp``); CSM's ``laser_data_carmen.c`` is the reference for the bearings of FLASER,
 which stores none: the scan spans 180 degrees from -90 degrees. A record must hold exactly the
 fields its counts announce.
+
+Each laser message type is a stream of its own: a log can hold two lasers (RAWLASER1 and
+RAWLASER2) or one laser twice (FLASER from the robot module, RAWLASER1 from the laser module, at
+the same instants), and a pair taken across two streams is no motion at all. A log with several is
+read one stream at a time, chosen like a bag's topic (``--topic ROBOTLASER1``).
 """
 
 from __future__ import annotations
@@ -26,8 +31,10 @@ LASER_MESSAGES = "FLASER, RAWLASER1-4 or ROBOTLASER1"
 TRAILER = 3  # ipc_timestamp ipc_hostname logger_timestamp
 
 
-def read_carmen(path: str) -> ScanLog:
-    log = ScanLog(str(path), [])
+def read_carmen(path: str, message: str | None = None) -> ScanLog:
+    """The scans of laser message type ``message`` (None: the log's only one)."""
+    log = ScanLog(str(path), [])  # odometry, frames and the messages read past
+    streams: dict[str, ScanLog] = {}
     laser_offset = 0.0
     for fields in token_lines(path, comment=None):
         kind = fields.t[0]
@@ -47,15 +54,34 @@ def read_carmen(path: str) -> ScanLog:
                 fields.take(name)
             log.odometry.append((_trailer(fields, "ODOM x y theta tv rv accel"), pose))
         elif kind == "FLASER":
-            log.add(_flaser(fields, log.records, laser_offset))
+            stream = streams.setdefault(kind, ScanLog(str(path), []))
+            stream.add(_flaser(fields, stream.records, laser_offset))
         elif kind == "ROBOTLASER1" or _RAWLASER.fullmatch(kind):
-            log.add(_rawlaser(fields, log.records, kind))
+            stream = streams.setdefault(kind, ScanLog(str(path), []))
+            stream.add(_rawlaser(fields, stream.records, kind))
         else:
             log.skipped[kind] = log.skipped.get(kind, 0) + 1
-    if not log.records:
+    if not streams:
         seen = ", ".join(f"{k} ({n})" for k, n in sorted(log.skipped.items())) or "none"
         raise InputError(f"no laser scans ({LASER_MESSAGES} lines); message types seen: {seen}", path)
+    kind = _stream(streams, message, path)
+    log.scans, log.unusable = streams[kind].scans, streams[kind].unusable
+    if len(streams) > 1:
+        log.topic, log.scan_topics = kind, {k: f"{v.records} scans" for k, v in streams.items()}
     return log
+
+
+def _stream(streams: dict[str, ScanLog], message: str | None, path: str) -> str:
+    """The laser message type to read: the one named, else the only one; several: an error listing them."""
+    listing = "; ".join(f"{k} ({v.records} scans)" for k, v in streams.items())
+    if message is not None:
+        if message not in streams:
+            raise InputError(f"no {message!r} scans; the log has: {listing}", path, field="--topic")
+        return message
+    if len(streams) > 1:
+        raise InputError(f"{len(streams)} laser message types, choose one with --topic: {listing}", path,
+                         field="--topic")
+    return next(iter(streams))
 
 
 def _pose(fields: Fields, name: str) -> Pose2:

@@ -166,7 +166,8 @@ class DebugState:
         return self.rematch()
 
     def set_topic(self, topic: str) -> str | None:
-        """Read another LaserScan topic of the bag and open its first consecutive pair."""
+        """Read another scan stream of the file (a bag's topic, a CARMEN log's laser message type) and
+        open its first consecutive pair."""
         from dataclasses import replace
 
         src = self.source
