@@ -67,3 +67,24 @@ def test_every_command_answers_help(tmp_path):
                 assert bracket in res.output, (name, param.name, bracket)
                 shown += 1
     assert shown >= 10
+
+
+def test_every_command_that_reads_scans_can_choose_the_stream():
+    """A bag with two scan topics or a CARMEN log with two laser message types is refused until
+    one is named: every command that reads scan files must let the user name it (--topic)."""
+    import typer
+
+    from mbicp_viz.cli import app
+    from mbicp_viz.cli.bench import command_names
+
+    root = typer.main.get_command(app)
+    reading = 0
+    for name in command_names(app):
+        command = root
+        for part in name.split():
+            command = command.commands[part]
+        arguments = {p.name for p in command.params if p.param_type_name == "argument"}
+        if arguments & {"first", "log", "logs", "scans"}:
+            reading += 1
+            assert any("--topic" in p.opts for p in command.params if p.param_type_name == "option"), name
+    assert reading >= 14

@@ -10,7 +10,7 @@ import typer
 
 from mbicp_viz.errors import InputError
 
-from .options import DEFAULT_ALGO, AlgoOpt, PairOpt, ParamsOpt, TeachOpt, user_errors
+from .options import DEFAULT_ALGO, AlgoOpt, PairOpt, ParamsOpt, TeachOpt, TopicOpt, read_options, user_errors
 from .serve import DEMO_PAIR
 
 
@@ -23,7 +23,7 @@ def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt 
             perturb: Annotated[Optional[tuple[float, float]], typer.Option(
                 "--perturb", metavar="XY_M THETA_DEG", help="move each stored guess uniformly within +/-XY_M in x "
                 "and y and +/-THETA_DEG (seeded)")] = None,
-            seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0):
+            seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0, topic: TopicOpt = None):
     """Time per match on consecutive pairs: mean, median, p90, matches per second; events off and on."""
     import numpy as np
 
@@ -31,7 +31,7 @@ def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt 
     from mbicp_viz.readers import read_log
     from mbicp_viz.readers.params_toml import make_params
 
-    lg = read_log(log)
+    lg = read_log(log, read_options(topic))
     p = make_params(algo.value, params)
     typer.echo(f"{algo.value} on {log}: {len(lg.scans[0].ranges)} beams; {machine_line()}")
     before = speed_probe_us()
@@ -67,7 +67,9 @@ def originals(built: Annotated[Path, typer.Argument(help="the folder tools/origi
               every: Annotated[int, typer.Option("--every", min=1, help="keep one beam in K (the C MbICP takes at "
                                                  "most 361)")] = 1,
               params: Annotated[Optional[Path], typer.Option(
-                  "--params", help="improved MbICP's parameters (TOML): a last line with them")] = None):
+                  "--params", help="improved MbICP's parameters, a TOML file or a preset (mbicp-viz params "
+                                   "--presets): a last line with them")] = None,
+              topic: TopicOpt = None):
     """This MbICP, ICP and PL-ICP against the original C code on the same pairs (agreement, successes,
     time per match); improved MbICP against CSM's PL-ICP."""
     from mbicp_viz.evaluation.bench import machine_line, speed_probe_us
@@ -78,7 +80,7 @@ def originals(built: Annotated[Path, typer.Argument(help="the folder tools/origi
 
     check_built(built)  # a missing build or a bad file stops here, before minutes of matching
     improved = make_params("improved", params)
-    pairs = protocol_pairs(every_kth_beam(read_log(log), every), limit, check_perturb(perturb), seed)
+    pairs = protocol_pairs(every_kth_beam(read_log(log, read_options(topic)), every), limit, check_perturb(perturb), seed)
     typer.echo(f"{log}: {len(pairs)} pairs of {len(pairs[0][0].bearings)} beams, guesses within +/-{perturb[0]:g} m, "
                f"+/-{perturb[1]:g} deg (seed {seed}); {machine_line()}")
     before = speed_probe_us()
@@ -100,13 +102,14 @@ def check_perturb(perturb: tuple[float, float]) -> tuple[float, float]:
     return perturb[0], math.radians(perturb[1])
 
 
-def gui(scans: Annotated[Path, typer.Argument(help="scan file")] = DEMO_PAIR, pair: PairOpt = None):
+def gui(scans: Annotated[Path, typer.Argument(help="scan file")] = DEMO_PAIR, pair: PairOpt = None,
+        topic: TopicOpt = None):
     """Latency of the debugger: iteration step -> redraw, parameter change -> re-match -> redraw."""
     from mbicp_viz.evaluation.bench import machine_line
     from mbicp_viz.views.debugger.latency import gui_latency
 
     typer.echo(f"viser debugger on {scans}; {machine_line()}")
-    for t in gui_latency(str(scans), pair or (0, 1)):
+    for t in gui_latency(str(scans), pair or (0, 1), read_options(topic)):
         typer.echo(t.line())
 
 

@@ -110,12 +110,13 @@ def protocol(log: LogArg, algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None
              max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, callback=finite,
                                                    help="largest |x|, |y| of the guess [m]")] = 0.2,
              max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
-                                                          help="largest |theta| of the guess [deg]")] = 45.0):
+                                                          help="largest |theta| of the guess [deg]")] = 45.0,
+             topic: TopicOpt = None):
     """MbICP's own protocol: every case matches a scan against itself from a random guess."""
     from mbicp_viz.evaluation.protocols import displaced_self_matches, protocol_summary
     from mbicp_viz.readers.params_toml import make_params
 
-    res = displaced_self_matches(_read(log).scans, cases, make_params(algo.value, params), seed, max_xy,
+    res = displaced_self_matches(_read(log, read_options(topic)).scans, cases, make_params(algo.value, params), seed, max_xy,
                                  math.radians(max_theta_deg))
     typer.echo(protocol_summary(algo.value, res))
 
@@ -139,7 +140,7 @@ def overlap(logs: Annotated[list[str], typer.Argument(help="scan logs; scenes ar
                                                          help="largest |theta| of a displacement [deg]")] = 15.0,
             csv: Annotated[Optional[Path], typer.Option("--csv", help="write every run as CSV")] = None,
             png: Annotated[Optional[Path], typer.Option("--png", help="write a plot")] = None,
-            workers: WorkersOpt = None):
+            workers: WorkersOpt = None, topic: TopicOpt = None):
     """Paper 000's partial-overlap protocol (§3.1): Tables 1-3 for each matcher, as Markdown."""
     from mbicp_viz.evaluation.overlap import csv_text, make_cases, markdown, plot_png, run_overlap, scene_scans, tables
 
@@ -148,7 +149,7 @@ def overlap(logs: Annotated[list[str], typer.Argument(help="scan logs; scenes ar
         raise InputError("each ratio must lie in (0, 100]", field="--ratios")
     ps = params_for(algos, params)
     picked = number_list(scans, "--scans", "3,10,25", int) if scans else None
-    scenes = [s for log in logs for s in scene_scans(_read(log), scenes_per_log, picked)]
+    scenes = [s for log in logs for s in scene_scans(_read(log, read_options(topic)), scenes_per_log, picked)]
     cases = make_cases(scenes, etas, runs, removal, seed, max_xy, math.radians(max_theta_deg), thin)
     t0 = time.perf_counter()
     with Progress(len(cases)) as bar:
@@ -171,12 +172,13 @@ def overlap(logs: Annotated[list[str], typer.Argument(help="scan logs; scenes ar
 
 
 def ceiling(log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
-            algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, limit: LimitOpt = None, workers: WorkersOpt = None):
+            algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, limit: LimitOpt = None, workers: WorkersOpt = None,
+            topic: TopicOpt = None):
     """How well any guess could do on a log: each matcher started at the truth, and the search alone."""
     from mbicp_viz.evaluation.sequence import ceiling as ceiling_of, ceiling_summary
 
     by_name = params_for(algos, params)
-    lg = _read(log)
+    lg = _read(log, read_options(topic))
     with Progress(len(lg.consecutive_pairs(limit))) as bar:
         found, kept, doubted, n = ceiling_of(lg, list(by_name.values()), limit, workers, on_row=lambda _: bar.update(1))
     if n == 0:
@@ -193,14 +195,14 @@ def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses 
              condition: Annotated[float, typer.Option("--condition", min=1.0, callback=finite,
                                                       help="a pair is degenerate above this surface condition "
                                                            "number at its true pose")] = 30.0,
-             workers: WorkersOpt = None):
+             workers: WorkersOpt = None, topic: TopicOpt = None):
     """Successes where the scene leaves a direction free (corridors) and elsewhere, from perturbed guesses."""
     from mbicp_viz.evaluation.corridor import corridor as corridor_of, corridor_summary
 
     if not all(math.isfinite(v) and v >= 0 for v in perturb):
         raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
     ps = params_for(algos, params)
-    lg = _read(log)
+    lg = _read(log, read_options(topic))
     t0 = time.perf_counter()
     with Progress(len(lg.consecutive_pairs(None))) as bar:
         rows = corridor_of(lg, ps, (perturb[0], math.radians(perturb[1])), seed, workers, on_row=lambda _: bar.update(1))
@@ -218,7 +220,7 @@ def covariance(log: Annotated[str, typer.Argument(help="scan log with a truth (i
                limit: LimitOpt = None,
                png: Annotated[Optional[Path], typer.Option("--png", help="the NEES distributions against chi2(3)")]
                = None,
-               workers: WorkersOpt = None):
+               workers: WorkersOpt = None, topic: TopicOpt = None):
     """Whether each matcher's reported covariance fits its errors against the truth (NEES, chi2 bounds)."""
     from mbicp_viz.evaluation.cases import cases_for
     from mbicp_viz.evaluation.covariance import consistency_lines, covariance_consistency, nees_png
@@ -227,7 +229,7 @@ def covariance(log: Annotated[str, typer.Argument(help="scan log with a truth (i
 
     moved = cases_options(truth, relations_file, guess, perturb)
     ps = params_for(algos, params)
-    lg = _read(log)
+    lg = _read(log, read_options(topic))
     cases = cases_for(0, lg, truth, read_relations(relations_file) if relations_file else None, offset, tolerance,
                       guess, moved, seed, load_search(params), limit)
     results = {}
@@ -248,13 +250,13 @@ def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps
               guess: Annotated[Guess, typer.Option("--guess", help="identity, pose, odometry or search (a correlative "
                                                    f"search within {SEARCH} of the identity)")] = Guess.identity,
               out: Annotated[Optional[Path], typer.Option("--out", help="JSON file: one object per matched relation")]
-              = None):
+              = None, topic: TopicOpt = None):
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""
     from mbicp_viz.evaluation.relations import match_relations, stored_summary, summary
     from mbicp_viz.readers.params_toml import load_search, make_params
     from mbicp_viz.readers.relations import read_relations
 
-    rows, missing = match_relations(_read(log), read_relations(relations_file), make_params(algo.value, params),
+    rows, missing = match_relations(_read(log, read_options(topic)), read_relations(relations_file), make_params(algo.value, params),
                                     offset, tolerance, guess, load_search(params))
     if out:
         out.write_text(json.dumps(rows, indent=1) + "\n")

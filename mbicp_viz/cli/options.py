@@ -220,7 +220,7 @@ class Progress:
             self.bar.__exit__(*exc)
 
 
-def read_options(topic: str | None, typestore: str, mount, upside_down: bool, deskew=None):
+def read_options(topic: str | None, typestore: str = "ROS2_HUMBLE", mount=None, upside_down: bool = False, deskew=None):
     """How to read the files a command names (``--topic``, ``--typestore``, ``--mount``, ``--upside-down``,
     ``--deskew``)."""
     from mbicp_viz.readers import ReadOptions

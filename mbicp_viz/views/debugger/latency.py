@@ -9,16 +9,18 @@ import viser
 
 from mbicp_viz.core import Pose2
 from mbicp_viz.evaluation.bench import Timing
-from mbicp_viz.readers import read_log
+from mbicp_viz.readers import ReadOptions, read_log
 
 from .session import Session
 from .state import Source
 
 
-def gui_latency(path: str, pair: tuple[int, int], steps: int = 3, changes: int = 40) -> tuple[Timing, Timing]:
+def gui_latency(path: str, pair: tuple[int, int], options: ReadOptions | None = None, steps: int = 3,
+                changes: int = 40) -> tuple[Timing, Timing]:
     """Iteration step -> redraw, and parameter change -> re-match -> redraw, as a user drives them."""
+    log = read_log(path, options)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    s = Session(server, Source(path, read_log(path), pair=pair, guess=Pose2()))
+    s = Session(server, Source(path, log, pair=pair, guess=Pose2(), options=options))
     try:
         step_ms = []
         for _ in range(steps):

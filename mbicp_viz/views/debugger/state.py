@@ -48,7 +48,7 @@ class Source:
     failures: list[EvalRow] = field(default_factory=list)  # an evaluation's failed pairs, worst first
     rows_label: str = ""  # the rows file they come from, and how many rows it holds
     opened: EvalRow | None = None  # the row the first match reopens
-    options: ReadOptions | None = None  # how the log was read (to read another of a bag's scan topics)
+    options: ReadOptions | None = None  # how the log was read (to read another of its scan streams)
     shown: tuple[str, ...] | None = None  # the layers (legend labels) shown at first; None: each style's default
     lesson: tuple = ()  # the lesson's steps (lesson/steps.py), in lesson mode
     lesson_step: int = 0  # the step a new tab opens (0-based)
