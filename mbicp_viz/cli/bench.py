@@ -80,7 +80,8 @@ def originals(built: Annotated[Path, typer.Argument(help="the folder tools/origi
 
     check_built(built)  # a missing build or a bad file stops here, before minutes of matching
     improved = make_params("improved", params)
-    pairs = protocol_pairs(every_kth_beam(read_log(log, read_options(topic)), every), limit, check_perturb(perturb), seed)
+    lg = every_kth_beam(read_log(log, read_options(topic)), every)
+    pairs = protocol_pairs(lg, limit, check_perturb(perturb), seed)
     typer.echo(f"{log}: {len(pairs)} pairs of {len(pairs[0][0].bearings)} beams, guesses within +/-{perturb[0]:g} m, "
                f"+/-{perturb[1]:g} deg (seed {seed}); {machine_line()}")
     before = speed_probe_us()

@@ -116,7 +116,8 @@ def protocol(log: LogArg, algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None
     from mbicp_viz.evaluation.protocols import displaced_self_matches, protocol_summary
     from mbicp_viz.readers.params_toml import make_params
 
-    res = displaced_self_matches(_read(log, read_options(topic)).scans, cases, make_params(algo.value, params), seed, max_xy,
+    scans = _read(log, read_options(topic)).scans
+    res = displaced_self_matches(scans, cases, make_params(algo.value, params), seed, max_xy,
                                  math.radians(max_theta_deg))
     typer.echo(protocol_summary(algo.value, res))
 
@@ -256,8 +257,9 @@ def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps
     from mbicp_viz.readers.params_toml import load_search, make_params
     from mbicp_viz.readers.relations import read_relations
 
-    rows, missing = match_relations(_read(log, read_options(topic)), read_relations(relations_file), make_params(algo.value, params),
-                                    offset, tolerance, guess, load_search(params))
+    lg = _read(log, read_options(topic))
+    rows, missing = match_relations(lg, read_relations(relations_file), make_params(algo.value, params), offset,
+                                    tolerance, guess, load_search(params))
     if out:
         out.write_text(json.dumps(rows, indent=1) + "\n")
     typer.echo(f"{algo.value}: {summary(rows)} ({missing} relations without a scan at both ends)")

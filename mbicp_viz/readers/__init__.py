@@ -47,10 +47,10 @@ def format_suffix(path: Path) -> str:
 
 @dataclass(frozen=True)
 class ReadOptions:
-    """How to read a file beyond its name: a bag's scan topic and ROS distro, and the laser's mount
-    for files that do not store it (T_base_laser; ``upside_down``: the laser's z axis points down,
-    its bearings run clockwise seen from above); ``deskew``: correct each scan for the motion during
-    it (``deskew.py``: "odometry" or "velocity")."""
+    """How to read a file beyond its name: its scan stream (a bag's topic, a CARMEN log's laser message
+    type), a bag's ROS distro, and the laser's mount for files that do not store it (T_base_laser;
+    ``upside_down``: the laser's z axis points down, its bearings run clockwise seen from above);
+    ``deskew``: correct each scan for the motion during it (``deskew.py``: "odometry" or "velocity")."""
 
     topic: str | None = None
     typestore: str = "ROS2_HUMBLE"

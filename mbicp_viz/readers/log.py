@@ -64,8 +64,8 @@ class ScanLog:
     skipped: dict[str, int] = field(default_factory=dict)  # message type -> records read past
     unusable: dict[int, UnusableScan] = field(default_factory=dict)  # scan record -> why it cannot be matched
     frames: Frames = field(default_factory=Frames)
-    topic: str | None = None  # a bag's scan topic
-    scan_topics: dict[str, str] = field(default_factory=dict)  # every LaserScan topic of a bag -> its description
+    topic: str | None = None  # the scan stream read: a bag's topic, a CARMEN log's laser message type
+    scan_topics: dict[str, str] = field(default_factory=dict)  # the file's scan streams -> their descriptions
     odometry_source: str | None = None
     notes: list[str] = field(default_factory=list)  # warnings for the user (a bag cut short ...)
 

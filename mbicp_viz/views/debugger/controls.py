@@ -181,7 +181,8 @@ class Guess:
 
 
 class Scans:
-    """Which two scans of a log are matched, and which of a bag's scan topics."""
+    """Which two scans of a log are matched, and which of its scan streams (a bag's topics, a CARMEN
+    log's laser message types)."""
 
     def __init__(self, session, gui, order: float):
         self.s = session
@@ -190,7 +191,7 @@ class Scans:
         with gui.add_folder("Scans", order=order):
             self.info = gui.add_markdown("")
             if len(log.scan_topics) > 1 and not state.source.rows_label:  # an evaluation's rows hold to one topic
-                self.topic = gui.add_dropdown("scan topic", list(log.scan_topics), initial_value=log.topic,
+                self.topic = gui.add_dropdown("scan stream", list(log.scan_topics), initial_value=log.topic,
                                               hint="; ".join(f"{t}: {d}" for t, d in log.scan_topics.items()))
                 self.topic.on_update(lambda _: session.guarded(self._topic))
             self.consecutive = gui.add_checkbox("consecutive (object = reference + 1)", True)
