@@ -204,3 +204,17 @@ def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_p
     state = DebugState(files_source(str(path), None, guess="identity", options=ReadOptions(topic="FLASER")))
     assert state.rematch() is None and state.set_topic("RAWLASER2") is None  # the debugger's picker
     assert state.pair == (0, 1) and np.allclose(state.ref.points(), intel.scans[10].points(), atol=1e-9)
+
+
+@pytest.mark.parametrize("n, span_deg, noted", [(361, 180.0, False), (180, 180.0, False), (401, 100.0, False),
+                                                (682, 180.0, True)])
+def test_flaser_bearings_follow_the_beam_count_as_carmen_guesses_them(tmp_path, n, span_deg, noted):
+    """FLASER stores no field of view: a SICK's counts span 180 degrees (CSM), 400-401 readings its
+    100-degree mode (CARMEN's readlog.c); any other count is read over 180 degrees, and said so."""
+    ranges = " ".join(["2.0"] * n)
+    path = tmp_path / "f.log"
+    path.write_text("".join(f"FLASER {n} {ranges} 0 0 0 0 0 0 {t} host {t}\n" for t in (1.0, 2.0)))
+    log = read_log(path)
+    b = log.scans[0].bearings
+    assert np.degrees(b[-1] - b[0]) == pytest.approx(span_deg) and np.degrees(b[0]) == pytest.approx(-span_deg / 2)
+    assert any("FLASER stores no field of view" in note and str(n) in note for note in log.notes) == noted

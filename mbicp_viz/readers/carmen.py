@@ -2,8 +2,11 @@
 
 Layouts as written by CARMEN's logger (every message ends ``ipc_timestamp ipc_hostname
 logger_timestamp``); CSM's ``laser_data_carmen.c`` is the reference for the bearings of FLASER,
-which stores none: the scan spans 180 degrees from -90 degrees. A record must hold exactly the
-fields its counts announce.
+which stores none: the scan spans 180 degrees from -90 degrees — but for 400 and 401 readings,
+which CARMEN's own reader (``carmen_laser_guess_fov``) takes for a SICK in its 100-degree mode at
+0.25 degrees. Other counts than a SICK's (180, 181, 360, 361, 400, 401) are read over 180 degrees
+with a note, since the file cannot say otherwise. A record must hold exactly the fields its counts
+announce.
 
 Each laser message type is a stream of its own: a log can hold two lasers (RAWLASER1 and
 RAWLASER2) or one laser twice (FLASER from the robot module, RAWLASER1 from the laser module, at
@@ -29,6 +32,8 @@ _MESSAGE = re.compile(r"^[A-Z][A-Z0-9_]*$")
 _RAWLASER = re.compile(r"RAWLASER[1-4]")
 LASER_MESSAGES = "FLASER, RAWLASER1-4 or ROBOTLASER1"
 TRAILER = 3  # ipc_timestamp ipc_hostname logger_timestamp
+SICK_180_DEG = (180, 181, 360, 361)  # FLASER readings of a SICK over 180 degrees (1 or 0.5 degree steps)
+SICK_100_DEG = (400, 401)  # ... and over 100 degrees at 0.25 degrees (CARMEN's readlog.c)
 
 
 def read_carmen(path: str, message: str | None = None) -> ScanLog:
@@ -66,6 +71,10 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
         raise InputError(f"no laser scans ({LASER_MESSAGES} lines); message types seen: {seen}", path)
     kind = _stream(streams, message, path)
     log.scans, log.unusable = streams[kind].scans, streams[kind].unusable
+    beams = {len(s.ranges) for s in log.scans}
+    if kind == "FLASER" and not beams <= set(SICK_180_DEG + SICK_100_DEG):
+        log.notes.append(f"{path}: FLASER stores no field of view, and {', '.join(map(str, sorted(beams)))} readings "
+                         "are not a SICK's: read over 180 degrees from -90, as CARMEN and CSM do")
     if len(streams) > 1:
         log.topic, log.scan_topics = kind, {k: f"{v.records} scans" for k, v in streams.items()}
     return log
@@ -110,7 +119,8 @@ def _flaser(fields: Fields, index: int, laser_offset: float):
     if laser_offset:
         pose = pose @ Pose2(laser_offset, 0.0, 0.0)
         odom = odom @ Pose2(laser_offset, 0.0, 0.0)
-    bearings = uniform_bearings(n, -math.pi / 2, math.pi / (n - 1) if n > 1 else 0.0)
+    fov = math.radians(100.0 if n in SICK_100_DEG else 180.0)
+    bearings = uniform_bearings(n, -fov / 2, fov / (n - 1) if n > 1 else 0.0)
     return _make(fields, index, ranges, bearings, pose=pose, odometry=odom, stamp=stamp)
 
 
