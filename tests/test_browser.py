@@ -333,3 +333,30 @@ def test_extrapolated_steps_are_named_in_the_playback_text(browser, app):
     page.get_by_text(f"went on to {1.0 + ev.extrapolated:.2f} times its length").first.wait_for(timeout=10000)
     assert float(box(page, "extrapolate").input_value()) == session.state.params["improved"].extrapolate
     page.close()
+
+
+def test_a_preset_picked_on_the_page_loads_and_the_picker_says_what_is_loaded(browser, app):
+    """The preset picker offers the edited matcher's presets; picking one fills the boxes and
+    re-matches; typing a value makes it 'as typed'; 'defaults' goes back."""
+    from mbicp_viz.readers.params_toml import presets_for
+    from mbicp_viz.views.debugger.state import DEFAULTS, TYPED
+
+    page, session = open_tab(browser, app)
+    picker = page.get_by_role("combobox", name="preset")
+    assert picker.input_value() == DEFAULTS
+    picker.click()
+    assert page.get_by_role("option").all_inner_texts() == [DEFAULTS, *presets_for("improved"), TYPED]
+    before = session.state.max_iteration()
+    page.get_by_role("option", name="poor-guess").click()
+    assert wait_for(lambda: session.state.params["improved"] == presets_for("improved")["poor-guess"])
+    assert wait_for(lambda: box(page, "mad_anneal").input_value() == "0.7")  # what the page shows
+    assert wait_for(lambda: session.state.max_iteration() != before)
+    page.get_by_text(f"after {session.state.max_iteration()} iterations").first.wait_for(timeout=10000)
+    type_into(page, "MaxIter", "7")
+    assert wait_for(lambda: session.state.params["improved"].MaxIter == 7)
+    assert wait_for(lambda: picker.input_value() == TYPED)
+    picker.click()
+    page.get_by_role("option", name=DEFAULTS).click()
+    assert wait_for(lambda: box(page, "MaxIter").input_value() == "100" and box(page, "mad_anneal").input_value() == "0.0")
+    assert wait_for(lambda: picker.input_value() == DEFAULTS)
+    page.close()

@@ -35,11 +35,13 @@ def params(algo: AlgoOpt = DEFAULT_ALGO,
                                                                    "their files, and stop")] = False):
     """Print (or write) the default parameters of a matcher and of the search, as a file for --params."""
     from mbicp_viz.core import SearchParams
-    from mbicp_viz.readers.params_toml import PRESETS, make_params, params_to_toml, preset_names
+    from mbicp_viz.core import MATCHERS
+    from mbicp_viz.readers.params_toml import PRESETS, make_params, params_to_toml, preset_names, presets_for
 
     if presets:
         for name in preset_names():
-            typer.echo(f"{name:<18} {PRESETS / name}.toml")
+            matchers = ",".join(m for m in MATCHERS if name in presets_for(m))
+            typer.echo(f"{name:<18} {matchers:<28} {PRESETS / name}.toml")
         return
     text = params_to_toml(make_params(algo.value, None), SearchParams())
     if out:

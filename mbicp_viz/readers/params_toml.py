@@ -10,6 +10,7 @@ the parameter sets the README and docs/results.md measure, each saying in its co
 
 from __future__ import annotations
 
+import functools
 import math
 import tomllib
 from pathlib import Path
@@ -26,6 +27,21 @@ PRESETS = Path(__file__).resolve().parent.parent / "presets"
 
 def preset_names() -> list[str]:
     return sorted(p.stem for p in PRESETS.glob("*.toml"))
+
+
+@functools.cache
+def presets_for(algorithm: str) -> dict[str, Params]:
+    """The presets that change something of ``algorithm``'s defaults, by name (a preset of other
+    matchers only, or with keys this one does not have, is not among them)."""
+    default, out = MATCHERS[algorithm].params_type(), {}
+    for name in preset_names():
+        try:
+            params = load_params(name, algorithm)
+        except InputError:
+            continue
+        if params != default:
+            out[name] = params
+    return out
 
 
 def params_file(path: str | Path) -> Path:

@@ -13,9 +13,11 @@ import threading
 import numpy as np
 
 from mbicp_viz.core import MATCHERS, Pose2
+from mbicp_viz.readers.params_toml import presets_for
 
 from .. import scene, viser_draw
 from . import panels
+from .state import DEFAULTS, TYPED
 
 
 def set_boxes(control, values: dict) -> None:
@@ -86,9 +88,13 @@ class Matchers:
             self.boxes = {name: gui.add_checkbox(name, name in state.algorithms, hint=m.title)
                           for name, m in MATCHERS.items()}
             self.edit = gui.add_dropdown("parameters of", list(MATCHERS), initial_value=self.edited)
+            self.preset = gui.add_dropdown("preset", self._presets(), initial_value=state.preset_of(self.edited),
+                                           hint="the parameter sets shipped with the tool (--params NAME); "
+                                                f"'{TYPED}': values typed into the boxes")
         for box in self.boxes.values():
             box.on_update(lambda _: session.guarded(self._chosen))
         self.edit.on_update(lambda _: session.guarded(self._edit))
+        self.preset.on_update(lambda _: session.guarded(self._preset))
         self.params: panels.ParamPanel | None = None
         self._build_params()
 
@@ -98,11 +104,20 @@ class Matchers:
         self.params = panels.param_panel(self.gui, f"Parameters: {self.edited}", self.s.state.params[self.edited],
                                          self.order + 1, lambda name, text: self.s.guarded(lambda: self._typed(name, text)))
 
+    def _presets(self) -> list[str]:
+        return [DEFAULTS, *presets_for(self.edited), TYPED]
+
+    def _show_preset(self) -> None:
+        """The picker names what the edited matcher's parameters are (its choices: that matcher's)."""
+        self.preset.options = self._presets()
+        self.preset.value = self.s.state.preset_of(self.edited)
+
     def show(self) -> None:
         """The boxes as the model holds them (after a pair was reopened with its own matcher)."""
         set_boxes(self, {n: n in self.s.state.algorithms for n in self.boxes})
         self.edited = self.edit.value = self.s.state.algorithms[0]
         self._build_params()
+        self._show_preset()
 
     def _chosen(self) -> None:
         if self.showing:  # the model sets the boxes one by one (``set_boxes``): no match in between
@@ -116,14 +131,27 @@ class Matchers:
     def _edit(self) -> None:
         self.edited = self.edit.value
         self._build_params()
+        self._show_preset()
 
     def _typed(self, name: str, text: str) -> None:
         """Apply one parameter as typed, or say why not; the boxes then show what the matcher uses."""
+        self._applied(self.s.state.set_params(self.edited, {name: text}))
+
+    def _preset(self) -> None:
+        """Load the picked preset (or the defaults); picking 'as typed' or what is loaded does nothing."""
         state = self.s.state
-        error = state.set_params(self.edited, {name: text})
+        if self.preset.value in (TYPED, state.preset_of(self.edited)):
+            return
+        self._applied(state.use_preset(self.edited, self.preset.value))
+
+    def _applied(self, error: str | None) -> None:
+        """After a change of the edited matcher's parameters: the boxes and the picker show what it
+        uses, the message why a value was refused; a match that ran is shown."""
+        state = self.s.state
         refused = error is not None and error != state.message  # a value, not the match, is wrong
         self.params.message.content = panels.warning(f"{error} — the last good value is kept" if refused else "")
         self.params.show(state.params[self.edited])
+        self._show_preset()
         if not refused:
             self.s.after_match(error)
 

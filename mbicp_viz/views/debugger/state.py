@@ -23,6 +23,7 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess, pair_guess, stored_odometry, stored_truth
 from mbicp_viz.evaluation.recorded import Run, run_match
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
+from mbicp_viz.readers.params_toml import presets_for
 from mbicp_viz.readers.rows import EvalRow
 
 from .. import scene, text
@@ -54,6 +55,9 @@ class Source:
     lesson_step: int = 0  # the step a new tab opens (0-based)
     view: tuple[float, float, float, float] | None = None  # what "fit the view" shows [m]; None: the reference scan
 
+
+# What the preset picker shows for a matcher's parameters: its defaults, a preset's name, or neither.
+DEFAULTS, TYPED = "defaults", "as typed"
 
 # What a failed match can raise that the user must read rather than a traceback.
 MATCH_ERRORS = (ScanError, ParamError, InputError, ValueError, FloatingPointError, np.linalg.LinAlgError)
@@ -241,9 +245,23 @@ class DebugState:
         """Apply what the user typed into a matcher's parameter boxes (re-matching once when
         anything changed); None, or why it is refused (then nothing changes)."""
         try:
-            new = parsed(self.params[matcher], typed)
+            return self._use_params(matcher, parsed(self.params[matcher], typed))
         except ParamError as e:
             return str(e)
+
+    def use_preset(self, matcher: str, name: str) -> str | None:
+        """A matcher's defaults (``DEFAULTS``) or one of its presets (``--params NAME``), as
+        ``set_params`` applies typed values."""
+        return self._use_params(matcher, MATCHERS[matcher].params_type() if name == DEFAULTS
+                                else presets_for(matcher)[name])
+
+    def preset_of(self, matcher: str) -> str:
+        """What a matcher's parameters are: ``DEFAULTS``, the name of a preset, or ``TYPED``."""
+        if self.params[matcher] == MATCHERS[matcher].params_type():
+            return DEFAULTS
+        return next((n for n, p in presets_for(matcher).items() if p == self.params[matcher]), TYPED)
+
+    def _use_params(self, matcher: str, new: Params) -> str | None:
         if new == self.params[matcher]:
             return None
         old, self.params[matcher] = self.params[matcher], new
