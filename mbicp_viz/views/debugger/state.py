@@ -245,9 +245,10 @@ class DebugState:
         """Apply what the user typed into a matcher's parameter boxes (re-matching once when
         anything changed); None, or why it is refused (then nothing changes)."""
         try:
-            return self._use_params(matcher, parsed(self.params[matcher], typed))
+            new = parsed(self.params[matcher], typed)
         except ParamError as e:
             return str(e)
+        return self._use_params(matcher, new)
 
     def use_preset(self, matcher: str, name: str) -> str | None:
         """A matcher's defaults (``DEFAULTS``) or one of its presets (``--params NAME``), as
