@@ -81,8 +81,16 @@ def test_a_driver_that_answers_too_few_pairs_ends_in_one_line(tmp_path):
     assert error.startswith("mbicp-viz: error:") and "mbicp_pairs" in error and "2 poses for 3 pairs" in error
 
 
-def test_more_rays_than_the_c_mbicp_takes_asks_for_every(tmp_path):
-    assert_clean_error(*run(stand_ins(tmp_path), HOKUYO_BAG), "--every", "681", "--every 2")
+def test_more_rays_than_the_c_mbicp_takes_skip_it_and_compare_the_rest(tmp_path):
+    """The C MbICP takes at most 361 rays: on 681 it is not run (and the line says how to thin the
+    scans); CSM's ICP and PL-ICP, and improved MbICP against PL-ICP, run at full resolution."""
+    code, out = run(stand_ins(tmp_path), HOKUYO_BAG, "--limit", 2, "--repeat", 1)
+    assert code == 0, out
+    lines = out.splitlines()
+    assert "2 pairs of 681 beams" in lines[0]
+    assert "mbicp  not compared: the original takes at most 361 rays and these scans have 681: --every 2 keeps " \
+           "one beam in 2" in lines
+    assert [line.split()[0] for line in lines[1:5]] == ["mbicp", "icp", "plicp", "improved"], out
 
 
 def test_a_bad_perturbation_or_params_file_is_one_line(tmp_path):

@@ -65,7 +65,7 @@ def originals(built: Annotated[Path, typer.Argument(help="the folder tools/origi
                   "and y and +/-THETA_DEG (seeded)")] = (0.3, 15.0),
               seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0,
               every: Annotated[int, typer.Option("--every", min=1, help="keep one beam in K (the C MbICP takes at "
-                                                 "most 361)")] = 1,
+                                                 "most 361 rays: on more it is not compared)")] = 1,
               params: Annotated[Optional[Path], typer.Option(
                   "--params", help="improved MbICP's parameters, a TOML file or a preset (mbicp-viz params "
                                    "--presets): a last line with them")] = None,
