@@ -169,12 +169,11 @@ def test_rawlaser_and_robotlaser_lines_read_like_flaser(tmp_path, intel):
             assert log.scans[1].pose.as_array() == pytest.approx(intel.scans[1].pose.as_array())
 
 
-def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_path, intel):
-    """FLASER and RAWLASER1 of the same instants (one laser, logged twice) and RAWLASER2 of another
-    laser, interleaved as a logger writes them: a pair across two of them is no motion, so the log
-    is read one type at a time, named like a bag's topic."""
+def two_lasers(path, intel, n_scans=4):
+    """A CARMEN log of Intel's scans 0.. as FLASER and RAWLASER1 at the same instants (one laser,
+    logged twice) and its scans 10.. as RAWLASER2 (another laser), interleaved as a logger writes them."""
     lines = []
-    for k, s in enumerate(intel.scans[:4]):
+    for k, s in enumerate(intel.scans[:n_scans]):
         n, ranges = len(s.ranges), " ".join(str(float(v)) for v in s.ranges)
         p, o = s.pose, s.odometry
         other = " ".join(str(float(v)) for v in intel.scans[10 + k].ranges)
@@ -182,8 +181,14 @@ def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_p
         lines += [f"FLASER {n} {ranges} {p.x} {p.y} {p.theta} {o.x} {o.y} {o.theta} {s.stamp} host {s.stamp}",
                   f"RAWLASER1 {head} {ranges} 0 {s.stamp} host {s.stamp}",
                   f"RAWLASER2 {head} {other} 0 {s.stamp} host {s.stamp}"]
-    path = tmp_path / "two-lasers.log"
     path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_path, intel):
+    """A pair across two laser message types is no motion: a log with several is read one type at a
+    time, named like a bag's topic."""
+    path = two_lasers(tmp_path / "two-lasers.log", intel)
     with pytest.raises(InputError) as e:
         read_log(path)
     assert e.value.field == "--topic"

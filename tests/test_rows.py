@@ -4,6 +4,7 @@ exactly as the evaluation ran it."""
 import json
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -18,6 +19,7 @@ from mbicp_viz.views.debugger.sources import files_source
 from mbicp_viz.views.debugger.state import DebugState
 
 from .conftest import DATA
+from .test_readers import two_lasers
 
 LOG = DATA / "intel-relations.log"
 
@@ -124,3 +126,22 @@ def test_damaged_rows_files_end_in_one_line(tmp_path_factory, rows_file, cut, fl
         assert "\n" not in str(e) and "rows.json" in str(e)
     else:
         assert rows and all(r.algorithm in MATCHERS for r in rows)
+
+
+def test_rows_remember_the_scan_stream_and_reopen_only_on_it(tmp_path, intel):
+    """Rows of one laser message type of a log that has several reopen on that type; read as
+    another, the debugger refuses them instead of opening other scans under the same numbers."""
+    log = two_lasers(tmp_path / "two.log", intel, 6)
+    out = tmp_path / "rows.json"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(log), "--topic", "RAWLASER2", "--guess", "identity",
+                                   "--out", str(out), "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    assert {r.stream for r in read_rows(out)} == {"RAWLASER2"}
+    from mbicp_viz.readers import ReadOptions
+
+    state = DebugState(files_source(str(log), None, rows=str(out), options=ReadOptions(topic="RAWLASER2")))
+    assert state.rematch() is None and state.source.log.topic == "RAWLASER2"
+    assert np.allclose(state.ref.points(), intel.scans[10 + state.pair[0]].points(), atol=1e-9)
+    with pytest.raises(InputError) as e:
+        files_source(str(log), None, rows=str(out), options=ReadOptions(topic="FLASER"))
+    assert e.value.field == "stream" and "--topic RAWLASER2" in e.value.message

@@ -125,7 +125,7 @@ def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
         lg = read_log(path, reading)
         records = lg.record_numbers()
         rows = [pair_row(records[c.i], records[c.j], lg.scans[c.i], lg.scans[c.j], best, c.guess, "tune's guess",
-                         c.truth, lg.frames, False) for c in cases if c.log == k]
+                         c.truth, lg.frames, False, lg.topic) for c in cases if c.log == k]
         target = rows_dir / f"{Path(path).name.split('.')[0]}-rows.json"
         target.write_text(json.dumps(rows, indent=1) + "\n")
         bad = worst_first(read_rows(target))

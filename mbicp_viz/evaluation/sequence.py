@@ -57,13 +57,13 @@ def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess
     if truth == "pose" and guess in (Guess.pose, Guess.stored):
         raise InputError("the scan poses cannot be both the truth and the guess: use --guess identity or odometry",
                          field="--truth")
-    jobs = [(log.path, i, j, log.scan(i), log.scan(j), params, guess, truth, search, log.frames, base)
+    jobs = [(log.path, i, j, log.scan(i), log.scan(j), params, guess, truth, search, log.frames, base, log.topic)
             for i, j in log.consecutive_pairs(limit)]
     return ordered_map(_match_row, jobs, workers, on_row)
 
 
 def _match_row(job) -> dict:
-    path, i, j, ref, obj, params, guess, truth, search, frames, base = job
+    path, i, j, ref, obj, params, guess, truth, search, frames, base, stream = job
     t0 = time.perf_counter()
     g, source = pair_guess(ref, obj, guess, search)
     guess_ms = 1000.0 * (time.perf_counter() - t0)
@@ -72,23 +72,24 @@ def _match_row(job) -> dict:
         answer = stored_truth(ref, obj)
         if answer is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
-    row = pair_row(i, j, ref, obj, params, g, source, answer, frames, base)
+    row = pair_row(i, j, ref, obj, params, g, source, answer, frames, base, stream)
     if guess is Guess.search:
         row["guess_ms"] = guess_ms
     return row
 
 
 def pair_row(i: int, j: int, ref: Scan, obj: Scan, params: Params, guess: Pose2, source: str, truth: Pose2 | None,
-             frames, base: bool) -> dict:
+             frames, base: bool, stream: str | None) -> dict:
     """The row of one pair (``eval sequence``, ``tune``'s worst pairs): the match from ``guess`` (laser
     frame; ``source`` says where it came from) reported in the frame ``base`` chooses, its distance
-    from the log's odometry when it has some, and with ``truth`` (laser frame) its error. The guess
-    and every parameter are kept: the pair reopens exactly as it ran (``serve LOG --rows``)."""
+    from the log's odometry when it has some, and with ``truth`` (laser frame) its error. The guess,
+    every parameter and the scan stream read (``ScanLog.topic``) are kept: the pair reopens exactly
+    as it ran (``serve LOG --rows``)."""
     o = run(ref, obj, guess, params)
     r = reported(o.result, frames, base)
     row = result_row(i, j, r, o.time_ms) | r.as_dict() | {
         "guess": source, "guess_pose": [guess.x, guess.y, guess.theta], "on_ref": o.on_ref,
-        "frame": frames.frame_name(base), "params": params.as_dict()}
+        "frame": frames.frame_name(base), "stream": stream, "params": params.as_dict()}
     if ref.odometry is not None and obj.odometry is not None:  # how far the match is from the odometry
         et, er = pose_error(r.pose, frames.reported(relative(ref.odometry, obj.odometry), base))
         row |= {"odometry_xy": et, "odometry_theta": er}

@@ -35,6 +35,7 @@ class EvalRow:
     guess_source: str
     pose: Pose2  # the evaluation's answer, in ``frame``
     frame: str
+    stream: str | None  # the scan stream the log was read as (a bag's topic ...; None: its only one)
     converged: bool
     reason: str  # why the matcher stopped
     success: bool | None = None  # with ``--truth``: within the criteria of the scan poses
@@ -105,6 +106,7 @@ def parse_row(obj, path: str, line: int) -> EvalRow:
     return EvalRow(line, ref, obj_, algorithm, f.params(algorithm), f.pose("guess_pose"),
                    f.get("guess", (str,), "where the guess came from"),
                    Pose2(f.number("x"), f.number("y"), f.number("theta")), f.get("frame", (str,), "a frame's name"),
+                   f.get("stream", (str, type(None)), "a scan stream's name or null", optional=True),
                    f.get("converged", (bool,), "true or false"), f.get("reason", (str,), "a stopping reason"),
                    f.get("success", (bool,), "true or false", optional=True),
                    f.number("error_xy", optional=True), f.number("error_theta", optional=True),

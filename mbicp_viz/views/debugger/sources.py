@@ -52,6 +52,10 @@ def _failures(path: str, log: ScanLog) -> tuple[list[EvalRow], str]:
             if k >= log.records:
                 raise InputError(f"record {k} is beyond the {log.records} records of {log.path}: rows of another "
                                  "log?", path, row.line, key)
+    if rows[0].stream != log.topic and rows[0].stream is not None:
+        raise InputError(f"written for the scans of {rows[0].stream!r}, but {log.path} is read as "
+                         f"{log.topic or 'its only stream'!r}: open it with --topic {rows[0].stream}",
+                         path, rows[0].line, "stream")
     frames = log.frames
     if rows[0].frame not in (frames.frame_name(True), frames.frame_name(False)):
         raise InputError(f"written for poses in {rows[0].frame!r}, but {log.path} reads as "
