@@ -194,9 +194,12 @@ def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_p
     assert e.value.field == "--topic"
     assert "3 laser message types, choose one with --topic: FLASER (4 scans); RAWLASER1 (4 scans); " \
            "RAWLASER2 (4 scans)" in str(e.value)
+    path.write_text("PARAM robot_frontlaser_offset 0.2 host 0\n" + path.read_text())
     for kind, first in (("FLASER", 0), ("RAWLASER1", 0), ("RAWLASER2", 10)):
         log = read_log(path, ReadOptions(topic=kind))
         assert len(log) == 4 and log.topic == kind and list(log.scan_topics) == ["FLASER", "RAWLASER1", "RAWLASER2"]
+        # the front laser's mount is laser 1's, not laser 2's
+        assert (log.frames.mount_source == "PARAM robot_frontlaser_offset") == (kind != "RAWLASER2")
         for a, b in zip(log.scans, intel.scans[first:first + 4]):
             np.testing.assert_allclose(a.points(), b.points(), atol=1e-9)
     with pytest.raises(InputError, match="no 'ROBOTLASER1' scans; the log has: FLASER"):

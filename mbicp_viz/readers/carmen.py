@@ -11,7 +11,9 @@ announce.
 Each laser message type is a stream of its own: a log can hold two lasers (RAWLASER1 and
 RAWLASER2) or one laser twice (FLASER from the robot module, RAWLASER1 from the laser module, at
 the same instants), and a pair taken across two streams is no motion at all. A log with several is
-read one stream at a time, chosen like a bag's topic (``--topic ROBOTLASER1``).
+read one stream at a time, chosen like a bag's topic (``--topic ROBOTLASER1``). The mount that
+``PARAM robot_frontlaser_offset`` gives is the front laser's (FLASER, ROBOTLASER1, RAWLASER1): the
+other lasers' scans are reported in their own frame.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ LASER_MESSAGES = "FLASER, RAWLASER1-4 or ROBOTLASER1"
 TRAILER = 3  # ipc_timestamp ipc_hostname logger_timestamp
 SICK_180_DEG = (180, 181, 360, 361)  # FLASER readings of a SICK over 180 degrees (1 or 0.5 degree steps)
 SICK_100_DEG = (400, 401)  # ... and over 100 degrees at 0.25 degrees (CARMEN's readlog.c)
+FRONT_LASER = ("FLASER", "ROBOTLASER1", "RAWLASER1")  # CARMEN's laser 1, the front one
 
 
 def read_carmen(path: str, message: str | None = None) -> ScanLog:
@@ -71,6 +74,8 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
         raise InputError(f"no laser scans ({LASER_MESSAGES} lines); message types seen: {seen}", path)
     kind = _stream(streams, message, path)
     log.scans, log.unusable = streams[kind].scans, streams[kind].unusable
+    if kind not in FRONT_LASER:  # robot_frontlaser_offset is not this laser's mount
+        log.frames = Frames()
     beams = {len(s.ranges) for s in log.scans}
     if kind == "FLASER" and not beams <= set(SICK_180_DEG + SICK_100_DEG):
         log.notes.append(f"{path}: FLASER stores no field of view, and {', '.join(map(str, sorted(beams)))} readings "
