@@ -34,8 +34,7 @@ def params(algo: AlgoOpt = DEFAULT_ALGO,
            presets: Annotated[bool, typer.Option("--presets", help="list the presets --params NAME reads, with "
                                                                    "their files, and stop")] = False):
     """Print (or write) the default parameters of a matcher and of the search, as a file for --params."""
-    from mbicp_viz.core import SearchParams
-    from mbicp_viz.core import MATCHERS
+    from mbicp_viz.core import MATCHERS, SearchParams
     from mbicp_viz.readers.params_toml import PRESETS, make_params, params_to_toml, preset_names, presets_for
 
     if presets:
