@@ -41,7 +41,6 @@ def test_the_command_line_loads_nothing_heavy_before_a_command_runs(tmp_path):
 
 
 def test_every_command_answers_help(tmp_path):
-    import typer
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app
@@ -49,17 +48,13 @@ def test_every_command_answers_help(tmp_path):
 
     names = command_names(app)
     assert {"match", "serve", "eval sequence", "bench startup", "params"} <= set(names)
-    root = typer.main.get_command(app)
     shown = 0
     for name in names:
         res = CliRunner().invoke(app, [*name.split(), "--help"], terminal_width=400)
         assert res.exit_code == 0 and "Usage" in res.output and "<bool>" not in res.output, (name, res.output)
         # units and table names in brackets ("[m]", "[deg]", "a [search] table") are shown as written, not
         # taken for markup and dropped
-        command = root
-        for part in name.split():
-            command = command.commands[part]
-        for param in command.params:
+        for param in _command(app, name).params:
             # a metavar names as many values as the option takes (X Y THETA_DEG: three)
             if param.metavar is not None and param.nargs > 0:
                 assert len(param.metavar.split()) == param.nargs, (name, param.name, param.metavar)
@@ -72,19 +67,24 @@ def test_every_command_answers_help(tmp_path):
 def test_every_command_that_reads_scans_can_choose_the_stream():
     """A bag with two scan topics or a CARMEN log with two laser message types is refused until
     one is named: every command that reads scan files must let the user name it (--topic)."""
-    import typer
-
     from mbicp_viz.cli import app
     from mbicp_viz.cli.bench import command_names
 
-    root = typer.main.get_command(app)
     reading = 0
     for name in command_names(app):
-        command = root
-        for part in name.split():
-            command = command.commands[part]
+        command = _command(app, name)
         arguments = {p.name for p in command.params if p.param_type_name == "argument"}
         if arguments & {"first", "log", "logs", "scans"}:
             reading += 1
             assert any("--topic" in p.opts for p in command.params if p.param_type_name == "option"), name
     assert reading >= 14
+
+
+def _command(app, name: str):
+    """The click command of ``name`` ("eval sequence"), with its parameters."""
+    import typer
+
+    command = typer.main.get_command(app)
+    for part in name.split():
+        command = command.commands[part]
+    return command

@@ -8,9 +8,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from mbicp_viz.errors import InputError
-
-from .options import DEFAULT_ALGO, AlgoOpt, PairOpt, ParamsOpt, TeachOpt, TopicOpt, read_options, user_errors
+from .options import (DEFAULT_ALGO, AlgoOpt, PairOpt, ParamsOpt, TeachOpt, TopicOpt, check_perturb, read_options,
+                      user_errors)
 from .serve import DEMO_PAIR
 
 
@@ -92,15 +91,6 @@ def originals(built: Annotated[Path, typer.Argument(help="the folder tools/origi
     for label, p in [("as published", make_params("improved", None))] + ([(str(params), improved)] if params else []):
         typer.echo(improved_against_plicp(pairs, p, label, plicp, repeat))
     typer.echo(f"machine speed probe {before:.2f} us before, {speed_probe_us():.2f} us after (lower is faster)")
-
-
-def check_perturb(perturb: tuple[float, float]) -> tuple[float, float]:
-    """--perturb XY_M THETA_DEG as (metres, radians), refused unless finite and >= 0."""
-    import math
-
-    if not all(math.isfinite(v) and v >= 0 for v in perturb):
-        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
-    return perturb[0], math.radians(perturb[1])
 
 
 def gui(scans: Annotated[Path, typer.Argument(help="scan file")] = DEMO_PAIR, pair: PairOpt = None,

@@ -16,8 +16,8 @@ from mbicp_viz.choices import Removal, Thin
 from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, FirstArg,
                       Frame, FrameOpt, Guess, GuessOpt, MountOpt, OffsetOpt, PairOpt, ParamsOpt, PerturbOpt, Progress,
                       RelationsOpt, RrdOpt, SEARCH, SecondArg, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt,
-                      UpsideDownOpt, WorkersOpt, cases_options, finite, number_list, params_for, pose_from_deg,
-                      read_options, say, user_errors)
+                      UpsideDownOpt, WorkersOpt, cases_options, check_perturb, finite, number_list, params_for,
+                      pose_from_deg, read_options, say, user_errors)
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[Optional[int], typer.Option("--limit", min=1, help="only the first N pairs")]
@@ -200,13 +200,12 @@ def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses 
     """Successes where the scene leaves a direction free (corridors) and elsewhere, from perturbed guesses."""
     from mbicp_viz.evaluation.corridor import corridor as corridor_of, corridor_summary
 
-    if not all(math.isfinite(v) and v >= 0 for v in perturb):
-        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+    moved = check_perturb(perturb)
     ps = params_for(algos, params)
     lg = _read(log, read_options(topic))
     t0 = time.perf_counter()
     with Progress(len(lg.consecutive_pairs(None))) as bar:
-        rows = corridor_of(lg, ps, (perturb[0], math.radians(perturb[1])), seed, workers, on_row=lambda _: bar.update(1))
+        rows = corridor_of(lg, ps, moved, seed, workers, on_row=lambda _: bar.update(1))
     if not rows:
         raise InputError("interrupted before the first pair was matched", log)
     typer.echo("\n".join(corridor_summary(rows, condition)))

@@ -110,6 +110,11 @@ def cases_options(truth: str, relations: str | None, guess: str, perturb: tuple[
         raise InputError("expected pose, or relations with one log and its --relations FILE", field="--truth")
     if guess not in GUESSES:
         raise InputError(f"expected one of {', '.join(GUESSES)} (the truth cannot be the guess)", field="--guess")
+    return check_perturb(perturb)
+
+
+def check_perturb(perturb: tuple[float, float]) -> tuple[float, float]:
+    """--perturb XY_M THETA_DEG as (metres, radians), refused unless finite and >= 0."""
     if not all(math.isfinite(v) and v >= 0 for v in perturb):
         raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
     return perturb[0], math.radians(perturb[1])
@@ -220,10 +225,11 @@ class Progress:
             self.bar.__exit__(*exc)
 
 
-def read_options(topic: str | None, typestore: str = "ROS2_HUMBLE", mount=None, upside_down: bool = False, deskew=None):
+def read_options(topic: str | None, typestore: str | None = None, mount=None, upside_down: bool = False,
+                 deskew=None):
     """How to read the files a command names (``--topic``, ``--typestore``, ``--mount``, ``--upside-down``,
-    ``--deskew``)."""
+    ``--deskew``; a command without ``--typestore`` reads with ``ReadOptions``' own)."""
     from mbicp_viz.readers import ReadOptions
 
-    return ReadOptions(topic, typestore, pose_from_deg(mount, "--mount"), upside_down,
+    return ReadOptions(topic, typestore or ReadOptions.typestore, pose_from_deg(mount, "--mount"), upside_down,
                        None if deskew is None else deskew.value)

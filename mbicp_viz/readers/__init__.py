@@ -72,11 +72,11 @@ def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
         raise InputError(f"unknown file type {''.join(p.suffixes)[-20:]!r}; known: {known}", str(p))
     module, name = reader.split(":")
     fn = getattr(importlib.import_module(f".{module}", __name__), name)
-    if o.topic is not None and module not in ("rosbag", "carmen"):
+    streams = {"rosbag": (o.topic, o.typestore), "carmen": (o.topic,)}  # the readers whose files hold several
+    if o.topic is not None and module not in streams:
         raise InputError("only ROS bags (topics) and CARMEN logs (laser message types) have streams to choose",
                          str(p), field="--topic")
-    log = fn(str(p), o.topic, o.typestore) if module == "rosbag" else fn(str(p), o.topic) if module == "carmen" \
-        else fn(str(p))
+    log = fn(str(p), *streams.get(module, ()))
     if o.mount is not None:
         log.frames = replace(log.frames, mount=o.mount, mount_source="--mount")
     if o.upside_down:

@@ -13,7 +13,6 @@ import numpy as np
 import viser
 
 from mbicp_viz.core import tiers
-from mbicp_viz.core.tiers import INTERPRETED
 from mbicp_viz.readers.params_toml import params_to_toml
 
 from .. import scene, viser_draw
@@ -107,12 +106,12 @@ class Session:
     def compiled(self) -> None:
         """The kernels are ready: the notice that they run interpreted goes (an error stays)."""
         with self.lock:
-            if self.h_status.content == panels.warning(INTERPRETED):
+            if self.h_status.content == panels.warning(tiers.INTERPRETED):
                 self.say("")
 
     def after_match(self, error: str | None) -> None:
         """Show a new match, or say why it failed (the last good one stays on screen)."""
-        self.say(error or (INTERPRETED if tiers.compiling() else ""))
+        self.say(error or (tiers.INTERPRETED if tiers.compiling() else ""))
         if error:
             return
         self.playback.show(self.state.max_iteration())
