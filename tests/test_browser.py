@@ -303,7 +303,7 @@ def test_the_lesson_step_by_step(browser, tmp_path):
 def test_a_tab_that_matches_interpreted_says_so_until_the_kernels_are_compiled(browser, app):
     """After an install (core/tiers.py's quick start) the page tells why a match is slow, and stops
     once the background compile has ended."""
-    from mbicp_viz.views.debugger.session import INTERPRETED
+    from mbicp_viz.core.tiers import INTERPRETED
 
     with interpreted_kernels():
         page, session = open_tab(browser, app)

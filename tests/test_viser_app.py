@@ -356,7 +356,7 @@ def test_a_tab_says_it_waits_for_the_kernels_then_shows_its_result(server):
 
 def test_while_the_kernels_compile_in_the_background_a_tab_matches_interpreted_and_says_so(server):
     from mbicp_viz.core import tiers
-    from mbicp_viz.views.debugger.session import INTERPRETED
+    from mbicp_viz.core.tiers import INTERPRETED
 
     source = Source("hokuyo pair", read_log(PAIR), guess=Pose2())
     compiled = Session(server, source).state.runs[0].result
