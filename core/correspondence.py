@@ -40,8 +40,9 @@ class ReferenceIndex:
     neighbours: np.ndarray  # (N, 2) scan-order previous and next point, -1 past the ends of a partial scan
 
     @staticmethod
-    def build(scan: Scan, L: float) -> "ReferenceIndex":
-        pts, b = scan.points(), scan.bearings[scan.valid]
+    def build(scan: Scan, L: float, max_range: float = np.inf) -> "ReferenceIndex":
+        """The index of ``scan``'s valid points below ``max_range`` (the matcher's range limit)."""
+        pts, b = scan.points_and_bearings(max_range)
         full = scan.is_full_circle()
         *extended, neighbours = run(_extended, pts, b, float(L), full)
         return ReferenceIndex(pts, b, *extended, full, neighbours)

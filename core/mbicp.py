@@ -35,14 +35,17 @@ _ENDS = (Termination.MAX_ITERATIONS, Termination.CONVERGED, Termination.CYCLE, T
 _MAX_ITER, _CONVERGED, _CYCLE, _TOO_FEW, _SINGULAR = range(5)
 
 
+@kernel
 def projection_bin_width(bearings: np.ndarray) -> float:
-    """The projection filter's bearing bin: two beam steps, but never finer than a quarter of the
-    beam count spread over the circle, so that its z-buffer is bounded by the beams, not by
-    1/step (a damaged scan's bearings can be nanoradians apart)."""
+    """The projection filter's bearing bin: two beam steps (the median step), but never finer than
+    a quarter of the beam count spread over the circle, so that its z-buffer is bounded by the
+    beams, not by 1/step (a damaged scan's bearings can be nanoradians apart)."""
     if len(bearings) < 2:
         return 2.0 * np.pi
-    step = run(median, np.diff(bearings))  # np.median's value (the same two middle elements, halved)
-    return max(2.0 * step, 2.0 * np.pi / (4 * len(bearings)))
+    steps = np.empty(len(bearings) - 1)
+    for i in range(len(steps)):
+        steps[i] = bearings[i + 1] - bearings[i]
+    return max(2.0 * median(steps), 2.0 * np.pi / (4 * len(bearings)))
 
 
 @kernel
@@ -247,7 +250,7 @@ def _run(R: ReferenceIndex, P: np.ndarray, guess: Pose2, params: MbicpParams, im
     tangents = surface_tangents(R.points, R.full_circle, np.arange(len(R.points))) if hold else np.zeros((0, 2))
     return run(_loop, np.ascontiguousarray(P, float), guess.x, guess.y, guess.theta, R.ext_bearings, R.ext_x, R.ext_y,
                R.ext_sq_norm_L2, R.ext_ux, R.ext_uy, R.ext_map, R.points, R.neighbours, R.full_circle, R.max_factor, R.max_step,
-               bin_start, projection_bin_width(R.bearings), params.ProjectionFilter, params.projection_zbuffer,
+               bin_start, run(projection_bin_width, R.bearings), params.ProjectionFilter, params.projection_zbuffer,
                point_line, mad, p, tangents, trace)
 
 
@@ -257,9 +260,8 @@ def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: MbicpPar
     params = params if params is not None else MbicpParams()
     improved = isinstance(params, ImprovedParams)
     name = "improved" if improved else "mbicp"
-    ref, obj = ref.within(params.max_range), obj.within(params.max_range)
-    R = ReferenceIndex.build(ref, params.L)
-    obj_pts = obj.points()
+    R = ReferenceIndex.build(ref, params.L, params.max_range)
+    obj_pts = obj.points(params.max_range)
     resampling = grid_resample(obj_pts, params.cell_size) if improved and params.resample else None
     used = (resampling.kept if resampling is not None else np.arange(len(obj_pts)))[:: params.laserStep]
     P = obj_pts[used]

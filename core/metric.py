@@ -139,27 +139,34 @@ def metric_normal_equations(p: np.ndarray, c: np.ndarray, L: float) -> tuple[np.
 
 
 @kernel
+def adjugate3(A: np.ndarray):
+    """The adjugate of the 3x3 A and its determinant, A^-1 = adj / det: written out, so that the
+    compiled and the interpreted kernels compute the same numbers (LAPACK's inverse is not
+    numpy's), and a symmetric A gets an exactly symmetric inverse."""
+    adj = np.empty((3, 3))
+    adj[0, 0] = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+    adj[1, 0] = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+    adj[2, 0] = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+    adj[0, 1] = A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]
+    adj[0, 2] = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
+    adj[1, 1] = A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
+    adj[1, 2] = A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]
+    adj[2, 1] = A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]
+    adj[2, 2] = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    return adj, A[0, 0] * adj[0, 0] + A[0, 1] * adj[1, 0] + A[0, 2] * adj[2, 0]
+
+
+@kernel
 def solve3(A: np.ndarray, b: np.ndarray):
     """x with A x = b for the 3x3 normal equations (Cramer's rule, as small systems are solved),
     and whether A was invertible and x finite."""
-    c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
-    c01 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
-    c02 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
-    det = A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02
+    adj, det = adjugate3(A)
     x = np.zeros(3)
     scale = max(abs(A[0, 0]), abs(A[1, 1]), abs(A[2, 2]), 1e-300)
     if not abs(det) > 1e-14 * scale ** 3:
         return x, False
-    inv = np.empty((3, 3))
-    inv[0, 0], inv[1, 0], inv[2, 0] = c00, c01, c02
-    inv[0, 1] = A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]
-    inv[0, 2] = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
-    inv[1, 1] = A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
-    inv[1, 2] = A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]
-    inv[2, 1] = A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]
-    inv[2, 2] = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
     for i in range(3):
-        x[i] = (inv[i, 0] * b[0] + inv[i, 1] * b[1] + inv[i, 2] * b[2]) / det
+        x[i] = (adj[i, 0] * b[0] + adj[i, 1] * b[1] + adj[i, 2] * b[2]) / det
     return x, bool(np.isfinite(x).all())
 
 

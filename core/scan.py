@@ -6,7 +6,7 @@ never turned into points. Bearings are in the sensor frame, strictly increasing,
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -36,15 +36,18 @@ class Scan:
     def n_valid(self) -> int:
         return int(np.count_nonzero(self.valid))
 
-    def points(self) -> np.ndarray:
-        """(M, 2) Cartesian points of the valid readings, in scan order, sensor frame."""
-        r, b = self.ranges[self.valid], self.bearings[self.valid]
-        return np.column_stack((r * np.cos(b), r * np.sin(b)))
+    def points(self, max_range: float = np.inf) -> np.ndarray:
+        """(M, 2) Cartesian points of the valid readings below ``max_range`` (a matcher's range
+        limit), in scan order, sensor frame."""
+        return self.points_and_bearings(max_range)[0]
 
-    def within(self, max_range: float) -> "Scan":
-        """This scan without the readings at or beyond ``max_range`` (a matcher's range limit)."""
-        keep = self.valid & (self.ranges < max_range)
-        return self if np.array_equal(keep, self.valid) else replace(self, valid=keep)
+    def points_and_bearings(self, max_range: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """``points(max_range)`` and their bearings [rad]."""
+        from .points import valid_points
+        from .tiers import run
+
+        return run(valid_points, np.ascontiguousarray(self.ranges), np.ascontiguousarray(self.bearings),
+                   np.ascontiguousarray(self.valid), float(max_range))
 
     def valid_indices(self) -> np.ndarray:
         return np.flatnonzero(self.valid)

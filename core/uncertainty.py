@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .metric import adjugate3
 from .result import Degeneracy, MatchResult, Termination
 from .se2 import Pose2
 from .tiers import kernel, run
@@ -15,19 +16,16 @@ from .tiers import kernel, run
 DEGENERACY_LENGTH_M = 3.0
 
 
-def covariance(A: np.ndarray, error: float, n_pairs: int) -> np.ndarray | None:
-    """sigma^2 A^-1 with sigma^2 the residual per degree of freedom (n_pairs pairs, 3 unknowns).
-
-    A is the matcher's final normal matrix; ``error`` the mean squared residual per pair.
-    """
-    if n_pairs <= 3:
-        return None
-    try:
-        inv = np.linalg.inv(A)
-    except np.linalg.LinAlgError:
-        return None
+@kernel
+def _covariance(A: np.ndarray, error: float, n_pairs: int):
+    """sigma^2 A^-1 with sigma^2 the residual per degree of freedom (n_pairs pairs, 3 unknowns),
+    and whether it exists (A invertible). A is the matcher's final normal matrix; ``error`` the
+    mean squared residual per pair."""
+    adj, det = adjugate3(A)
+    if n_pairs <= 3 or det == 0.0 or not np.isfinite(det):
+        return np.zeros((3, 3)), False
     sigma2 = error * n_pairs / (2 * n_pairs - 3)  # two scalar residuals per pair
-    return sigma2 * inv
+    return sigma2 * (adj / det), True
 
 
 def surface_tangents(points: np.ndarray, full_circle: bool, at: np.ndarray) -> np.ndarray:
@@ -74,11 +72,39 @@ def degeneracy(targets: np.ndarray, tangents: np.ndarray, L: float) -> Degenerac
     its condition number, eigenvalues and weakest direction."""
     if len(targets) < 3:
         return None
-    w, V = np.linalg.eigh(run(surface_information, targets, tangents, float(L)))
+    return _degeneracy(*run(_eigen, run(surface_information, targets, tangents, float(L))), L)
+
+
+@kernel
+def _eigen(H: np.ndarray):
+    """The condition number, the ascending eigenvalues (clipped at 0) and the weakest direction of
+    the symmetric H, that direction's largest component positive (a sign for the record)."""
+    w, V = np.linalg.eigh(H)
     w = np.maximum(w, 0.0)
-    cond = float(w[-1] / w[0]) if w[0] > 1e-12 * max(w[-1], 1e-300) else float("inf")
-    v = V[:, 0] * (1 if V[np.argmax(np.abs(V[:, 0])), 0] >= 0 else -1)
-    return Degeneracy(cond, tuple(float(c) for c in v), tuple(float(c) for c in w), L)
+    cond = w[2] / w[0] if w[0] > 1e-12 * max(w[2], 1e-300) else np.inf
+    v = V[:, 0].copy()
+    big = 0
+    for i in range(1, 3):
+        if abs(v[i]) > abs(v[big]):
+            big = i
+    return cond, w, v if v[big] >= 0 else -v
+
+
+def _degeneracy(cond: float, w: np.ndarray, v: np.ndarray, L: float) -> Degeneracy:
+    return Degeneracy(float(cond), tuple(v.tolist()), tuple(w.tolist()), L)
+
+
+@kernel
+def _final_numbers(A, error, n_kept, targets, ref_points, full_circle, ref_index, L):
+    """``build_result``'s numbers in one compiled call (a match's final system is small: numpy's
+    per-call costs were most of them): covariance, whether it exists, and the degeneracy's
+    condition number, eigenvalues and weakest direction (condition NaN: fewer than 3 pairs)."""
+    cov, has_cov = _covariance(A, error, n_kept)
+    if len(targets) < 3:
+        return cov, has_cov, np.nan, np.zeros(3), np.zeros(3)
+    H = surface_information(targets, _tangents(ref_points, full_circle, ref_index), L)
+    cond, w, v = _eigen(H)
+    return cov, has_cov, cond, w, v
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +124,7 @@ def build_result(name: str, est: Pose2, reason: Termination, iterations: int, la
     """The MatchResult of a finished loop (``ref_points``: the reference scan's points in scan order)."""
     if last is None:
         return MatchResult(name, est, False, reason, iterations, float("nan"), 0, 0, None, None)
-    return MatchResult(
-        name, est, reason.converged, reason, iterations, last.error, last.n_kept, last.n_rejected,
-        covariance(last.A, last.error, last.n_kept),
-        degeneracy(last.targets, surface_tangents(ref_points, full_circle, last.ref_index), L))
+    cov, has_cov, cond, w, v = run(_final_numbers, last.A, float(last.error), int(last.n_kept), last.targets,
+                                   ref_points, bool(full_circle), np.asarray(last.ref_index, dtype=np.int64), float(L))
+    return MatchResult(name, est, reason.converged, reason, iterations, last.error, last.n_kept, last.n_rejected,
+                       cov if has_cov else None, None if np.isnan(cond) else _degeneracy(cond, w, v, L))
