@@ -103,7 +103,8 @@ def _loop(P, x, y, th, eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours
             point_line, v_moved[:m], v_alpha[:m], v_rng[:m], eb, ex, ey, ek, eux, euy, ext_map, ref_points, neighbours,
             full, max_factor, max_step, Bw, Br, L, max_inter)
         obj_rows, dist = rows[found], np.sqrt(np.maximum(d2, 0.0))
-        status, thr = reject(dist, Br, keep, mad, mad_k, rejection_floor(Br, mad_floor, mad_anneal, it) if mad else 0.0)
+        status, thr = reject(dist, Br, keep, mad, mad_k, rejection_floor(Br, mad_floor, mad_anneal, it) if mad else 0.0,
+                             record)
         kept = np.flatnonzero(status == KEPT)
         n_within = np.count_nonzero(status != OUTSIDE_BR)
         # the C code's association test: pairs within Br against the points the filter left

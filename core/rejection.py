@@ -14,13 +14,15 @@ KEPT, OUTSIDE_BR, TRIMMED, MAD = (int(s) for s in (PairStatus.KEPT, PairStatus.O
 
 @kernel
 def reject(dist: np.ndarray, max_dist: float, keep_fraction: float, use_mad: bool, mad_k: float,
-           mad_floor: float):
+           mad_floor: float, shown: bool = True):
     """Status of each pair and the distance threshold applied after the hard cut (NaN: none).
 
     First the hard cut ``max_dist`` (MbICP's radial window Br). Then either the trimmed estimator
     — keep the best ``keep_fraction`` of the remaining pairs (MbICP's ``filter``) — or, with
     ``use_mad``, paper 000 eq. 5: reject pairs above median + mad_k * MAD of the remaining
-    distances (§2.4.2), but never below ``mad_floor``.
+    distances (§2.4.2), but never below ``mad_floor``. When no pair lies above the floor MAD
+    rejects none whatever its value, and unless the threshold is ``shown`` (recorded) its two
+    selections are skipped: the threshold is then NaN.
     """
     status = np.empty(len(dist), dtype=np.int8)
     for i in range(len(dist)):
@@ -30,6 +32,8 @@ def reject(dist: np.ndarray, max_dist: float, keep_fraction: float, use_mad: boo
         return status, np.nan
     d_in = dist[inside]
     if use_mad:
+        if not shown and d_in.max() <= mad_floor:
+            return status, np.nan
         thr = max(mad_threshold(d_in, mad_k), mad_floor)
         for j in range(len(inside)):
             if d_in[j] > thr:

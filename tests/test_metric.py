@@ -35,6 +35,23 @@ def test_mad_floor_never_rejects_close_pairs():
     assert thr == pytest.approx(0.1) and np.all(status == PairStatus.KEPT)
 
 
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.floats(0.0, 2.0, allow_nan=False), min_size=1, max_size=40), st.floats(0.0, 1.5),
+       st.floats(0.5, 3.0))
+def test_mad_decides_alike_whether_its_threshold_is_shown_or_not(d, floor, k):
+    """The matcher's unrecorded run skips MAD's selections where no pair lies above the floor: the
+    same decisions, and the threshold it shows when recorded."""
+    d = np.array(d)
+    shown, thr = reject(d, 1.0, 1.0, True, k, floor)
+    unshown, thr_unshown = reject(d, 1.0, 1.0, True, k, floor, False)
+    assert np.array_equal(shown, unshown)
+    inside = d[d <= 1.0]
+    if len(inside) and inside.max() <= floor:
+        assert np.isnan(thr_unshown) and np.all(shown[d <= 1.0] == PairStatus.KEPT)
+    else:
+        assert thr_unshown == thr or (np.isnan(thr) and np.isnan(thr_unshown))
+
+
 def test_trimming_keeps_the_best_fraction():
     d = np.arange(20, dtype=float)
     status, thr = reject(d, 100.0, 0.75, False, 0.0, 0.0)
