@@ -100,3 +100,25 @@ def test_a_first_match_after_an_install_answers_at_once_and_the_next_ones_run_co
         if pid is not None:
             os.killpg(pid, signal.SIGTERM)
             wait_for(lambda: _background_pid(tmp_path) is None, timeout=30)
+
+
+def test_the_debugger_after_an_install_compiles_nothing_in_its_own_process(tmp_path):
+    """Its first tab draws and matches interpreted while the background process compiles: no kernel
+    (the first scan's points for the camera included) compiles in the debugger's process, where a
+    person would wait for it."""
+    env = {k: v for k, v in os.environ.items() if k != "MBICP_VIZ_JIT"} | {"NUMBA_CACHE_DIR": str(tmp_path)}
+    script = ("from numba.core import event\n"
+              "from mbicp_viz.views.debugger.latency import first_result_ms\n"
+              "with event.install_recorder('numba:compile') as rec:\n"
+              f"    first_result_ms({str(HOKUYO)!r})\n"
+              "print(len(rec.buffer))\n")
+    try:
+        run = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0, run.stderr
+        assert run.stdout.split()[-1:] == ["0"], run.stdout + run.stderr
+        assert _background_pid(tmp_path) is not None  # the compile it relies on runs elsewhere
+    finally:
+        pid = _background_pid(tmp_path)
+        if pid is not None:
+            os.killpg(pid, signal.SIGTERM)
+            wait_for(lambda: _background_pid(tmp_path) is None, timeout=30)

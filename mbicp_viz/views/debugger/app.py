@@ -33,6 +33,7 @@ class App:
 
     def __init__(self, source: Source, host: str = "127.0.0.1", port: int = 8080,
                  allow_origins: tuple[str, ...] = ()):
+        tiers.quick_start()  # a person waits on this page: never a compile stall (before any kernel runs)
         self.source = source
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())  # where every tab starts
@@ -40,7 +41,6 @@ class App:
         self.sessions: dict[int, Session] = {}
         self.refused: dict[int, str] = {}  # client id -> the origin whose websocket was closed
         self._lock = threading.Lock()
-        tiers.quick_start()  # a person waits on this page: never a compile stall
         self.ready = threading.Event()
         threading.Thread(target=self._warm_up, daemon=True).start()
         # viser has no origin hook of its own: the websocket layer's connect callbacks run, in the
