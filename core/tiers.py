@@ -1,7 +1,7 @@
 """The compiled kernels, and the same kernels interpreted while numba compiles them.
 
 numba compiles a kernel at its first call and keeps the machine code in its cache (beside the
-module, or under ``NUMBA_CACHE_DIR``). The matchers' loops take 9 s (improved MbICP) to about 24 s
+module, or under ``NUMBA_CACHE_DIR``). The matchers' loops take 9 s (improved MbICP) to about 26 s
 (all six: the background compile as last measured) on a 2-core machine: after an install, a
 person's first match would stall that long. So there are two tiers, as in a JIT-compiled
 language runtime:
