@@ -65,8 +65,9 @@ def test_every_command_answers_help(tmp_path):
 
 
 def test_every_command_that_reads_scans_can_choose_the_stream():
-    """A bag with two scan topics or a CARMEN log with two laser message types is refused until
-    one is named: every command that reads scan files must let the user name it (--topic)."""
+    """A bag with two scan topics is refused until one is named, and a CARMEN log with two laser
+    message types reads its front laser unless another is named: every command that reads scan
+    files must let the user name it (--topic)."""
     from mbicp_viz.cli import app
     from mbicp_viz.cli.bench import command_names
 

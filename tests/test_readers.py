@@ -187,13 +187,12 @@ def two_lasers(path, intel, n_scans=4):
 
 def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_path, intel):
     """A pair across two laser message types is no motion: a log with several is read one type at a
-    time, named like a bag's topic."""
+    time, named like a bag's topic; unnamed, the front laser with its poses, and a note says so."""
     path = two_lasers(tmp_path / "two-lasers.log", intel)
-    with pytest.raises(InputError) as e:
-        read_log(path)
-    assert e.value.field == "--topic"
-    assert "3 laser message types, choose one with --topic: FLASER (4 scans); RAWLASER1 (4 scans); " \
-           "RAWLASER2 (4 scans)" in str(e.value)
+    log = read_log(path)
+    assert log.topic == "FLASER" and np.allclose(log.scans[1].pose.as_array(), intel.scans[1].pose.as_array())
+    assert log.notes == [f"{path}: read FLASER (4 scans), the front laser with its poses; the log also has RAWLASER1 "
+                         "(4 scans); RAWLASER2 (4 scans): --topic reads another"]
     path.write_text("PARAM robot_frontlaser_offset 0.2 host 0\n" + path.read_text())
     for kind, first in (("FLASER", 0), ("RAWLASER1", 0), ("RAWLASER2", 10)):
         log = read_log(path, ReadOptions(topic=kind))
@@ -205,6 +204,16 @@ def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_p
     with pytest.raises(InputError, match="no 'ROBOTLASER1' scans; the log has: FLASER"):
         read_log(path, ReadOptions(topic="ROBOTLASER1"))
     assert read_log(DATA / "laserazosSM3-40.log").topic is None  # one type: nothing to choose
+    assert read_log(path, ReadOptions(topic="RAWLASER2")).notes == []  # named: nothing to say
+    # a front laser logged raw beside another laser: the front one; no front laser: nothing to prefer
+    rear = tmp_path / "rear.log"
+    rear.write_text("".join(line + "\n" for line in path.read_text().splitlines() if not line.startswith("FLASER")))
+    assert read_log(rear).topic == "RAWLASER1"
+    rear.write_text(rear.read_text().replace("RAWLASER1 ", "RAWLASER3 "))
+    with pytest.raises(InputError) as e:
+        read_log(rear)
+    assert e.value.field == "--topic"
+    assert "2 laser message types, choose one with --topic: RAWLASER3 (4 scans); RAWLASER2 (4 scans)" in str(e.value)
 
     from mbicp_viz.views.debugger.sources import files_source
     from mbicp_viz.views.debugger.state import DebugState

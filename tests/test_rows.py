@@ -145,3 +145,10 @@ def test_rows_remember_the_scan_stream_and_reopen_only_on_it(tmp_path, intel):
     with pytest.raises(InputError) as e:
         files_source(str(log), None, rows=str(out), options=ReadOptions(topic="FLASER"))
     assert e.value.field == "stream" and "--topic RAWLASER2" in e.value.message
+    # unnamed: the front laser, and the command says which it read and how to read another
+    res = CliRunner().invoke(app, ["eval", "sequence", str(log), "--guess", "identity", "--out", str(out),
+                                   "--workers", "1", "--limit", "2"])
+    assert res.exit_code == 0, res.output
+    assert "read FLASER (6 scans), the front laser with its poses; the log also has RAWLASER1 (6 scans); " \
+           "RAWLASER2 (6 scans): --topic reads another" in res.stderr
+    assert {r.stream for r in read_rows(out)} == {"FLASER"}

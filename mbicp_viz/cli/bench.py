@@ -8,8 +8,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from .options import (DEFAULT_ALGO, AlgoOpt, PairOpt, ParamsOpt, TeachOpt, TopicOpt, check_perturb, read_options,
-                      user_errors)
+from .options import (DEFAULT_ALGO, AlgoOpt, PairOpt, ParamsOpt, TeachOpt, TopicOpt, check_perturb, read_log_saying,
+                      read_options, user_errors)
 from .serve import DEMO_PAIR
 
 
@@ -27,10 +27,9 @@ def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt 
     import numpy as np
 
     from mbicp_viz.evaluation.bench import bench, machine_line, speed_probe_us
-    from mbicp_viz.readers import read_log
     from mbicp_viz.readers.params_toml import make_params
 
-    lg = read_log(log, read_options(topic))
+    lg = read_log_saying(log, read_options(topic))
     p = make_params(algo.value, params)
     typer.echo(f"{algo.value} on {log}: {len(lg.scans[0].ranges)} beams; {machine_line()}")
     before = speed_probe_us()
@@ -74,12 +73,11 @@ def originals(built: Annotated[Path, typer.Argument(help="the folder tools/origi
     from mbicp_viz.evaluation.bench import machine_line, speed_probe_us
     from mbicp_viz.evaluation.originals import (check_built, compare, every_kth_beam, improved_against_plicp,
                                                 protocol_pairs)
-    from mbicp_viz.readers import read_log
     from mbicp_viz.readers.params_toml import make_params
 
     check_built(built)  # a missing build or a bad file stops here, before minutes of matching
     improved = make_params("improved", params)
-    lg = every_kth_beam(read_log(log, read_options(topic)), every)
+    lg = every_kth_beam(read_log_saying(log, read_options(topic)), every)
     pairs = protocol_pairs(lg, limit, check_perturb(perturb), seed)
     typer.echo(f"{log}: {len(pairs)} pairs of {len(pairs[0][0].bearings)} beams, guesses within +/-{perturb[0]:g} m, "
                f"+/-{perturb[1]:g} deg (seed {seed}); {machine_line()}")

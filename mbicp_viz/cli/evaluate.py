@@ -17,21 +17,10 @@ from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, CaseGuessOpt, CaseTruthOpt, 
                       Frame, FrameOpt, Guess, GuessOpt, MountOpt, OffsetOpt, PairOpt, ParamsOpt, PerturbOpt, Progress,
                       RelationsOpt, RrdOpt, SEARCH, SecondArg, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt,
                       UpsideDownOpt, WorkersOpt, cases_options, check_perturb, finite, number_list, params_for,
-                      pose_from_deg, read_options, say, user_errors)
+                      pose_from_deg, read_log_saying, read_options, say, user_errors)
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[Optional[int], typer.Option("--limit", min=1, help="only the first N pairs")]
-
-
-def _read(log: str, reading=None):
-    """A log, with a line for each warning and for the scans skipped as unusable."""
-    from mbicp_viz.readers import read_log
-
-    lg = read_log(log, reading)
-    for note in lg.notes + [lg.unusable_summary()]:
-        if note:
-            say(note)
-    return lg
 
 
 def sequence(log: LogArg,
@@ -58,7 +47,7 @@ def sequence(log: LogArg,
     if truth not in (None, "pose"):
         raise InputError("the only truth a log carries is 'pose'", field="--truth")
     p = make_params(algo.value, params)
-    lg = _read(log, read_options(topic, typestore, mount, upside_down, deskew))
+    lg = read_log_saying(log, read_options(topic, typestore, mount, upside_down, deskew))
     total = len(lg.consecutive_pairs(limit))
     with Progress(total) as bar:
         rows = match_sequence(lg, p, limit, guess, truth, on_row=lambda _: bar.update(1), workers=workers,
@@ -116,7 +105,7 @@ def protocol(log: LogArg, algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None
     from mbicp_viz.evaluation.protocols import displaced_self_matches, protocol_summary
     from mbicp_viz.readers.params_toml import make_params
 
-    scans = _read(log, read_options(topic)).scans
+    scans = read_log_saying(log, read_options(topic)).scans
     res = displaced_self_matches(scans, cases, make_params(algo.value, params), seed, max_xy,
                                  math.radians(max_theta_deg))
     typer.echo(protocol_summary(algo.value, res))
@@ -150,7 +139,7 @@ def overlap(logs: Annotated[list[str], typer.Argument(help="scan logs; scenes ar
         raise InputError("each ratio must lie in (0, 100]", field="--ratios")
     ps = params_for(algos, params)
     picked = number_list(scans, "--scans", "3,10,25", int) if scans else None
-    scenes = [s for log in logs for s in scene_scans(_read(log, read_options(topic)), scenes_per_log, picked)]
+    scenes = [s for log in logs for s in scene_scans(read_log_saying(log, read_options(topic)), scenes_per_log, picked)]
     cases = make_cases(scenes, etas, runs, removal, seed, max_xy, math.radians(max_theta_deg), thin)
     t0 = time.perf_counter()
     with Progress(len(cases)) as bar:
@@ -179,7 +168,7 @@ def ceiling(log: Annotated[str, typer.Argument(help="scan log whose scan poses a
     from mbicp_viz.evaluation.sequence import ceiling as ceiling_of, ceiling_summary
 
     by_name = params_for(algos, params)
-    lg = _read(log, read_options(topic))
+    lg = read_log_saying(log, read_options(topic))
     with Progress(len(lg.consecutive_pairs(limit))) as bar:
         found, kept, doubted, n = ceiling_of(lg, list(by_name.values()), limit, workers, on_row=lambda _: bar.update(1))
     if n == 0:
@@ -202,7 +191,7 @@ def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses 
 
     moved = check_perturb(perturb)
     ps = params_for(algos, params)
-    lg = _read(log, read_options(topic))
+    lg = read_log_saying(log, read_options(topic))
     t0 = time.perf_counter()
     with Progress(len(lg.consecutive_pairs(None))) as bar:
         rows = corridor_of(lg, ps, moved, seed, workers, on_row=lambda _: bar.update(1))
@@ -229,7 +218,7 @@ def covariance(log: Annotated[str, typer.Argument(help="scan log with a truth (i
 
     moved = cases_options(truth, relations_file, guess, perturb)
     ps = params_for(algos, params)
-    lg = _read(log, read_options(topic))
+    lg = read_log_saying(log, read_options(topic))
     cases = cases_for(0, lg, truth, read_relations(relations_file) if relations_file else None, offset, tolerance,
                       guess, moved, seed, load_search(params), limit)
     results = {}
@@ -256,7 +245,7 @@ def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps
     from mbicp_viz.readers.params_toml import load_search, make_params
     from mbicp_viz.readers.relations import read_relations
 
-    lg = _read(log, read_options(topic))
+    lg = read_log_saying(log, read_options(topic))
     rows, missing = match_relations(lg, read_relations(relations_file), make_params(algo.value, params), offset,
                                     tolerance, guess, load_search(params))
     if out:

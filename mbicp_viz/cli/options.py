@@ -225,6 +225,18 @@ class Progress:
             self.bar.__exit__(*exc)
 
 
+def read_log_saying(log: str, reading=None):
+    """A log, with a line on stderr for each note of how it was read and for the scans skipped as
+    unusable."""
+    from mbicp_viz.readers import read_log
+
+    lg = read_log(log, reading)
+    for note in lg.notes + [lg.unusable_summary()]:
+        if note:
+            say(note)
+    return lg
+
+
 def read_options(topic: str | None, typestore: str | None = None, mount=None, upside_down: bool = False,
                  deskew=None):
     """How to read the files a command names (``--topic``, ``--typestore``, ``--mount``, ``--upside-down``,

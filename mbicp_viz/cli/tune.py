@@ -13,7 +13,7 @@ from mbicp_viz.errors import InputError
 
 from .options import (AlgoOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, MountOpt, OffsetOpt, ParamsOpt,
                       PerturbOpt, Progress, RelationsOpt, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt, UpsideDownOpt,
-                      WorkersOpt, cases_options, read_options, say, user_errors)
+                      WorkersOpt, cases_options, read_log_saying, read_options, say, user_errors)
 
 
 def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="training logs with a truth")],
@@ -40,7 +40,6 @@ def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="train
     """Search a matcher's parameters on training logs against their truth; defaults and best side by side."""
     from mbicp_viz.evaluation import tune as t
     from mbicp_viz.evaluation.cases import cases_for
-    from mbicp_viz.readers import read_log
     from mbicp_viz.readers.params_toml import load_search, make_params, params_to_toml
     from mbicp_viz.readers.relations import read_relations
 
@@ -54,8 +53,9 @@ def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="train
     rels = read_relations(relations) if relations else None
 
     def cases_of(paths: list[str]):
-        return [c for k, path in enumerate(paths) for c in cases_for(k, read_log(path, reading), truth, rels, offset,
-                                                                      tolerance, guess, moved, seed, search, limit)]
+        return [c for k, path in enumerate(paths) for c in cases_for(k, read_log_saying(path, reading), truth, rels,
+                                                                      offset, tolerance, guess, moved, seed, search,
+                                                                      limit)]
 
     cases = cases_of(logs)
     name = study or f"{algo.value}-{Path(logs[0]).name.split('.')[0]}"

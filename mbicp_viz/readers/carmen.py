@@ -11,9 +11,12 @@ announce.
 Each laser message type is a stream of its own: a log can hold two lasers (RAWLASER1 and
 RAWLASER2) or one laser twice (FLASER from the robot module, RAWLASER1 from the laser module, at
 the same instants), and a pair taken across two streams is no motion at all. A log with several is
-read one stream at a time, chosen like a bag's topic (``--topic ROBOTLASER1``). The mount that
-``PARAM robot_frontlaser_offset`` gives is the front laser's (FLASER, ROBOTLASER1, RAWLASER1): the
-other lasers' scans are reported in their own frame.
+read one stream at a time, chosen like a bag's topic (``--topic ROBOTLASER1``); unnamed, it is the
+front laser (CARMEN's laser 1) as the robot module logs it, with its poses — ROBOTLASER1, which
+states its field of view, else FLASER, else RAWLASER1 — and a note names the others. Without a
+front laser there is nothing to prefer: the types are listed and one must be named. The mount
+that ``PARAM robot_frontlaser_offset`` gives is the front laser's (FLASER, ROBOTLASER1, RAWLASER1):
+the other lasers' scans are reported in their own frame.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ LASER_MESSAGES = "FLASER, RAWLASER1-4 or ROBOTLASER1"
 TRAILER = 3  # ipc_timestamp ipc_hostname logger_timestamp
 SICK_180_DEG = (180, 181, 360, 361)  # FLASER readings of a SICK over 180 degrees (1 or 0.5 degree steps)
 SICK_100_DEG = (400, 401)  # ... and over 100 degrees at 0.25 degrees (CARMEN's readlog.c)
-FRONT_LASER = ("FLASER", "ROBOTLASER1", "RAWLASER1")  # CARMEN's laser 1, the front one
+FRONT_LASER = ("ROBOTLASER1", "FLASER", "RAWLASER1")  # CARMEN's laser 1, the front one, in the order read unnamed
 
 
 def read_carmen(path: str, message: str | None = None) -> ScanLog:
@@ -73,6 +76,11 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
         seen = ", ".join(f"{k} ({n})" for k, n in sorted(log.skipped.items())) or "none"
         raise InputError(f"no laser scans ({LASER_MESSAGES} lines); message types seen: {seen}", path)
     kind = _stream(streams, message, path)
+    if message is None and len(streams) > 1:
+        others = "; ".join(f"{k} ({v.records} scans)" for k, v in streams.items() if k != kind)
+        log.notes.append(f"{path}: read {kind} ({streams[kind].records} scans), the front laser"
+                         f"{' with its poses' if kind != 'RAWLASER1' else ''}; the log also has {others}: --topic reads "
+                         "another")
     log.scans, log.unusable = streams[kind].scans, streams[kind].unusable
     if kind not in FRONT_LASER:  # robot_frontlaser_offset is not this laser's mount
         log.frames = Frames()
@@ -86,16 +94,18 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
 
 
 def _stream(streams: dict[str, ScanLog], message: str | None, path: str) -> str:
-    """The laser message type to read: the one named, else the only one; several: an error listing them."""
+    """The laser message type to read: the one named, else the only one, else the front laser's
+    (``FRONT_LASER``'s order); several without a front laser: an error listing them."""
     listing = "; ".join(f"{k} ({v.records} scans)" for k, v in streams.items())
     if message is not None:
         if message not in streams:
             raise InputError(f"no {message!r} scans; the log has: {listing}", path, field="--topic")
         return message
-    if len(streams) > 1:
+    front = [k for k in FRONT_LASER if k in streams]
+    if len(streams) > 1 and not front:
         raise InputError(f"{len(streams)} laser message types, choose one with --topic: {listing}", path,
                          field="--topic")
-    return next(iter(streams))
+    return front[0] if front else next(iter(streams))
 
 
 def _pose(fields: Fields, name: str) -> Pose2:
