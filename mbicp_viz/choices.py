@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import enum
 
+# The ROS distro whose message types decode a ROS 2 bag recorded without them (``--typestore``)
+DEFAULT_TYPESTORE = "ROS2_HUMBLE"
+
 
 class Guess(str, enum.Enum):
     """Where an initial guess comes from (``--guess``)."""

@@ -11,7 +11,7 @@ from typing import Annotated, Optional
 import typer
 
 from mbicp_viz.errors import InputError
-from mbicp_viz.choices import Removal, Thin
+from mbicp_viz.choices import DEFAULT_TYPESTORE, Removal, Thin
 
 from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, FirstArg,
                       Frame, FrameOpt, Guess, GuessOpt, MountOpt, OffsetOpt, PairOpt, ParamsOpt, PerturbOpt, Progress,
@@ -38,7 +38,7 @@ def sequence(log: LogArg,
                                                   "paper 003 §5.3); the TUM file and map then use the fused track")]
              = False,
              workers: WorkersOpt = None, frame: FrameOpt = Frame.base, topic: TopicOpt = None,
-             typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False,
+             typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None, upside_down: UpsideDownOpt = False,
              deskew: DeskewOpt = None):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
     from mbicp_viz.evaluation.sequence import match_sequence, odometry_summary, truth_summary
@@ -266,7 +266,7 @@ def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
           thetas_deg: Annotated[str, typer.Option("--thetas-deg", help="theta offsets [deg]")] = "-30,-15,0,15,30",
           png: Annotated[Optional[Path], typer.Option("--png", help="write the atlas as a PNG")] = None,
           rrd: RrdOpt = None, workers: WorkersOpt = None, topic: TopicOpt = None,
-          typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False,
+          typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None, upside_down: UpsideDownOpt = False,
           deskew: DeskewOpt = None):
     """A convergence atlas: every matcher from a grid of initial offsets, coloured by outcome."""
     from mbicp_viz.evaluation.basin import basin as atlas_of, plot_png, summary

@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from mbicp_viz.choices import DEFAULT_TYPESTORE
+
 from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, ConnectOpt, DEFAULT_ALGO, DeskewOpt, FirstArg, Frame, FrameOpt,
                       Guess, GuessOpt, InitOpt, MountOpt, PairOpt, ParamsOpt, PortOpt, RrdOpt, SearchFlag, SecondArg,
                       ServeOpt, TeachOpt, TopicOpt, TruthOpt, TypestoreOpt, UpsideDownOpt, pose_from_deg, read_options,
@@ -32,7 +34,7 @@ def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, a
               guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
               params: ParamsOpt = None, as_json: JsonOpt = False, frame: FrameOpt = Frame.base, rrd: RrdOpt = None,
               teach: TeachOpt = False, connect: ConnectOpt = None, serve: ServeOpt = False, port: PortOpt = 9090,
-              topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None,
+              topic: TopicOpt = None, typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None,
               upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None):
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from mbicp_viz.core import tiers
@@ -65,7 +67,7 @@ def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
                 guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
                 params: ParamsOpt = None, rrd: RrdOpt = None, teach: TeachOpt = False, connect: ConnectOpt = None,
                 serve: ServeOpt = False, port: PortOpt = 9090, topic: TopicOpt = None,
-                typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None, upside_down: UpsideDownOpt = False,
+                typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None, upside_down: UpsideDownOpt = False,
                 deskew: DeskewOpt = None):
     """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
     from mbicp_viz.core import tiers

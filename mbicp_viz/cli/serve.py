@@ -8,6 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from mbicp_viz.choices import DEFAULT_TYPESTORE
 from mbicp_viz.errors import InputError
 
 from .options import (DeskewOpt, Guess, GuessOpt, MountOpt, PairOpt, TopicOpt, TypestoreOpt, UpsideDownOpt,
@@ -29,7 +30,7 @@ def serve(first: Annotated[Optional[str], typer.Argument(help="a scan log, or th
                                                                              "record --list`)")] = None,
           pair: PairOpt = None, guess: GuessOpt = Guess.stored, host: HostOpt = "127.0.0.1",
           port: ServePortOpt = 8080, allow_origin: OriginOpt = None, for_seconds: ForOpt = None,
-          topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE", mount: MountOpt = None,
+          topic: TopicOpt = None, typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None,
           upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None,
           rows: Annotated[Optional[str], typer.Option("--rows", help="an evaluation's rows (`eval sequence --out`): "
                                                       "its failures listed worst first, each opened as it ran")] = None):

@@ -9,6 +9,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from mbicp_viz.choices import DEFAULT_TYPESTORE
 from mbicp_viz.errors import InputError
 
 from .options import (AlgoOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, MountOpt, OffsetOpt, ParamsOpt,
@@ -35,7 +36,7 @@ def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="train
                                                          "importance as PNGs here")] = None,
          rows_dir: Annotated[Optional[Path], typer.Option("--rows-dir", help="each training log's pairs under the "
                                                           "best parameters as a rows file (serve LOG --rows)")] = None,
-         workers: WorkersOpt = None, topic: TopicOpt = None, typestore: TypestoreOpt = "ROS2_HUMBLE",
+         workers: WorkersOpt = None, topic: TopicOpt = None, typestore: TypestoreOpt = DEFAULT_TYPESTORE,
          mount: MountOpt = None, upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None):
     """Search a matcher's parameters on training logs against their truth; defaults and best side by side."""
     from mbicp_viz.evaluation import tune as t

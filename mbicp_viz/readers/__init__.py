@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from mbicp_viz.choices import DEFAULT_TYPESTORE
 from mbicp_viz.core import Pose2
 from mbicp_viz.errors import InputError
 
@@ -53,7 +54,7 @@ class ReadOptions:
     ``deskew``: correct each scan for the motion during it (``deskew.py``: "odometry" or "velocity")."""
 
     topic: str | None = None
-    typestore: str = "ROS2_HUMBLE"
+    typestore: str = DEFAULT_TYPESTORE
     mount: Pose2 | None = None
     upside_down: bool = False
     deskew: str | None = None

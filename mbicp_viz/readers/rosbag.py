@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mbicp_viz.choices import DEFAULT_TYPESTORE
 from mbicp_viz.core import Pose2, ScanSource
 from mbicp_viz.errors import InputError
 
@@ -39,7 +40,6 @@ LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
 TF_TOPICS = {"/tf": False, "/tf_static": True, "tf": False, "tf_static": True}
-DEFAULT_TYPESTORE = "ROS2_HUMBLE"
 _MAGIC = b"#ROSBAG V2.0\n"
 _OP_MSG, _OP_HEADER, _OP_INDEX, _OP_CHUNK, _OP_CONN = 2, 3, 4, 5, 7
 MAX_CHUNK_BYTES = 256 * 1024 * 1024  # a chunk unpacking to more is damaged (or hostile)
