@@ -360,3 +360,29 @@ def test_a_preset_picked_on_the_page_loads_and_the_picker_says_what_is_loaded(br
     assert wait_for(lambda: box(page, "MaxIter").input_value() == "100" and box(page, "mad_anneal").input_value() == "0.0")
     assert wait_for(lambda: picker.input_value() == DEFAULTS)
     page.close()
+
+
+def test_a_log_with_two_lasers_opens_the_front_one_and_the_page_says_which_stream_it_shows(browser, tmp_path, intel):
+    """A CARMEN log with FLASER, RAWLASER1 and RAWLASER2 opens on FLASER with a note naming the
+    others; picking RAWLASER2 in "scan stream" shows that laser's scans, and the note that said
+    FLASER is gone from the page."""
+    from mbicp_viz.views.debugger.sources import files_source
+
+    from .test_readers import two_lasers
+
+    path = two_lasers(tmp_path / "two-lasers.log", intel)
+    application = App(files_source(str(path), None, guess="identity"), "127.0.0.1", 0)
+    try:
+        page, session = open_tab(browser, application)
+        note = "read FLASER (4 scans), the front laser with its poses"
+        assert note in page.inner_text("body") and "records 0 .. 3 of FLASER" in page.inner_text("body")
+        picker = page.get_by_role("combobox", name="scan stream")
+        assert picker.input_value() == "FLASER"
+        picker.click()
+        page.get_by_role("option", name="RAWLASER2").click()
+        page.get_by_text("records 0 .. 3 of RAWLASER2").first.wait_for(timeout=30000)
+        assert wait_for(lambda: note not in page.inner_text("body"))
+        assert np.allclose(session.state.ref.points(), intel.scans[10].points(), atol=1e-9)
+        page.close()
+    finally:
+        application.stop()

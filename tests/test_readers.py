@@ -192,7 +192,7 @@ def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_p
     log = read_log(path)
     assert log.topic == "FLASER" and np.allclose(log.scans[1].pose.as_array(), intel.scans[1].pose.as_array())
     assert log.notes == [f"{path}: read FLASER (4 scans), the front laser with its poses; the log also has RAWLASER1 "
-                         "(4 scans); RAWLASER2 (4 scans): --topic reads another"]
+                         "(4 scans); RAWLASER2 (4 scans): --topic (in the debugger: scan stream) reads another"]
     path.write_text("PARAM robot_frontlaser_offset 0.2 host 0\n" + path.read_text())
     for kind, first in (("FLASER", 0), ("RAWLASER1", 0), ("RAWLASER2", 10)):
         log = read_log(path, ReadOptions(topic=kind))

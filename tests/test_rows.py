@@ -150,5 +150,5 @@ def test_rows_remember_the_scan_stream_and_reopen_only_on_it(tmp_path, intel):
                                    "--workers", "1", "--limit", "2"])
     assert res.exit_code == 0, res.output
     assert "read FLASER (6 scans), the front laser with its poses; the log also has RAWLASER1 (6 scans); " \
-           "RAWLASER2 (6 scans): --topic reads another" in res.stderr
+           "RAWLASER2 (6 scans): --topic (in the debugger: scan stream) reads another" in res.stderr
     assert {r.stream for r in read_rows(out)} == {"FLASER"}

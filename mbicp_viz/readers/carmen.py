@@ -79,8 +79,8 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
     if message is None and len(streams) > 1:
         others = "; ".join(f"{k} ({v.records} scans)" for k, v in streams.items() if k != kind)
         log.notes.append(f"{path}: read {kind} ({streams[kind].records} scans), the front laser"
-                         f"{' with its poses' if kind != 'RAWLASER1' else ''}; the log also has {others}: --topic reads "
-                         "another")
+                         f"{' with its poses' if kind != 'RAWLASER1' else ''}; the log also has {others}: --topic (in the "
+                         "debugger: scan stream) reads another")
     log.scans, log.unusable = streams[kind].scans, streams[kind].unusable
     if kind not in FRONT_LASER:  # robot_frontlaser_offset is not this laser's mount
         log.frames = Frames()

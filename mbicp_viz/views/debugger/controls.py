@@ -249,6 +249,7 @@ class Scans:
         error = self.s.state.set_topic(self.topic.value)
         if error:
             self.topic.value = self.s.state.source.log.topic
+        self.s.show_notes()
         self.open(error)
 
     def open(self, error: str | None) -> None:

@@ -48,6 +48,12 @@ class Session:
         elif not ready.is_set():
             self.say(COMPILING)
 
+    def show_notes(self) -> None:
+        """What to look at, and how the log on screen was read (a scan stream picked is read anew)."""
+        src = self.state.source
+        self.h_notes.content = "\n\n".join(filter(None, [src.note, *(f"*{n}*" for n in src.log.notes)]))
+        self.h_notes.visible = bool(self.h_notes.content)
+
     def first_match(self, ready: threading.Event | None = None) -> None:
         """The tab's first match, once the kernels are ready (``ready`` set)."""
         if ready is not None:
@@ -63,6 +69,7 @@ class Session:
         """Open another source (a lesson's step) in this tab: its pair, matchers, parameters and
         layers, shown at ``iteration`` (None: where the match ended)."""
         self.state = DebugState(source)
+        self.show_notes()
         error = self.state.rematch()
         if iteration is not None:
             self.state.iteration = min(iteration, self.state.max_iteration())
@@ -77,9 +84,8 @@ class Session:
         gui.main_panel.dock_right()  # beside the view, never over it
         gui.add_markdown(f"**mbicp-viz** — {src.label}", order=0)
         self.h_status = gui.add_markdown("", order=1)
-        notes = [src.note, *(f"*{n}*" for n in src.log.notes)]  # what to look at; how the log was read
-        if any(notes):
-            gui.add_markdown("\n\n".join(filter(None, notes)), order=2)
+        self.h_notes = gui.add_markdown("", order=2)
+        self.show_notes()
         self.lesson = lesson.Lesson(self, gui, src.lesson, order=2) if src.lesson else None
         self.h_legend = gui.add_html(panels.legend_html([]), order=3)
         self.camera = TopDownCamera(self.client)
