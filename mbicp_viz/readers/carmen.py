@@ -43,7 +43,8 @@ FRONT_LASER = ("ROBOTLASER1", "FLASER", "RAWLASER1")  # CARMEN's laser 1, the fr
 
 
 def read_carmen(path: str, message: str | None = None) -> ScanLog:
-    """The scans of laser message type ``message`` (None: the log's only one)."""
+    """The scans of laser message type ``message`` (None: the log's only one, else its front laser's,
+    with a note; see ``_stream``)."""
     log = ScanLog(str(path), [])  # odometry, frames and the messages read past
     streams: dict[str, ScanLog] = {}
     laser_offset = 0.0
