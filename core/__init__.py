@@ -10,19 +10,44 @@ from __future__ import annotations
 
 import importlib
 
-if __name__ != "mbicp_viz.core":  # a checkout's folder on sys.path must not pose as a package `core`
+# a checkout's folder on sys.path must not pose as a package `core`
+if __name__ != "mbicp_viz.core":
     raise ImportError("the matchers of mbicp-viz are imported as mbicp_viz.core, not as 'core'")
 
 _EXPORTS = {
-    "events": ("Correspondences", "Event", "FinishEvent", "HeldDirection", "IterationEvent", "Observer", "PairKind", "PairStatus",
-               "PolarStep", "Recorder", "Resampling", "StartEvent", "broadcast"),
+    "events": (
+        "Correspondences",
+        "Event",
+        "FinishEvent",
+        "HeldDirection",
+        "IterationEvent",
+        "Observer",
+        "PairKind",
+        "PairStatus",
+        "PolarStep",
+        "Recorder",
+        "Resampling",
+        "StartEvent",
+        "broadcast",
+    ),
     "matchers": ("MATCHERS", "Matcher", "match", "matcher_for"),
-    "params": ("FieldSpec", "IcpParams", "ImprovedParams", "MbicpParams", "ParamError", "Params", "PlIcpParams", "PmwnParams", "SearchParams",
-               "PsmParams", "field_specs"),
+    "params": (
+        "FieldSpec",
+        "IcpParams",
+        "ImprovedParams",
+        "MbicpParams",
+        "ParamError",
+        "Params",
+        "PlIcpParams",
+        "PmwnParams",
+        "SearchParams",
+        "PsmParams",
+        "field_specs",
+    ),
     "result": ("Degeneracy", "MatchResult", "Termination"),
     "errors": ("ScanError", "ScanSource", "UnusableScan"),
     "deskew": ("deskew", "twist"),
-    "scan": ("Scan", "make_scan", "scan_from_points", "uniform_bearings"),
+    "scan": ("Scan", "make_scan", "uniform_bearings"),
     "se2": ("Pose2", "pose_error", "relative", "wrap_angle"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}

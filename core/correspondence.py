@@ -37,10 +37,11 @@ class ReferenceIndex:
     max_factor: float  # sqrt(max|q|^2 + L^2) / L: the Euclidean radius per unit of metric distance
     max_step: float  # the widest bearing gap between consecutive reference points [rad]
     full_circle: bool
-    neighbours: np.ndarray  # (N, 2) scan-order previous and next point, -1 past the ends of a partial scan
+    # (N, 2) scan-order previous and next point, -1 past the ends of a partial scan
+    neighbours: np.ndarray
 
     @staticmethod
-    def build(scan: Scan, L: float, max_range: float = np.inf) -> "ReferenceIndex":
+    def build(scan: Scan, L: float, max_range: float = np.inf) -> ReferenceIndex:
         """The index of ``scan``'s valid points below ``max_range`` (the matcher's range limit)."""
         pts, b = scan.points_and_bearings(max_range)
         full = scan.is_full_circle()
@@ -55,7 +56,13 @@ def _extended(pts, b, L: float, full: bool):
     2 pi without points) and the scan neighbours (-1 past the ends of a partial scan)."""
     n = len(b)
     ext_b, ext_map = np.empty(3 * n), np.empty(3 * n, dtype=np.int64)
-    ext_x, ext_y, ext_k, ext_ux, ext_uy = np.empty(3 * n), np.empty(3 * n), np.empty(3 * n), np.empty(3 * n), np.empty(3 * n)
+    ext_x, ext_y, ext_k, ext_ux, ext_uy = (
+        np.empty(3 * n),
+        np.empty(3 * n),
+        np.empty(3 * n),
+        np.empty(3 * n),
+        np.empty(3 * n),
+    )
     k_max = 0.0
     for i in range(n):
         k = pts[i, 0] * pts[i, 0] + pts[i, 1] * pts[i, 1] + L * L
@@ -64,7 +71,14 @@ def _extended(pts, b, L: float, full: bool):
         for t in range(3):
             e = t * n + i
             ext_b[e] = b[i] + (t - 1) * (2 * np.pi) if t != 1 else b[i]
-            ext_map[e], ext_x[e], ext_y[e], ext_k[e], ext_ux[e], ext_uy[e] = i, pts[i, 0], pts[i, 1], k, c, s
+            ext_map[e], ext_x[e], ext_y[e], ext_k[e], ext_ux[e], ext_uy[e] = (
+                i,
+                pts[i, 0],
+                pts[i, 1],
+                k,
+                c,
+                s,
+            )
     nb = np.empty((n, 2), dtype=np.int64)
     for i in range(n):
         for q, j in enumerate((i - 1, i + 1)):
@@ -103,8 +117,8 @@ def _first_at_least(eb, a: float, strict: bool) -> int:
 
 @kernel(inline="always")
 def _window_min(px: float, py: float, ex, ey, ek, lo: int, hi: int):
-    """Metric-nearest of the reference points ext[lo, hi) to (px, py): (ext index, d^2); (-1, inf) if
-    empty; the first of equal minima. ``ek`` holds the metric's denominators |q|^2 + L^2."""
+    """Metric-nearest of the reference points ext[lo, hi) to (px, py): (ext index, d^2); (-1, inf)
+    if empty; the first of equal minima. ``ek`` holds the metric's denominators |q|^2 + L^2."""
     best, d_best = -1, np.inf
     for j in range(lo, hi):
         d = metric_sq(px, py, ex[j], ey[j], ek[j])
@@ -123,8 +137,24 @@ def _reaches(px, py, r, ux, uy, rho):
 
 
 @kernel
-def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int, Bw: float, Br: float, L: float,
-                    max_factor: float, max_step: float):
+def _nearest_kernel(
+    p,
+    alpha,
+    rng,
+    eb,
+    ex,
+    ey,
+    ek,
+    eux,
+    euy,
+    ext_map,
+    n_ref: int,
+    Bw: float,
+    Br: float,
+    L: float,
+    max_factor: float,
+    max_step: float,
+):
     """The loop of ``nearest`` over the moved points (compiled: a handful of candidates per point,
     where numpy paid a call per step for all points at once)."""
     idx = np.empty(len(alpha), dtype=np.int64)
@@ -146,8 +176,11 @@ def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int
         d0 = np.sqrt(min(max(d2, 0.0), Br * Br))
         rho = d0 * min((r + L) / max(L - d0, 1e-12), max_factor)
         reach = Bw + 1e-12  # the bounded window's own slack: a beam at +/-Bw by round-off is in
-        if (lo > 0 and a - eb[lo - 1] <= reach and _reaches(px, py, r, eux[lo - 1], euy[lo - 1], rho)) or \
-                (hi < len(eb) and eb[hi] - a <= reach and _reaches(px, py, r, eux[hi], euy[hi], rho)):
+        if (
+            lo > 0
+            and a - eb[lo - 1] <= reach
+            and _reaches(px, py, r, eux[lo - 1], euy[lo - 1], rho)
+        ) or (hi < len(eb) and eb[hi] - a <= reach and _reaches(px, py, r, eux[hi], euy[hi], rho)):
             half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw) + 1e-12
             wlo = _first_at_least(eb, a - half, False)
             whi = min(_first_at_least(eb, a + half, True), wlo + n_ref, len(eb))  # a point once
@@ -164,7 +197,9 @@ def _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int
     return idx, out
 
 
-def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float, moved_polar=None):
+def nearest(
+    ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float, moved_polar=None
+):
     """Metric-nearest reference point of each moved point within MbICP's angular window +/-Bw.
 
     Exact for every pair whose metric distance is at most Br. First the 2K beams around the
@@ -180,9 +215,25 @@ def nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: flo
     metric distance).
     """
     alpha, rng = moved_polar if moved_polar is not None else polar(moved)
-    return run(_nearest_kernel, moved, alpha, rng, ref.ext_bearings, ref.ext_x, ref.ext_y, ref.ext_sq_norm_L2,
-               ref.ext_ux, ref.ext_uy, ref.ext_map, len(ref.points), float(Bw), float(Br), float(L), ref.max_factor,
-               ref.max_step)
+    return run(
+        _nearest_kernel,
+        moved,
+        alpha,
+        rng,
+        ref.ext_bearings,
+        ref.ext_x,
+        ref.ext_y,
+        ref.ext_sq_norm_L2,
+        ref.ext_ux,
+        ref.ext_uy,
+        ref.ext_map,
+        len(ref.points),
+        float(Bw),
+        float(Br),
+        float(L),
+        ref.max_factor,
+        ref.max_step,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,7 +255,11 @@ def _segment_candidate(px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter
     dqx, dqy = q1x - q2x, q1y - q2y
     dqpx, dqpy = q1x - px, q1y - py
     den = B * dqx * dqx + C * dqy * dqy + 2.0 * D * dqx * dqy
-    lam = (D * (dqx * dqpy + dqy * dqpx) + B * dqx * dqpx + C * dqy * dqpy) / den if den > 0.0 else 0.0
+    lam = (
+        (D * (dqx * dqpy + dqy * dqpx) + B * dqx * dqpx + C * dqy * dqpy) / den
+        if den > 0.0
+        else 0.0
+    )
     j1, j2 = ext_map[J - 1], ext_map[J]
     if lam < 0.0:
         qx, qy, k, j, other = q1x, q1y, ek[J - 1], j1, -1
@@ -232,8 +287,23 @@ def _ray_bound(px, py, ux, uy, mf2):
 
 
 @kernel
-def _window_kernel(p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int, full: bool, Bw: float, L: float,
-                   max_inter: float, max_factor: float):
+def _window_kernel(
+    p,
+    alpha,
+    eb,
+    ex,
+    ey,
+    ek,
+    eux,
+    euy,
+    ext_map,
+    n_ref: int,
+    full: bool,
+    Bw: float,
+    L: float,
+    max_inter: float,
+    max_factor: float,
+):
     """The loop of ``mbicp_pairs``: per object point the target, d^2, kind and reference indices
     (j, -1) or (j1, j2); d^2 = inf where the window holds no reference point.
 
@@ -262,61 +332,136 @@ def _window_kernel(p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref: int, full
             continue
         A = 1.0 / (px * px + py * py + L2)
         B, C, D = 1.0 - A * py * py, 1.0 - A * px * px, A * px * py
-        start = min(max(_first_at_least(eb, a, False), lo + 1), hi)  # the segment across the point's bearing
+        # the segment across the point's bearing
+        start = min(max(_first_at_least(eb, a, False), lo + 1), hi)
         best_J = -1
         for J in range(start, hi + 1):  # up, then down
-            if J > start and _ray_bound(px, py, eux[J - 1], euy[J - 1], mf2) > d2[i] * (1.0 + 1e-12):
+            if J > start and _ray_bound(px, py, eux[J - 1], euy[J - 1], mf2) > d2[i] * (
+                1.0 + 1e-12
+            ):
                 break
-            if not full and ext_map[J] == 0:  # a partial scan has no segment from its last point to its first
+            # a partial scan has no segment from its last point to its first
+            if not full and ext_map[J] == 0:
                 continue
-            d, qx, qy, j, other = _segment_candidate(px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter)
+            d, qx, qy, j, other = _segment_candidate(
+                px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter
+            )
             if d < d2[i] or (d == d2[i] and J < best_J):
-                d2[i], target[i, 0], target[i, 1], ref_index[i, 0], ref_index[i, 1], best_J = d, qx, qy, j, other, J
+                d2[i], target[i, 0], target[i, 1], ref_index[i, 0], ref_index[i, 1], best_J = (
+                    d,
+                    qx,
+                    qy,
+                    j,
+                    other,
+                    J,
+                )
         for J in range(start - 1, lo, -1):
             if _ray_bound(px, py, eux[J], euy[J], mf2) > d2[i] * (1.0 + 1e-12):
                 break
             if not full and ext_map[J] == 0:
                 continue
-            d, qx, qy, j, other = _segment_candidate(px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter)
+            d, qx, qy, j, other = _segment_candidate(
+                px, py, J, ex, ey, ek, ext_map, L2, A, B, C, D, max_inter
+            )
             if d < d2[i] or (d == d2[i] and J < best_J):
-                d2[i], target[i, 0], target[i, 1], ref_index[i, 0], ref_index[i, 1], best_J = d, qx, qy, j, other, J
+                d2[i], target[i, 0], target[i, 1], ref_index[i, 0], ref_index[i, 1], best_J = (
+                    d,
+                    qx,
+                    qy,
+                    j,
+                    other,
+                    J,
+                )
         kind[i] = PairKind.INTERPOLATED if ref_index[i, 1] >= 0 else PairKind.POINT
     return target, d2, kind, ref_index
 
 
 @kernel
-def candidates(point_line: bool, p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, points, neighbours, full: bool,
-               max_factor: float, max_step: float, Bw: float, Br: float, L: float, max_inter: float):
+def candidates(
+    point_line: bool,
+    p,
+    alpha,
+    rng,
+    eb,
+    ex,
+    ey,
+    ek,
+    eux,
+    euy,
+    ext_map,
+    points,
+    neighbours,
+    full: bool,
+    max_factor: float,
+    max_step: float,
+    Bw: float,
+    Br: float,
+    L: float,
+    max_inter: float,
+):
     """The pairs of the points p (moved into the reference frame, with their bearings and ranges)
     that find a target: (rows of p, target, kind, reference indices (K, 2), squared metric
     distance). ``point_line``: paper 000 §2.4.1 (``point_line_pairs``), else MbICP's
     (``mbicp_pairs``). The reference's arrays are ``ReferenceIndex``'s."""
     n_ref = len(points)
     if point_line:
-        best, d2 = _nearest_kernel(p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref, Bw, Br, L, max_factor,
-                                   max_step)
+        best, d2 = _nearest_kernel(
+            p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref, Bw, Br, L, max_factor, max_step
+        )
         rows = np.flatnonzero(best >= 0)
-        target, kind, second, d2f = _share_targets(p[rows], best[rows], d2[rows], points, ek, neighbours, L, max_inter)
+        target, kind, second, d2f = _share_targets(
+            p[rows], best[rows], d2[rows], points, ek, neighbours, L, max_inter
+        )
         ref_index = np.empty((len(rows), 2), dtype=np.int64)
         for k in range(len(rows)):  # element by element: slice assignments are slow to compile
             ref_index[k, 0], ref_index[k, 1] = best[rows[k]], second[k]
         return rows, target, kind, ref_index, d2f
-    target, d2, kind, ref_index = _window_kernel(p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref, full, Bw, L,
-                                                 max_inter, max_factor)
+    target, d2, kind, ref_index = _window_kernel(
+        p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref, full, Bw, L, max_inter, max_factor
+    )
     rows = np.flatnonzero(d2 < np.inf)
     return rows, target[rows], kind[rows], ref_index[rows], d2[rows]
 
 
-def _pairs(point_line: bool, ref: ReferenceIndex, moved, moved_polar, rows, Bw, Br, L, max_dist_inter) -> Pairs:
-    found, target, kind, ref_index, d2 = run(candidates,
-        point_line, moved[rows], moved_polar[0][rows], moved_polar[1][rows], ref.ext_bearings, ref.ext_x, ref.ext_y,
-        ref.ext_sq_norm_L2, ref.ext_ux, ref.ext_uy, ref.ext_map, ref.points, ref.neighbours, ref.full_circle, ref.max_factor, ref.max_step,
-        float(Bw), float(Br), float(L), float(max_dist_inter))
+def _pairs(
+    point_line: bool, ref: ReferenceIndex, moved, moved_polar, rows, Bw, Br, L, max_dist_inter
+) -> Pairs:
+    found, target, kind, ref_index, d2 = run(
+        candidates,
+        point_line,
+        moved[rows],
+        moved_polar[0][rows],
+        moved_polar[1][rows],
+        ref.ext_bearings,
+        ref.ext_x,
+        ref.ext_y,
+        ref.ext_sq_norm_L2,
+        ref.ext_ux,
+        ref.ext_uy,
+        ref.ext_map,
+        ref.points,
+        ref.neighbours,
+        ref.full_circle,
+        ref.max_factor,
+        ref.max_step,
+        float(Bw),
+        float(Br),
+        float(L),
+        float(max_dist_inter),
+    )
     return Pairs(rows[found], target, kind, ref_index, np.sqrt(np.maximum(d2, 0.0)))
 
 
-def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float, Br: float,
-                L: float, max_dist_inter: float) -> Pairs:
+def mbicp_pairs(
+    ref: ReferenceIndex,
+    moved: np.ndarray,
+    moved_polar,
+    rows: np.ndarray,
+    Bw: float,
+    Br: float,
+    L: float,
+    max_dist_inter: float,
+) -> Pairs:
     """MbICP's correspondences as the original C code makes them (Minguez et al. 2006, §IV).
 
     The window of an object point holds the reference points whose bearing lies in
@@ -337,8 +482,16 @@ def mbicp_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.nd
     return _pairs(False, ref, moved, moved_polar, rows, Bw, Br, L, max_dist_inter)
 
 
-def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: np.ndarray, Bw: float,
-                     Br: float, L: float, max_dist_inter: float) -> Pairs:
+def point_line_pairs(
+    ref: ReferenceIndex,
+    moved: np.ndarray,
+    moved_polar,
+    rows: np.ndarray,
+    Bw: float,
+    Br: float,
+    L: float,
+    max_dist_inter: float,
+) -> Pairs:
     """Paper 000 §2.4.1: point-to-point pairs, point-to-line for object points sharing a target.
 
     Every object point takes its metric-nearest reference point m_j. Among the points sharing one
@@ -353,12 +506,14 @@ def point_line_pairs(ref: ReferenceIndex, moved: np.ndarray, moved_polar, rows: 
 
 @kernel
 def _share_targets(p, best, d2, points, sq_norm_L2, neighbours, L: float, max_len: float):
-    """The loop of ``point_line_pairs``: target, kind, second reference point (-1: none) and d^2 per pair.
+    """The loop of ``point_line_pairs``: target, kind, second reference point (-1: none) and d^2
+    per pair.
 
     ``sq_norm_L2[j]`` = |q_j|^2 + L^2 for reference point j (ReferenceIndex.ext_sq_norm_L2).
     """
     n = len(best)
-    winner = np.empty(len(points), dtype=np.int64)  # per reference point: the closest object point, first of ties
+    # per reference point: the closest object point, first of ties
+    winner = np.empty(len(points), dtype=np.int64)
     winner[:] = -1
     for i in range(n):
         w = winner[best[i]]
@@ -417,8 +572,9 @@ def visible_in_order(alpha: np.ndarray) -> np.ndarray:
 
 
 @kernel
-def visible_from_reference(alpha: np.ndarray, r: np.ndarray, bin_start: float, bin_width: float,
-                           margin: float) -> np.ndarray:
+def visible_from_reference(
+    alpha: np.ndarray, r: np.ndarray, bin_start: float, bin_width: float, margin: float
+) -> np.ndarray:
     """Projection filter (Lu & Milios 1997, used by MbICP): which moved points the reference sees.
 
     A z-buffer over bearing bins of the reference viewpoint: in each bin only points within
@@ -428,7 +584,8 @@ def visible_from_reference(alpha: np.ndarray, r: np.ndarray, bin_start: float, b
     zbuf = np.full(int(2 * np.pi / bin_width) + 2, np.inf)
     bins = np.empty(len(alpha), dtype=np.int64)
     for i in range(len(alpha)):
-        bins[i] = int(((alpha[i] - bin_start) % (2 * np.pi)) / bin_width)  # non-negative: truncation floors
+        # non-negative: truncation floors
+        bins[i] = int(((alpha[i] - bin_start) % (2 * np.pi)) / bin_width)
         zbuf[bins[i]] = min(zbuf[bins[i]], r[i])
     vis = np.empty(len(alpha), dtype=np.bool_)
     for i in range(len(alpha)):

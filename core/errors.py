@@ -1,4 +1,5 @@
-"""Errors of the core and where a scan came from (no numpy: the command line imports these at once)."""
+"""Errors of the core and where a scan came from (no numpy: the command line imports these at "
+"once)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from dataclasses import dataclass
 class ScanError(ValueError):
     """A scan that cannot be matched (empty, all invalid, inconsistent arrays)."""
 
-    def __init__(self, source: "ScanSource", reason: str):
+    def __init__(self, source: ScanSource, reason: str):
         super().__init__(f"{source}: {reason}")
         self.source, self.reason = source, reason
 

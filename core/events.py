@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Union
 
 import numpy as np
 
@@ -122,7 +122,8 @@ class PolarStep:
     its two neighbours, through which the fit passes. metric_weight: PMWN's adaptive lambda
     [m/rad], None for PSM. residuals, weights: (K,) translation residuals [m] and their weights.
     circle_points: (K, 2) PMWN's projected-circle points Delta r_i u_i, circle_centre: (2,) its
-    fitted centre (T/2); None for PSM and with ``surface_jacobian`` (the circle holds for Diosi's model only).
+    fitted centre (T/2); None for PSM and with ``surface_jacobian`` (the circle holds for Diosi's
+    model only).
     """
 
     bearings: np.ndarray
@@ -145,7 +146,9 @@ class HeldDirection:
     """Improved MbICP with ``hold_weak``: the direction an iteration's step left alone because the
     surfaces its pairs lie on barely fix the motion there (a corridor's axis), and why."""
 
-    condition_number: float  # of the pairs' point-to-line information in (x, y, L theta), above hold_weak
+    condition_number: (
+        float  # of the pairs' point-to-line information in (x, y, L theta), above hold_weak
+    )
     direction: tuple[float, float, float]  # unit vector in (x, y, L theta)
     length: float  # L [m]
 
@@ -166,11 +169,17 @@ class IterationEvent:
     pairs: Correspondences
     threshold: float | None  # rejection threshold on pair distance [m] (MAD, trim cut, or None)
     error: float  # mean squared Euclidean residual of the kept pairs after the step [m^2]
-    increment: Pose2  # the step composed this iteration (estimate_after = increment @ estimate_before)
+    increment: (
+        Pose2  # the step composed this iteration (estimate_after = increment @ estimate_before)
+    )
     polar: PolarStep | None = None  # PSM / PMWN only
     note: str = ""  # what else happened, in words (ICP / PL-ICP: a restart began, the run kept)
-    held: HeldDirection | None = None  # improved MbICP with hold_weak: the direction its step left alone
-    extrapolated: float = 0.0  # improved MbICP with extrapolate: the step went on by this many times its own length
+    held: HeldDirection | None = (
+        None  # improved MbICP with hold_weak: the direction its step left alone
+    )
+    extrapolated: float = (
+        0.0  # improved MbICP with extrapolate: the step went on by this many times its own length
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,7 +187,7 @@ class FinishEvent:
     result: MatchResult
 
 
-Event = Union[StartEvent, IterationEvent, FinishEvent]
+Event = StartEvent | IterationEvent | FinishEvent
 Observer = Callable[[Event], None]
 
 

@@ -66,7 +66,8 @@ def _largest_root(s00, s01, s11, h0, h1):
 @kernel
 def solve(A, b):
     """(t_x, t_y, theta) minimising x^T A x - 2 b^T x on the circle; ok False when the
-    translation is unconstrained (A's translation block singular) or nothing fixes the rotation (h = 0)."""
+    translation is unconstrained (A's translation block singular) or nothing fixes the rotation (h
+    = 0)."""
     a00, a01, a11 = A[0, 0], A[0, 1], A[1, 1]
     det_a = a00 * a11 - a01 * a01
     if not abs(det_a) > 1e-12 * max(1.0, abs(a00) + abs(a11)) ** 2:

@@ -22,7 +22,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, StartEvent
+from .events import (
+    Correspondences,
+    FinishEvent,
+    IterationEvent,
+    Observer,
+    PairKind,
+    PairStatus,
+    StartEvent,
+)
 from .gpc import normal_terms, solve
 from .metric import kth_smallest
 from .params import IcpParams, PlIcpParams
@@ -37,8 +45,9 @@ FAIL_FRACTION = 0.05
 DOUBLES_FACTOR = 3.0  # kill_outliers_double: a pair farther than this times its j1's nearest pair
 
 # Pair statuses as the compiled loop writes them (numba compares plain integers)
-_KEPT, _OUTSIDE, _TRIMMED, _DOUBLE = (int(s) for s in (PairStatus.KEPT, PairStatus.OUTSIDE_BR, PairStatus.TRIMMED,
-                                                     PairStatus.DOUBLE))
+_KEPT, _OUTSIDE, _TRIMMED, _DOUBLE = (
+    int(s) for s in (PairStatus.KEPT, PairStatus.OUTSIDE_BR, PairStatus.TRIMMED, PairStatus.DOUBLE)
+)
 
 # Outcomes of one run of the loop
 _OK, _TOO_FEW, _SINGULAR = 0, 1, 2
@@ -113,8 +122,25 @@ def _segment_foot(ax, ay, bx, by, px, py, clamp: bool):
 
 
 @kernel
-def _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, max_dist, order, mult, max_perc,
-           doubles: bool):
+def _pairs(
+    rx,
+    ry,
+    rtheta,
+    rcos,
+    rsin,
+    rvalid,
+    sx,
+    sy,
+    svalid,
+    x,
+    y,
+    th,
+    max_dist,
+    order,
+    mult,
+    max_perc,
+    doubles: bool,
+):
     """One iteration's correspondences at the pose (x, y, th): per object ray the moved point,
     j1, j2 (-1: none), its status and its distance to the segment j1-j2."""
     n, m = len(sx), len(rx)
@@ -127,7 +153,17 @@ def _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, max_dis
         wx[i], wy[i] = c * sx[i] - s * sy[i] + x, s * sx[i] + c * sy[i] + y
         if not svalid[i]:
             continue
-        best, d = _nearest(rx, ry, rtheta, rcos, rsin, rvalid, wx[i], wy[i], _on_branch(np.arctan2(wy[i], wx[i]), rtheta))
+        best, d = _nearest(
+            rx,
+            ry,
+            rtheta,
+            rcos,
+            rsin,
+            rvalid,
+            wx[i],
+            wy[i],
+            _on_branch(np.arctan2(wy[i], wx[i]), rtheta),
+        )
         d2[i] = d
         if best < 0 or d > max_dist * max_dist or best == 0 or best == m - 1:
             continue
@@ -177,7 +213,8 @@ def _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, max_dis
 @kernel
 def _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line: bool):
     """The kept pairs as the solver takes them: object point (sensor frame), target and weight.
-    ICP: the foot on the segment, weight I; PL-ICP: the point j1 and n n^T of the segment's normal."""
+    ICP: the foot on the segment, weight I; PL-ICP: the point j1 and n n^T of the segment's
+    normal."""
     idx = np.flatnonzero(status == _KEPT)
     K = len(idx)
     p, q, C = np.empty((K, 2)), np.empty((K, 2)), np.zeros((K, 2, 2))
@@ -202,14 +239,40 @@ def _hash(j1, j2, status):
     """A 64-bit fingerprint of the kept pairs (PL-ICP's test for a repeated set of pairs)."""
     h = np.uint64(1469598103934665603)
     for i in range(len(j1)):
-        v = np.uint64(i * 1000003 + (j1[i] + 1) * 7919 + (j2[i] + 1)) if status[i] == _KEPT else np.uint64(i)
+        v = (
+            np.uint64(i * 1000003 + (j1[i] + 1) * 7919 + (j2[i] + 1))
+            if status[i] == _KEPT
+            else np.uint64(i)
+        )
         h = (h ^ v) * np.uint64(1099511628211)
     return h
 
 
 @kernel
-def _loop(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, line: bool, max_iter: int, eps_xy: float,
-          eps_th: float, max_dist: float, order: float, mult: float, max_perc: float, doubles: bool, trace):
+def _loop(
+    rx,
+    ry,
+    rtheta,
+    rcos,
+    rsin,
+    rvalid,
+    sx,
+    sy,
+    svalid,
+    x,
+    y,
+    th,
+    line: bool,
+    max_iter: int,
+    eps_xy: float,
+    eps_th: float,
+    max_dist: float,
+    order: float,
+    mult: float,
+    max_perc: float,
+    doubles: bool,
+    trace,
+):
     """CSM's icp_loop from (x, y, th): (outcome, x, y, th, total distance, kept pairs, iterations,
     converged, and the last iteration's pairs: wx, wy, j1, j2, status). ``trace`` (poses (n, 6),
     statuses, ... for n iterations) records each iteration; an empty one records nothing."""
@@ -220,8 +283,25 @@ def _loop(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, line: bo
     wx, wy, j1, j2 = np.empty(0), np.empty(0), np.empty(0, np.int64), np.empty(0, np.int64)
     status = np.empty(0, np.int8)
     for it in range(max_iter):
-        wx, wy, j1, j2, status, dist, limit, k = _pairs(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y,
-                                                       th, max_dist, order, mult, max_perc, doubles)
+        wx, wy, j1, j2, status, dist, limit, k = _pairs(
+            rx,
+            ry,
+            rtheta,
+            rcos,
+            rsin,
+            rvalid,
+            sx,
+            sy,
+            svalid,
+            x,
+            y,
+            th,
+            max_dist,
+            order,
+            mult,
+            max_perc,
+            doubles,
+        )
         kept = np.flatnonzero(status == _KEPT)
         if k < FAIL_FRACTION * n or len(kept) < FAIL_FRACTION * n or len(kept) < 3:
             code = _TOO_FEW
@@ -235,7 +315,14 @@ def _loop(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, line: bo
             break
         if record:
             poses, stat, first, second, dists, limits = trace
-            poses[it, 0], poses[it, 1], poses[it, 2], poses[it, 3], poses[it, 4], poses[it, 5] = x, y, th, nx, ny, nth
+            poses[it, 0], poses[it, 1], poses[it, 2], poses[it, 3], poses[it, 4], poses[it, 5] = (
+                x,
+                y,
+                th,
+                nx,
+                ny,
+                nth,
+            )
             stat[it], first[it], second[it], dists[it], limits[it] = status, j1, j2, dist, limit
         # the step as CSM measures it: the new pose seen from the old one
         c, s = np.cos(th), np.sin(th)
@@ -254,8 +341,14 @@ def _loop(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, x, y, th, line: bo
 
 
 def _empty_trace(n_iter: int, n: int):
-    return (np.zeros((n_iter, 6)), np.zeros((n_iter, n), np.int8), np.zeros((n_iter, n), np.int64),
-            np.zeros((n_iter, n), np.int64), np.zeros((n_iter, n)), np.zeros(n_iter))
+    return (
+        np.zeros((n_iter, 6)),
+        np.zeros((n_iter, n), np.int8),
+        np.zeros((n_iter, n), np.int64),
+        np.zeros((n_iter, n), np.int64),
+        np.zeros((n_iter, n)),
+        np.zeros(n_iter),
+    )
 
 
 class _Scans:
@@ -266,7 +359,12 @@ class _Scans:
         def rays(scan):
             r = np.where(scan.valid, scan.ranges, 0.0)
             ok = scan.valid & (r > params.min_reading) & (r <= params.max_reading)
-            return r * np.cos(scan.bearings), r * np.sin(scan.bearings), np.ascontiguousarray(scan.bearings, float), ok
+            return (
+                r * np.cos(scan.bearings),
+                r * np.sin(scan.bearings),
+                np.ascontiguousarray(scan.bearings, float),
+                ok,
+            )
 
         self.rx, self.ry, self.rtheta, self.rvalid = rays(ref)
         self.rcos, self.rsin = np.cos(self.rtheta), np.sin(self.rtheta)
@@ -279,21 +377,55 @@ class _Scans:
 
     def run(self, start: Pose2, params: IcpParams, trace=None):
         p = params
-        return run(_loop, self.rx, self.ry, self.rtheta, self.rcos, self.rsin, self.rvalid, self.sx, self.sy, self.svalid, start.x, start.y,
-                   start.theta, isinstance(p, PlIcpParams), p.max_iterations, p.epsilon_xy, p.epsilon_theta,
-                   p.max_correspondence_dist, p.outliers_adaptive_order, p.outliers_adaptive_mult,
-                   p.outliers_maxPerc, p.outliers_remove_doubles, trace if trace is not None else _empty_trace(0, 0))
+        return run(
+            _loop,
+            self.rx,
+            self.ry,
+            self.rtheta,
+            self.rcos,
+            self.rsin,
+            self.rvalid,
+            self.sx,
+            self.sy,
+            self.svalid,
+            start.x,
+            start.y,
+            start.theta,
+            isinstance(p, PlIcpParams),
+            p.max_iterations,
+            p.epsilon_xy,
+            p.epsilon_theta,
+            p.max_correspondence_dist,
+            p.outliers_adaptive_order,
+            p.outliers_adaptive_mult,
+            p.outliers_maxPerc,
+            p.outliers_remove_doubles,
+            trace if trace is not None else _empty_trace(0, 0),
+        )
 
 
 def _restarts(params: IcpParams, result: Pose2) -> list[tuple[Pose2, str]]:
     dt, dth = params.restart_dt, params.restart_dtheta
-    moves = ((dt, 0, 0, "x + dt"), (-dt, 0, 0, "x - dt"), (0, dt, 0, "y + dt"), (0, -dt, 0, "y - dt"),
-             (0, 0, dth, "theta + dtheta"), (0, 0, -dth, "theta - dtheta"))
-    return [(Pose2(result.x + a, result.y + b, result.theta + c), label) for a, b, c, label in moves]
+    moves = (
+        (dt, 0, 0, "x + dt"),
+        (-dt, 0, 0, "x - dt"),
+        (0, dt, 0, "y + dt"),
+        (0, -dt, 0, "y - dt"),
+        (0, 0, dth, "theta + dtheta"),
+        (0, 0, -dth, "theta - dtheta"),
+    )
+    return [
+        (Pose2(result.x + a, result.y + b, result.theta + c), label) for a, b, c, label in moves
+    ]
 
 
-def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: IcpParams | None = None,
-          observer: Observer | None = None) -> MatchResult:
+def match(
+    ref: Scan,
+    obj: Scan,
+    initial_guess: Pose2 = Pose2(),
+    params: IcpParams | None = None,
+    observer: Observer | None = None,
+) -> MatchResult:
     """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
     params = params if params is not None else IcpParams()
     line = isinstance(params, PlIcpParams)
@@ -338,20 +470,43 @@ def _replay(observer, name, params, scans, runs, outcomes, best, initial_guess) 
             st, j1, j2 = stat[it][obj_valid], first[it][obj_valid], second[it][obj_valid]
             has = st != PairStatus.OUTSIDE_BR
             moved = before.apply(obj_pts)
-            target = _feet(ref_pts[ref_of_ray[j1[has]]], ref_pts[ref_of_ray[j2[has]]], moved[has],
-                           clamp=not isinstance(params, PlIcpParams))
-            pairs = Correspondences(used[has], target, np.full(len(target), PairKind.INTERPOLATED, np.int8),
-                                    np.column_stack((ref_of_ray[j1[has]], ref_of_ray[j2[has]])),
-                                    dists[it][obj_valid][has], st[has], moved[has])
+            target = _feet(
+                ref_pts[ref_of_ray[j1[has]]],
+                ref_pts[ref_of_ray[j2[has]]],
+                moved[has],
+                clamp=not isinstance(params, PlIcpParams),
+            )
+            pairs = Correspondences(
+                used[has],
+                target,
+                np.full(len(target), PairKind.INTERPOLATED, np.int8),
+                np.column_stack((ref_of_ray[j1[has]], ref_of_ray[j2[has]])),
+                dists[it][obj_valid][has],
+                st[has],
+                moved[has],
+            )
             kept = st[has] == PairStatus.KEPT
-            err = float(np.mean(np.sum((after.apply(obj_pts[has][kept]) - target[kept]) ** 2, axis=1)))
+            err = float(
+                np.mean(np.sum((after.apply(obj_pts[has][kept]) - target[kept]) ** 2, axis=1))
+            )
             note = label if it == 0 else ""
             if k == best and it == recorded - 1 and len(runs) > 1:
                 note = f"the run kept: the smallest total distance of {len(runs)} runs"
             count += 1
-            observer(IterationEvent(count, before, after, moved, np.empty(0, np.int64), pairs,
-                                    float(limits[it]) if np.isfinite(limits[it]) else None, err,
-                                    after @ before.inverse(), note=note))
+            observer(
+                IterationEvent(
+                    count,
+                    before,
+                    after,
+                    moved,
+                    np.empty(0, np.int64),
+                    pairs,
+                    float(limits[it]) if np.isfinite(limits[it]) else None,
+                    err,
+                    after @ before.inverse(),
+                    note=note,
+                )
+            )
 
 
 def _feet(a: np.ndarray, b: np.ndarray, p: np.ndarray, clamp: bool) -> np.ndarray:
@@ -370,13 +525,31 @@ def _result(name, scans, params, outcomes, best) -> MatchResult:
     ref_pts, ref_of_ray = scans.ref_points()
     if code != _OK:
         reason = Termination.TOO_FEW_PAIRS if code == _TOO_FEW else Termination.SINGULAR
-        return build_result(name, pose, reason, iterations, None, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M)
+        return build_result(
+            name, pose, reason, iterations, None, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M
+        )
     reason = Termination.CONVERGED if converged else Termination.MAX_ITERATIONS
-    A, err, foot, first = run(_final_system, scans.rx, scans.ry, scans.sx, scans.sy, wx, wy, j1, j2, status, x, y, th,
-                              isinstance(params, PlIcpParams))
+    A, err, foot, first = run(
+        _final_system,
+        scans.rx,
+        scans.ry,
+        scans.sx,
+        scans.sy,
+        wx,
+        wy,
+        j1,
+        j2,
+        status,
+        x,
+        y,
+        th,
+        isinstance(params, PlIcpParams),
+    )
     n_candidates = int(np.count_nonzero(status != PairStatus.OUTSIDE_BR))
     last = FinalSystem(A, err, foot, ref_of_ray[first], len(first), n_candidates - len(first))
-    return build_result(name, pose, reason, iterations, last, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M)
+    return build_result(
+        name, pose, reason, iterations, last, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M
+    )
 
 
 @kernel
@@ -398,6 +571,8 @@ def _final_system(rx, ry, sx, sy, wx, wy, j1, j2, status, x, y, th, line: bool):
                     for b in range(2):
                         A[i, m] += jac[a][i] * C[k, a, b] * jac[b][m]
         i = idx[k]
-        foot[k, 0], foot[k, 1] = _segment_foot(rx[j1[i]], ry[j1[i]], rx[j2[i]], ry[j2[i]], mx, my, True)
+        foot[k, 0], foot[k, 1] = _segment_foot(
+            rx[j1[i]], ry[j1[i]], rx[j2[i]], ry[j2[i]], mx, my, True
+        )
         err += (mx - foot[k, 0]) ** 2 + (my - foot[k, 1]) ** 2
     return A, err / len(idx), foot, j1[idx]

@@ -9,7 +9,15 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 
-from .params import IcpParams, ImprovedParams, MbicpParams, Params, PlIcpParams, PmwnParams, PsmParams
+from .params import (
+    IcpParams,
+    ImprovedParams,
+    MbicpParams,
+    Params,
+    PlIcpParams,
+    PmwnParams,
+    PsmParams,
+)
 
 
 @dataclass(frozen=True)
@@ -43,8 +51,10 @@ def check_inputs(ref, obj, guess) -> None:
     if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
         raise ValueError(f"the initial guess must be finite numbers, got {guess}")
     if max(abs(guess.x), abs(guess.y)) > MAX_GUESS_M:
-        raise ValueError(f"the initial guess lies {max(abs(guess.x), abs(guess.y)):.3g} m away: more than "
-                         f"{MAX_GUESS_M:g} m is no pose between two scans")
+        raise ValueError(
+            f"the initial guess lies {max(abs(guess.x), abs(guess.y)):.3g} m away: more than "
+            f"{MAX_GUESS_M:g} m is no pose between two scans"
+        )
     for name, scan in (("reference", ref), ("object", obj)):
         # a point r (cos b, sin b) is finite exactly when r and b are (|r cos b| <= |r|)
         r, b = scan.ranges[scan.valid], scan.bearings[scan.valid]
@@ -70,11 +80,23 @@ def matcher_for(params: Params) -> Matcher:
     return next(m for m in MATCHERS.values() if type(params) is m.params_type)
 
 
-def match(ref, obj, initial_guess=None, params: Params | None = None, observer=None, algorithm: str = "improved"):
+def match(
+    ref,
+    obj,
+    initial_guess=None,
+    params: Params | None = None,
+    observer=None,
+    algorithm: str = "improved",
+):
     """Run the matcher that ``params`` belongs to (or ``algorithm``'s, with its defaults): the
     ``MatchResult`` whose pose maps object-frame points into the reference frame."""
     from .se2 import Pose2
 
     m = matcher_for(params) if params is not None else MATCHERS[algorithm]
-    return m.run(ref, obj, initial_guess if initial_guess is not None else Pose2(),
-                 params if params is not None else m.params_type(), observer)
+    return m.run(
+        ref,
+        obj,
+        initial_guess if initial_guess is not None else Pose2(),
+        params if params is not None else m.params_type(),
+        observer,
+    )

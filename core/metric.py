@@ -50,7 +50,9 @@ def metric_exact_sq(p1: np.ndarray, p2: np.ndarray, L: float, max_theta: float =
     grid = np.linspace(-max_theta, max_theta, 2001)
     i = int(np.argmin([cost(t) for t in grid]))
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    return float(minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}).fun)
+    return float(
+        minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}).fun
+    )
 
 
 @kernel
@@ -110,7 +112,9 @@ def mad_threshold(distances: np.ndarray, k: float = 2.0) -> float:
 
 
 @kernel
-def metric_normal_equations(p: np.ndarray, c: np.ndarray, L: float) -> tuple[np.ndarray, np.ndarray]:
+def metric_normal_equations(
+    p: np.ndarray, c: np.ndarray, L: float
+) -> tuple[np.ndarray, np.ndarray]:
     """A, b of MbICP's metric least squares: A q = b minimises sum (c_i - q(p_i))^T M(c_i) (...).
 
     Linearised residual e_i = (c_i - p_i) - J_i q with J_i = [[1, 0, -p_iy], [0, 1, p_ix]] and
@@ -163,7 +167,7 @@ def solve3(A: np.ndarray, b: np.ndarray):
     adj, det = adjugate3(A)
     x = np.zeros(3)
     scale = max(abs(A[0, 0]), abs(A[1, 1]), abs(A[2, 2]), 1e-300)
-    if not abs(det) > 1e-14 * scale ** 3:
+    if not abs(det) > 1e-14 * scale**3:
         return x, False
     for i in range(3):
         x[i] = (adj[i, 0] * b[0] + adj[i, 1] * b[1] + adj[i, 2] * b[2]) / det
@@ -187,8 +191,11 @@ def weakest_direction(A: np.ndarray, L: float):
     if p == 0.0:  # a multiple of the identity: no direction is weaker
         return 1.0, np.array([1.0, 0.0, 0.0])
     B = (M - q * np.eye(3)) / p
-    r = 0.5 * (B[0, 0] * (B[1, 1] * B[2, 2] - B[1, 2] * B[2, 1]) - B[0, 1] * (B[1, 0] * B[2, 2] - B[1, 2] * B[2, 0])
-               + B[0, 2] * (B[1, 0] * B[2, 1] - B[1, 1] * B[2, 0]))
+    r = 0.5 * (
+        B[0, 0] * (B[1, 1] * B[2, 2] - B[1, 2] * B[2, 1])
+        - B[0, 1] * (B[1, 0] * B[2, 2] - B[1, 2] * B[2, 0])
+        + B[0, 2] * (B[1, 0] * B[2, 1] - B[1, 1] * B[2, 0])
+    )
     phi = np.arccos(min(max(r, -1.0), 1.0)) / 3.0
     largest = q + 2.0 * p * np.cos(phi)
     smallest = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
@@ -196,9 +203,15 @@ def weakest_direction(A: np.ndarray, L: float):
     N = M - smallest * np.eye(3)
     best, v = -1.0, np.zeros(3)
     for a, b in ((0, 1), (0, 2), (1, 2)):
-        # written out: numba's np.cross and 1-D matmul cost seconds of compilation for three products
-        c = np.array([N[a, 1] * N[b, 2] - N[a, 2] * N[b, 1], N[a, 2] * N[b, 0] - N[a, 0] * N[b, 2],
-                      N[a, 0] * N[b, 1] - N[a, 1] * N[b, 0]])
+        # written out: numba's np.cross and 1-D matmul cost seconds of compilation for three
+        # products
+        c = np.array(
+            [
+                N[a, 1] * N[b, 2] - N[a, 2] * N[b, 1],
+                N[a, 2] * N[b, 0] - N[a, 0] * N[b, 2],
+                N[a, 0] * N[b, 1] - N[a, 1] * N[b, 0],
+            ]
+        )
         n = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
         if n > best:
             best, v = n, c / n if n > 0.0 else c

@@ -34,9 +34,16 @@ from .scan import Scan
 from .se2 import Pose2
 
 
-def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: PmwnParams | None = None,
-          observer: Observer | None = None) -> MatchResult:
+def match(
+    ref: Scan,
+    obj: Scan,
+    initial_guess: Pose2 = Pose2(),
+    params: PmwnParams | None = None,
+    observer: Observer | None = None,
+) -> MatchResult:
     """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
     p = params if params is not None else PmwnParams()
-    strategy = Strategy("pmwn", orientation_due=lambda it: True, refine=refine_v, fit="V", metric=True)
+    strategy = Strategy(
+        "pmwn", orientation_due=lambda it: True, refine=refine_v, fit="V", metric=True
+    )
     return run_polar(strategy, ref, obj, initial_guess, p, observer)

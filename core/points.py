@@ -20,6 +20,10 @@ def valid_points(ranges, bearings, valid, max_range: float):
     k = 0
     for i in range(len(ranges)):
         if valid[i] and ranges[i] < max_range:
-            pts[k, 0], pts[k, 1], b[k] = ranges[i] * np.cos(bearings[i]), ranges[i] * np.sin(bearings[i]), bearings[i]
+            pts[k, 0], pts[k, 1], b[k] = (
+                ranges[i] * np.cos(bearings[i]),
+                ranges[i] * np.sin(bearings[i]),
+                bearings[i],
+            )
             k += 1
     return pts, b

@@ -9,13 +9,23 @@ a 360-degree reference wraps around.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
-from .events import Correspondences, FinishEvent, IterationEvent, Observer, PairKind, PairStatus, PolarStep, StartEvent
+from .events import (
+    Correspondences,
+    FinishEvent,
+    IterationEvent,
+    Observer,
+    PairKind,
+    PairStatus,
+    PolarStep,
+    StartEvent,
+)
 from .metric import kth_smallest
 from .result import MatchResult, Termination
 from .scan import Scan, ScanError
@@ -27,7 +37,8 @@ from .uncertainty import DEGENERACY_LENGTH_M, degeneracy, surface_tangents
 
 @dataclass(frozen=True, eq=False)
 class PolarScan:
-    """A preprocessed scan: median-filtered ranges, validity, and segment ids (-1: not in a segment)."""
+    """A preprocessed scan: median-filtered ranges, validity, and segment ids (-1: not in a "
+    "segment)."""
 
     ranges: np.ndarray
     bearings: np.ndarray
@@ -57,7 +68,8 @@ def segment(r: np.ndarray, valid: np.ndarray, max_jump: float) -> np.ndarray:
 def _segment_kernel(r, valid, max_jump: float):
     """The loop of ``segment``: number the runs of valid readings, then drop the one-reading runs
     (their numbers stay unused)."""
-    seg = np.empty(len(r), dtype=np.int64)  # (np.full in compiled code costs a quarter second to compile)
+    # (np.full in compiled code costs a quarter second to compile)
+    seg = np.empty(len(r), dtype=np.int64)
     seg[:] = -1
     beam = np.empty(len(r), dtype=np.int64)
     run = np.empty(len(r), dtype=np.int64)
@@ -98,8 +110,11 @@ def median_nearest(x, window: int):
     return out
 
 
-def preprocess(scan: Scan, median_window: int, min_range: float, max_range: float, max_jump: float) -> PolarScan:
-    """PSM §3 step 1 (also PMWN's): median filter, drop near/far readings, segment, drop lone points.
+def preprocess(
+    scan: Scan, median_window: int, min_range: float, max_range: float, max_jump: float
+) -> PolarScan:
+    """PSM §3 step 1 (also PMWN's): median filter, drop near/far readings, segment, drop lone
+    points.
 
     The median filter runs over valid readings in scan order (invalid ones neither vote nor get
     filled); see ``segment``.
@@ -111,8 +126,15 @@ def preprocess(scan: Scan, median_window: int, min_range: float, max_range: floa
         r[idx] = run(median_nearest, scan.ranges[idx], median_window)
     seg = segment(r, valid, max_jump)
     rays = np.column_stack((np.cos(scan.bearings), np.sin(scan.bearings)))
-    return PolarScan(r, scan.bearings, seg >= 0, seg, rays, r[:, None] * rays,
-                     np.flatnonzero((seg[:-1] >= 0) & (seg[:-1] == seg[1:])))
+    return PolarScan(
+        r,
+        scan.bearings,
+        seg >= 0,
+        seg,
+        rays,
+        r[:, None] * rays,
+        np.flatnonzero((seg[:-1] >= 0) & (seg[:-1] == seg[1:])),
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,15 +147,19 @@ class Grid:
     full: bool
 
     @staticmethod
-    def of(scan: Scan, name: str) -> "Grid":
+    def of(scan: Scan, name: str) -> Grid:
         b = scan.bearings
         if len(b) < 3:
             raise ScanError(scan.source, f"{name} needs at least 3 reference beams")
         d = np.diff(b)
         step = float(np.median(d))
         if np.max(np.abs(d - step)) > 0.01 * step:
-            raise ScanError(scan.source, f"{name} needs uniformly spaced reference bearings (increments from "
-                            f"{np.degrees(d.min()):.4f} to {np.degrees(d.max()):.4f} deg); use icp, mbicp or improved")
+            raise ScanError(
+                scan.source,
+                f"{name} needs uniformly spaced reference bearings (increments from "
+                f"{np.degrees(d.min()):.4f} to {np.degrees(d.max()):.4f} deg); use icp, mbicp or "
+                "improved",
+            )
         return Grid(float(b[0]), step, len(b), scan.is_full_circle())
 
     @cached_property
@@ -152,14 +178,37 @@ def project(grid: Grid, cur: PolarScan, pose: Pose2, pad: int = 0) -> np.ndarray
     reference viewpoint: it still hides what lies behind it, but a bearing whose closest surface is
     such a back face is not compared (NaN), as is a bearing where nothing projects.
     """
-    out = run(_project_kernel, cur.xy, cur.edges, pose.x, pose.y, math.cos(pose.theta), math.sin(pose.theta),
-              grid.b0, grid.step, grid.n, grid.full, pad)
-    return np.concatenate((out[grid.n - pad:], out, out[:pad])) if grid.full and pad else out
+    out = run(
+        _project_kernel,
+        cur.xy,
+        cur.edges,
+        pose.x,
+        pose.y,
+        math.cos(pose.theta),
+        math.sin(pose.theta),
+        grid.b0,
+        grid.step,
+        grid.n,
+        grid.full,
+        pad,
+    )
+    return np.concatenate((out[grid.n - pad :], out, out[:pad])) if grid.full and pad else out
 
 
 @kernel
-def _project_kernel(xy, edges, tx: float, ty: float, c: float, s: float, b0: float, step: float, n: int,
-                    full: bool, pad: int):
+def _project_kernel(
+    xy,
+    edges,
+    tx: float,
+    ty: float,
+    c: float,
+    s: float,
+    b0: float,
+    step: float,
+    n: int,
+    full: bool,
+    pad: int,
+):
     """The loop of ``project``: move the scan by (tx, ty, angle with cosine c and sine s), then walk
     its edges (bins of a full grid not yet extended)."""
     size = n if full else n + 2 * pad
@@ -179,9 +228,11 @@ def _project_kernel(xy, edges, tx: float, ty: float, c: float, s: float, b0: flo
         if not abs(span) < np.pi / 2:  # an edge across the seam of the angle range is not a surface
             continue
         lo, hi = min(a1, a2), max(a1, a2)
-        slope = (r2 - r1) / (span if abs(span) > 1e-12 else np.inf)  # range per radian along the edge
+        # range per radian along the edge
+        slope = (r2 - r1) / (span if abs(span) > 1e-12 else np.inf)
         i0, i1 = int(np.ceil((lo - b0) / step - 1e-9)), int(np.floor((hi - b0) / step + 1e-9))
-        if not full:  # only the bins of the grid: time bounded by the beams, not by the edge's span / step
+        # only the bins of the grid: time bounded by the beams, not by the edge's span / step
+        if not full:
             i0, i1 = max(i0, -pad), min(i1, n + pad - 1)
         for i in range(i0, i1 + 1):
             rr = r1 + (b0 + i * step - a1) * slope
@@ -196,8 +247,11 @@ def _project_kernel(xy, edges, tx: float, ty: float, c: float, s: float, b0: flo
     return out
 
 
-def shift_costs(ref_r: np.ndarray, proj_ext: np.ndarray, K: int, min_pairs: int, cap: float | None = None):
-    """Mean |r_ref(i) - r_proj(i + k)| and the pair count for every shift k in -K..K (PSM §3 step 4).
+def shift_costs(
+    ref_r: np.ndarray, proj_ext: np.ndarray, K: int, min_pairs: int, cap: float | None = None
+):
+    """Mean |r_ref(i) - r_proj(i + k)| and the pair count for every shift k in -K..K (PSM §3 step
+    4).
 
     ``proj_ext`` holds the projection on bins -K .. n + K - 1; NaN marks missing ranges. ``cap``
     (not published) limits each difference: after a long move most bearings compare different
@@ -205,7 +259,9 @@ def shift_costs(ref_r: np.ndarray, proj_ext: np.ndarray, K: int, min_pairs: int,
     mean (a nearly flat curve whose minimum wanders); capped, a bearing that compares different
     surfaces costs the same at every shift and the agreeing ones decide.
     """
-    return run(_shift_costs_kernel, ref_r, proj_ext, K, min_pairs, np.inf if cap is None else float(cap))
+    return run(
+        _shift_costs_kernel, ref_r, proj_ext, K, min_pairs, np.inf if cap is None else float(cap)
+    )
 
 
 @kernel
@@ -242,7 +298,8 @@ def refine_v(a: float, b: float, c: float) -> float:
 
 
 def least(cost: np.ndarray) -> int | None:
-    """Index of the smallest cost, NaN meaning "too few pairs at that shift"; None if all are NaN."""
+    """Index of the smallest cost, NaN meaning "too few pairs at that shift"; None if all are "
+    "NaN."""
     j = run(_least_kernel, cost)
     return j if j >= 0 else None
 
@@ -288,9 +345,11 @@ class Residuals(NamedTuple):
     wu: np.ndarray  # w[used]
 
 
-def translation_residuals(ref: PolarScan, proj_r: np.ndarray, max_error: float, C: float,
-                          min_pairs: int | None = None) -> Residuals:
-    """Residuals e_i = r_ref - r_proj at shared bearings, PSM weights w = C / (C + e^2), and which are used.
+def translation_residuals(
+    ref: PolarScan, proj_r: np.ndarray, max_error: float, C: float, min_pairs: int | None = None
+) -> Residuals:
+    """Residuals e_i = r_ref - r_proj at shared bearings, PSM weights w = C / (C + e^2), and which
+    are used.
 
     With ``min_pairs`` (not published) the cut never keeps fewer than that many residuals: when
     fewer lie within ``max_error`` it rises to the min_pairs-th smallest |e|, so that a long move
@@ -344,10 +403,11 @@ class TranslationStep:
     mean_abs: float  # mean |e| of the used residuals [m]
 
 
-def translation_step(ref: PolarScan, iu: np.ndarray, eu: np.ndarray, wu: np.ndarray,
-                     normals: np.ndarray | None) -> TranslationStep:
-    """Weighted least squares of rhs_i ~ rows_i . dt (PSM §3 step 3; PMWN's circle) over the used residuals
-    (bearing indices iu, residuals eu, weights wu).
+def translation_step(
+    ref: PolarScan, iu: np.ndarray, eu: np.ndarray, wu: np.ndarray, normals: np.ndarray | None
+) -> TranslationStep:
+    """Weighted least squares of rhs_i ~ rows_i . dt (PSM §3 step 3; PMWN's circle) over the used
+    residuals (bearing indices iu, residuals eu, weights wu).
 
     Diosi's model (``normals`` None): moving the scan by dt changes the range along ray u by
     u . dt — exact for a surface facing the sensor, wrong for a wall seen at a grazing angle, whose
@@ -357,8 +417,15 @@ def translation_step(ref: PolarScan, iu: np.ndarray, eu: np.ndarray, wu: np.ndar
     corridors, where Diosi's under-estimates the range change of the walls, over-corrects and
     drifts (his code's own limitation note; `eval ceiling` measures it).
     """
-    rows, rhs, sums = run(_translation_kernel, iu, eu, wu, ref.rays, ref.rays if normals is None else normals,
-                          normals is not None)
+    rows, rhs, sums = run(
+        _translation_kernel,
+        iu,
+        eu,
+        wu,
+        ref.rays,
+        ref.rays if normals is None else normals,
+        normals is not None,
+    )
     a, b, d, rx, ry, e2, e1 = sums
     det = a * d - b * b
     m = len(eu)
@@ -394,16 +461,31 @@ def _translation_kernel(iu, eu, wu, rays, normals, surface: bool):
     return rows, rhs, sums
 
 
-def polar_pairs(grid: Grid, ref: PolarScan, proj_r: np.ndarray, i: np.ndarray, e: np.ndarray,
-                used: np.ndarray, ref_point_of: np.ndarray) -> Correspondences:
-    """The range comparisons as point pairs: projected surface point -> reference point, one bearing each."""
+def polar_pairs(
+    grid: Grid,
+    ref: PolarScan,
+    proj_r: np.ndarray,
+    i: np.ndarray,
+    e: np.ndarray,
+    used: np.ndarray,
+    ref_point_of: np.ndarray,
+) -> Correspondences:
+    """The range comparisons as point pairs: projected surface point -> reference point, one "
+    "bearing each."""
     u = ref.rays[i]
     src = proj_r[i, None] * u
     tgt = ref.ranges[i, None] * u
     status = np.full(len(i), PairStatus.OUTSIDE_BR, dtype=np.int8)
     status[used] = PairStatus.KEPT
-    return Correspondences(np.full(len(i), -1), tgt, np.full(len(i), PairKind.POINT, dtype=np.int8),
-                           np.column_stack((ref_point_of[i], np.full(len(i), -1))), np.abs(e), status, src)
+    return Correspondences(
+        np.full(len(i), -1),
+        tgt,
+        np.full(len(i), PairKind.POINT, dtype=np.int8),
+        np.column_stack((ref_point_of[i], np.full(len(i), -1))),
+        np.abs(e),
+        status,
+        src,
+    )
 
 
 @dataclass(frozen=True)
@@ -412,39 +494,54 @@ class Strategy:
 
     name: str
     orientation_due: Callable[[int], bool]  # iteration -> run the orientation step?
-    refine: Callable[[float, float, float], float]  # three costs -> fractional offset of the minimum
+    # three costs -> fractional offset of the minimum
+    refine: Callable[[float, float, float], float]
     fit: str  # "parabola" | "V"
     metric: bool  # PMWN: add lambda * |shift angle| to the cost and adapt lambda
 
 
-def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, observer: Observer | None) -> MatchResult:
+def run_polar(
+    strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, observer: Observer | None
+) -> MatchResult:
     """Alternate orientation (shift the projected ranges) and translation (weighted LS) steps."""
     grid = Grid.of(ref, strategy.name.upper())
     pre = (params.median_window, params.min_range, params.max_range, params.max_jump)
-    R, O = preprocess(ref, *pre), preprocess(obj, *pre)
-    ref_pts, obj_pts = R.points(), O.points()
-    ref_point_of = np.cumsum(R.valid) - 1
-    normals = beam_normals(R) if params.surface_jacobian else None
-    ref_r = np.where(R.valid, R.ranges, np.nan)
-    K = min(int(round(params.search_window / grid.step)), grid.n)  # no shift beyond the scan's own beams
+    ref_pre, obj_pre = preprocess(ref, *pre), preprocess(obj, *pre)
+    ref_pts, obj_pts = ref_pre.points(), obj_pre.points()
+    ref_point_of = np.cumsum(ref_pre.valid) - 1
+    normals = beam_normals(ref_pre) if params.surface_jacobian else None
+    ref_r = np.where(ref_pre.valid, ref_pre.ranges, np.nan)
+    # no shift beyond the scan's own beams
+    K = min(int(round(params.search_window / grid.step)), grid.n)
     shifts = np.arange(-K, K + 1)
-    no_cost = np.full(len(shifts), np.nan)  # the cost curve of an iteration without orientation step
+    # the cost curve of an iteration without orientation step
+    no_cost = np.full(len(shifts), np.nan)
     if observer is not None:
-        observer(StartEvent(strategy.name, params, ref_pts, obj_pts, np.arange(len(obj_pts)), guess, None))
+        observer(
+            StartEvent(
+                strategy.name, params, ref_pts, obj_pts, np.arange(len(obj_pts)), guess, None
+            )
+        )
     est, lam = guess, params.lambda0 if strategy.metric else None
-    projected_circle = strategy.metric and normals is None  # PMWN's circle picture holds for Diosi's model only
+    # PMWN's circle picture holds for Diosi's model only
+    projected_circle = strategy.metric and normals is None
     n_small, it, reason, last = 0, 0, Termination.MAX_ITERATIONS, None
     cycles = CycleWatch(params)
     gain, last_fraction = 0.5, 0.0  # sub-bearing orientation steps (see below)
     for it in range(1, params.MaxIter + 1):
         before = est
-        proj_ext = project(grid, O, est, K)
-        proj0 = proj_ext[K: K + grid.n]
+        proj_ext = project(grid, obj_pre, est, K)
+        proj0 = proj_ext[K : K + grid.n]
         cost, k_best, abc = no_cost, None, None
         range_cost = cost
         if strategy.orientation_due(it) and K > 0:
-            range_cost, _ = shift_costs(ref_r, proj_ext, K, params.min_pairs,
-                                         params.max_error if params.truncated_orientation else None)
+            range_cost, _ = shift_costs(
+                ref_r,
+                proj_ext,
+                K,
+                params.min_pairs,
+                params.max_error if params.truncated_orientation else None,
+            )
             cost = range_cost + lam * np.abs(shifts) * grid.step if strategy.metric else range_cost
             k_best, abc = best_shift(shifts, cost, strategy.refine, range_cost)
         proj = proj0
@@ -460,18 +557,34 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
                 last_fraction = k_best
                 k_turn = gain * k_best
             est = Pose2(0.0, 0.0, -k_turn * grid.step) @ est
-            proj = project(grid, O, est)
-        res = translation_residuals(R, proj, params.max_error, params.weight_constant(it),
-                                    params.min_pairs if params.relaxed_cut else None)
+            proj = project(grid, obj_pre, est)
+        res = translation_residuals(
+            ref_pre,
+            proj,
+            params.max_error,
+            params.weight_constant(it),
+            params.min_pairs if params.relaxed_cut else None,
+        )
         if len(res.iu) < params.min_pairs:
             reason = Termination.TOO_FEW_PAIRS
             est = before
             if observer is not None:
-                observer(IterationEvent(it, before, before, before.apply(obj_pts), np.empty(0, np.int64),
-                                        polar_pairs(grid, R, proj, res.i, res.e, res.used, ref_point_of), None,
-                                        float("nan"), Pose2(), None))
+                observer(
+                    IterationEvent(
+                        it,
+                        before,
+                        before,
+                        before.apply(obj_pts),
+                        np.empty(0, np.int64),
+                        polar_pairs(grid, ref_pre, proj, res.i, res.e, res.used, ref_point_of),
+                        None,
+                        float("nan"),
+                        Pose2(),
+                        None,
+                    )
+                )
             break
-        step = translation_step(R, res.iu, res.eu, res.wu, normals)
+        step = translation_step(ref_pre, res.iu, res.eu, res.wu, normals)
         dt, error = step.dt, step.error
         if dt is None:
             reason, est = Termination.SINGULAR, before
@@ -489,13 +602,36 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
             lam = min(step.mean_abs / max(theta_r, grid.step), params.lambda_max)
         inc = est @ before.inverse()
         if observer is not None:
-            circle = step.rhs[:, None] * step.rows if projected_circle else None  # Diosi's rows are the rays u_i
-            observer(IterationEvent(
-                it, before, est, before.apply(obj_pts), np.empty(0, np.int64),
-                polar_pairs(grid, R, proj, res.i, res.e, res.used, ref_point_of), params.max_error, error, inc,
-                PolarStep(grid.bearings, ref_r, proj0, shifts, cost, k_best,
-                          strategy.fit if k_best is not None else None, abc, lam_used,
-                          res.e, res.w, circle, 0.5 * np.array(dt) if projected_circle else None)))
+            # Diosi's rows are the rays u_i
+            circle = step.rhs[:, None] * step.rows if projected_circle else None
+            observer(
+                IterationEvent(
+                    it,
+                    before,
+                    est,
+                    before.apply(obj_pts),
+                    np.empty(0, np.int64),
+                    polar_pairs(grid, ref_pre, proj, res.i, res.e, res.used, ref_point_of),
+                    params.max_error,
+                    error,
+                    inc,
+                    PolarStep(
+                        grid.bearings,
+                        ref_r,
+                        proj0,
+                        shifts,
+                        cost,
+                        k_best,
+                        strategy.fit if k_best is not None else None,
+                        abc,
+                        lam_used,
+                        res.e,
+                        res.w,
+                        circle,
+                        0.5 * np.array(dt) if projected_circle else None,
+                    ),
+                )
+            )
         last = (error, res.iu, len(res.iu), len(res.i) - len(res.iu))
         n_small = n_small + 1 if params.small(inc) else 0
         if n_small >= params.stop_after:
@@ -508,8 +644,18 @@ def run_polar(strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, ob
     if last is not None:
         j = ref_point_of[last[1]]
         deg = degeneracy(ref_pts[j], surface_tangents(ref_pts, grid.full, j), DEGENERACY_LENGTH_M)
-    result = MatchResult(strategy.name, est, reason.converged, reason, it,
-                         last[0] if last else float("nan"), last[2] if last else 0, last[3] if last else 0, None, deg)
+    result = MatchResult(
+        strategy.name,
+        est,
+        reason.converged,
+        reason,
+        it,
+        last[0] if last else float("nan"),
+        last[2] if last else 0,
+        last[3] if last else 0,
+        None,
+        deg,
+    )
     if observer is not None:
         observer(FinishEvent(result))
     return result

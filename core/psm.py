@@ -18,10 +18,20 @@ from .scan import Scan
 from .se2 import Pose2
 
 
-def match(ref: Scan, obj: Scan, initial_guess: Pose2 = Pose2(), params: PsmParams | None = None,
-          observer: Observer | None = None) -> MatchResult:
+def match(
+    ref: Scan,
+    obj: Scan,
+    initial_guess: Pose2 = Pose2(),
+    params: PsmParams | None = None,
+    observer: Observer | None = None,
+) -> MatchResult:
     """Pose of the object frame in the reference frame, starting from ``initial_guess``."""
     p = params if params is not None else PsmParams()
-    strategy = Strategy("psm", orientation_due=lambda it: (it - 1) % p.orientation_every == 0,
-                        refine=refine_parabola, fit="parabola", metric=False)
+    strategy = Strategy(
+        "psm",
+        orientation_due=lambda it: (it - 1) % p.orientation_every == 0,
+        refine=refine_parabola,
+        fit="parabola",
+        metric=False,
+    )
     return run_polar(strategy, ref, obj, initial_guess, p, observer)

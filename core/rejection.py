@@ -8,13 +8,21 @@ from .events import PairStatus
 from .metric import kth_smallest, mad_threshold
 from .tiers import kernel
 
-KEPT, OUTSIDE_BR, TRIMMED, MAD = (int(s) for s in (PairStatus.KEPT, PairStatus.OUTSIDE_BR, PairStatus.TRIMMED,
-                                                  PairStatus.MAD))
+KEPT, OUTSIDE_BR, TRIMMED, MAD = (
+    int(s) for s in (PairStatus.KEPT, PairStatus.OUTSIDE_BR, PairStatus.TRIMMED, PairStatus.MAD)
+)
 
 
 @kernel
-def reject(dist: np.ndarray, max_dist: float, keep_fraction: float, use_mad: bool, mad_k: float,
-           mad_floor: float, shown: bool = True):
+def reject(
+    dist: np.ndarray,
+    max_dist: float,
+    keep_fraction: float,
+    use_mad: bool,
+    mad_k: float,
+    mad_floor: float,
+    shown: bool = True,
+):
     """Status of each pair and the distance threshold applied after the hard cut (NaN: none).
 
     First the hard cut ``max_dist`` (MbICP's radial window Br). Then either the trimmed estimator

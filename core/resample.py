@@ -89,16 +89,30 @@ def _cells(points, cell_size: float):
     for i in range(n):
         cell_id[i] = rc[i, 0] * n_cols + rc[i, 1]
     sensor = np.empty(2, dtype=np.int64)
-    sensor[0], sensor[1] = int(np.floor((0.0 - origin[1]) / cell_size)), int(np.floor((0.0 - origin[0]) / cell_size))
+    sensor[0], sensor[1] = (
+        int(np.floor((0.0 - origin[1]) / cell_size)),
+        int(np.floor((0.0 - origin[0]) / cell_size)),
+    )
     return rc, sensor, cell_id, origin
 
 
 def grid_resample(points: np.ndarray, cell_size: float) -> Resampling:
     """Resample sensor-frame ``points`` (scan order) on a grid of ``cell_size`` metres."""
-    if len(points) == 0:  # nothing within the matcher's range: no cells (the match then ends with too few pairs)
-        return Resampling(np.zeros(2), float(cell_size), np.zeros((0, 2), np.int64), np.zeros(2, np.int64), np.zeros(0),
-                          np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
-    rc, sensor, cell_id, origin = run(_cells, np.ascontiguousarray(points, dtype=float), float(cell_size))
+    # nothing within the matcher's range: no cells (the match then ends with too few pairs)
+    if len(points) == 0:
+        return Resampling(
+            np.zeros(2),
+            float(cell_size),
+            np.zeros((0, 2), np.int64),
+            np.zeros(2, np.int64),
+            np.zeros(0),
+            np.zeros(0, np.int64),
+            np.zeros(0, np.int64),
+            np.zeros(0, np.int64),
+        )
+    rc, sensor, cell_id, origin = run(
+        _cells, np.ascontiguousarray(points, dtype=float), float(cell_size)
+    )
     order = np.argsort(cell_id, kind="stable")  # stable: scan order inside each cell
     cells, ratio, count, n_keep, kept = run(_resample, rc, sensor, order, cell_id)
     return Resampling(origin, float(cell_size), cells, sensor, ratio, count, n_keep, kept)

@@ -20,7 +20,8 @@ class Termination(enum.Enum):
 
     @property
     def converged(self) -> bool:
-        """Whether the estimate settled: a short cycle below the thresholds settles as well as a fixed point."""
+        """Whether the estimate settled: a short cycle below the thresholds settles as well as a "
+        "fixed point."""
         return self in (Termination.CONVERGED, Termination.CYCLE)
 
 
@@ -50,7 +51,8 @@ class Degeneracy:
 
 @dataclass(frozen=True)
 class MatchResult:
-    """``pose`` is the pose of the object frame in the reference frame (maps object points into it)."""
+    """``pose`` is the pose of the object frame in the reference frame (maps object points into "
+    "it)."""
 
     algorithm: str
     pose: Pose2
@@ -60,10 +62,11 @@ class MatchResult:
     error: float  # final mean squared Euclidean residual of the kept pairs [m^2]
     pairs_kept: int
     pairs_rejected: int
-    covariance: np.ndarray | None  # (3, 3) in (x [m], y [m], theta [rad]), sigma^2 * A^-1 of the final system
+    # (3, 3) in (x [m], y [m], theta [rad]), sigma^2 * A^-1 of the final system
+    covariance: np.ndarray | None
     degeneracy: Degeneracy | None
 
-    def conjugated(self, mount: Pose2) -> "MatchResult":
+    def conjugated(self, mount: Pose2) -> MatchResult:
         """The same match seen as the motion of the frame the laser is mounted on (``mount`` =
         T_base_laser): pose ``mount @ pose @ mount^-1``; covariance and weakest direction carried
         by the mount's adjoint (the condition number stays that of the laser's constraints)."""
@@ -76,9 +79,15 @@ class MatchResult:
             L = deg.length
             d = Ad @ (np.array(deg.weakest_direction) / [1.0, 1.0, L])
             d = d * [1.0, 1.0, L]
-            deg = Degeneracy(deg.condition_number, tuple(float(v) for v in d / np.linalg.norm(d)), deg.eigenvalues,
-                             L)
-        return dataclasses.replace(self, pose=mount.conjugate(self.pose), covariance=cov, degeneracy=deg)
+            deg = Degeneracy(
+                deg.condition_number,
+                tuple(float(v) for v in d / np.linalg.norm(d)),
+                deg.eigenvalues,
+                L,
+            )
+        return dataclasses.replace(
+            self, pose=mount.conjugate(self.pose), covariance=cov, degeneracy=deg
+        )
 
     def as_dict(self) -> dict:
         """Plain-JSON fields; the names are stable (scripts rely on them)."""

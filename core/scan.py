@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ScanError, ScanSource, UnusableScan  # noqa: F401 - re-exported
+from .errors import ScanError, ScanSource, UnusableScan
 from .se2 import Pose2
 
 
@@ -30,7 +30,9 @@ class Scan:
     stamp: float | None = None  # seconds
     source: ScanSource = field(default_factory=ScanSource)
     beam_times: np.ndarray | None = None  # (N,) [s] when each beam was measured, after ``stamp``
-    raw: "Scan | None" = None  # the scan as measured, when this one is corrected for motion (core/deskew.py)
+    raw: Scan | None = (
+        None  # the scan as measured, when this one is corrected for motion (core/deskew.py)
+    )
 
     @property
     def n_valid(self) -> int:
@@ -46,8 +48,13 @@ class Scan:
         from .points import valid_points
         from .tiers import run
 
-        return run(valid_points, np.ascontiguousarray(self.ranges), np.ascontiguousarray(self.bearings),
-                   np.ascontiguousarray(self.valid), float(max_range))
+        return run(
+            valid_points,
+            np.ascontiguousarray(self.ranges),
+            np.ascontiguousarray(self.bearings),
+            np.ascontiguousarray(self.valid),
+            float(max_range),
+        )
 
     def valid_indices(self) -> np.ndarray:
         return np.flatnonzero(self.valid)
@@ -109,15 +116,26 @@ def make_scan(
         raise ScanError(source, f"{len(v)} validity flags for {len(r)} beams")
     t = None if beam_times is None else np.asarray(beam_times, dtype=float).reshape(-1)
     if t is not None and (t.shape != r.shape or not np.all(np.isfinite(t))):
-        raise ScanError(source, f"{len(t)} beam times for {len(r)} beams, or a time that is not a number")
+        raise ScanError(
+            source, f"{len(t)} beam times for {len(r)} beams, or a time that is not a number"
+        )
     if len(b) > 2:
         step = (b[-1] - b[0]) / (len(b) - 1)
         if b[-1] - b[0] > 2.0 * np.pi + 1.5 * step:
-            raise ScanError(source, f"bearings span {np.degrees(b[-1] - b[0]):.4f} degrees: more than 360 degrees "
-                                    "and one step")
-        turn = b < b[0] + 2.0 * np.pi - 0.5 * step  # beams past it repeat the first directions: dropped
+            raise ScanError(
+                source,
+                f"bearings span {np.degrees(b[-1] - b[0]):.4f} degrees: more than 360 degrees "
+                "and one step",
+            )
+        # beams past it repeat the first directions: dropped
+        turn = b < b[0] + 2.0 * np.pi - 0.5 * step
         if not turn.all():
-            r, b, v, t = r[turn], b[turn], None if v is None else v[turn], None if t is None else t[turn]
+            r, b, v, t = (
+                r[turn],
+                b[turn],
+                None if v is None else v[turn],
+                None if t is None else t[turn],
+            )
     elif len(b) == 2 and b[1] - b[0] >= 2.0 * np.pi:
         raise ScanError(source, "two beams a full turn apart")
     with np.errstate(invalid="ignore"):
@@ -133,18 +151,3 @@ def make_scan(
 
 def uniform_bearings(n: int, start: float, increment: float) -> np.ndarray:
     return start + increment * np.arange(n)
-
-
-def scan_from_points(points: np.ndarray, source: ScanSource | None = None) -> Scan:
-    """A scan whose beams hit the given sensor-frame points (sorted by bearing).
-
-    Used to build test and teaching pairs (e.g. a scan with a block of points removed);
-    duplicate bearings are dropped so that bearings stay strictly increasing.
-    """
-    pts = np.asarray(points, dtype=float)
-    b = np.arctan2(pts[:, 1], pts[:, 0])
-    r = np.hypot(pts[:, 0], pts[:, 1])
-    order = np.argsort(b, kind="stable")
-    b, r = b[order], r[order]
-    keep = np.concatenate(([True], np.diff(b) > 0))
-    return make_scan(r[keep], b[keep], source=source)

@@ -27,11 +27,11 @@ class Pose2:
     theta: float = 0.0
 
     @staticmethod
-    def identity() -> "Pose2":
+    def identity() -> Pose2:
         return Pose2(0.0, 0.0, 0.0)
 
     @staticmethod
-    def from_array(v) -> "Pose2":
+    def from_array(v) -> Pose2:
         x, y, t = np.asarray(v, dtype=float).tolist()
         return Pose2(x, y, wrap_angle(t))
 
@@ -42,7 +42,7 @@ class Pose2:
         c, s = np.cos(self.theta), np.sin(self.theta)
         return np.array([[c, -s], [s, c]])
 
-    def __matmul__(self, other: "Pose2") -> "Pose2":
+    def __matmul__(self, other: Pose2) -> Pose2:
         c, s = math.cos(self.theta), math.sin(self.theta)
         return Pose2(
             self.x + c * other.x - s * other.y,
@@ -50,7 +50,7 @@ class Pose2:
             wrap_angle(self.theta + other.theta),
         )
 
-    def inverse(self) -> "Pose2":
+    def inverse(self) -> Pose2:
         c, s = math.cos(self.theta), math.sin(self.theta)
         return Pose2(-c * self.x - s * self.y, s * self.x - c * self.y, wrap_angle(-self.theta))
 
@@ -60,14 +60,15 @@ class Pose2:
         return points @ np.array([[c, s], [-s, c]]) + np.array([self.x, self.y])
 
     def adjoint(self) -> np.ndarray:
-        """3x3 matrix taking a small motion (dx, dy, dtheta) applied on the left in this pose's child
-        frame to the same motion seen from its parent frame: ``self @ exp(d) @ self^-1 = exp(Ad d)``."""
+        """3x3 matrix taking a small motion (dx, dy, dtheta) applied on the left in this pose's
+        child frame to the same motion seen from its parent frame: ``self @ exp(d) @ self^-1 =
+        exp(Ad d)``."""
         c, s = math.cos(self.theta), math.sin(self.theta)
         return np.array([[c, -s, self.y], [s, c, -self.x], [0.0, 0.0, 1.0]])
 
-    def conjugate(self, motion: "Pose2") -> "Pose2":
-        """``self @ motion @ self^-1``: a motion of the child frame as the motion of the parent frame
-        (a laser's motion as its robot's, with ``self`` the laser's mount T_base_laser)."""
+    def conjugate(self, motion: Pose2) -> Pose2:
+        """``self @ motion @ self^-1``: a motion of the child frame as the motion of the parent
+        frame (a laser's motion as its robot's, with ``self`` the laser's mount T_base_laser)."""
         return self @ motion @ self.inverse()
 
     def translation_norm(self) -> float:
@@ -78,13 +79,9 @@ class Pose2:
 
 
 def relative(a: Pose2, b: Pose2) -> Pose2:
-    """``a^-1 @ b``: pose of frame ``b`` seen from frame ``a`` when both are given in a common frame."""
+    """``a^-1 @ b``: pose of frame ``b`` seen from frame ``a`` when both are given in a common "
+    "frame."""
     return a.inverse() @ b
-
-
-def relative_theta(a: Pose2, b: Pose2) -> float:
-    """``relative(a, b).theta`` with the same arithmetic, without building the poses (hot loops)."""
-    return wrap_angle(wrap_angle(-a.theta) + b.theta)
 
 
 def pose_error(estimate: Pose2, truth: Pose2) -> tuple[float, float]:

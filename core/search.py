@@ -27,18 +27,21 @@ class SearchResult:
     pose: Pose2  # best candidate of the fine pass: pose of the object frame in the reference frame
     coarse: Pose2  # best candidate of the coarse pass, around which the fine pass searched
     score: float  # the coarse best's summed weighted likelihood
-    best_per_angle: np.ndarray  # (A,) best coarse score at each candidate rotation (the search's profile)
+    # (A,) best coarse score at each candidate rotation (the search's profile)
+    best_per_angle: np.ndarray
     angles: np.ndarray  # (A,) candidate rotations of the coarse pass [rad], relative to the guess
 
 
 # Bounds on what a search may cost whatever its parameters: point placements scored (time), and
-# window elements held at once (memory; the defaults stay in one batch, so their sums are unchanged).
+# window elements held at once (memory; the defaults stay in one batch, so their sums are
+# unchanged).
 MAX_WORK = 5e8
 WINDOW_ELEMENTS = 4_000_000
 
 
-def likelihood_field(points: np.ndarray, origin: np.ndarray, shape: tuple[int, int], cell: float,
-                     sigma: float) -> np.ndarray:
+def likelihood_field(
+    points: np.ndarray, origin: np.ndarray, shape: tuple[int, int], cell: float, sigma: float
+) -> np.ndarray:
     """exp(-d^2 / sigma^2) per cell, d the distance from the cell centre to the nearest point [m];
     points outside the grid are ignored (zero everywhere when none is inside)."""
     ij = np.round((points - origin) / cell).astype(np.int64)
@@ -50,8 +53,9 @@ def likelihood_field(points: np.ndarray, origin: np.ndarray, shape: tuple[int, i
     return np.exp(-((distance_transform_edt(occupied) * cell / sigma) ** 2))
 
 
-def correlative_search(ref: Scan, obj: Scan, guess: Pose2 = Pose2(), params: SearchParams | None = None
-                       ) -> SearchResult:
+def correlative_search(
+    ref: Scan, obj: Scan, guess: Pose2 = Pose2(), params: SearchParams | None = None
+) -> SearchResult:
     """The pose in the window around ``guess`` whose object points best meet the reference scan.
 
     Two passes, coarse to fine (Olson 2009 searches at two resolutions as well): the coarse grid
@@ -61,22 +65,28 @@ def correlative_search(ref: Scan, obj: Scan, guess: Pose2 = Pose2(), params: Sea
     a fraction of a degree of the likelihood's peak.
     """
     p = params if params is not None else SearchParams()
-    R = ref.points()
-    O = obj.points()
-    w = np.minimum(np.hypot(O[:, 0], O[:, 1]), p.weight_cap)
-    pose, score, best_per_angle, angles = _grid_pass(R, O, w, guess, p)
+    ref_pts = ref.points()
+    obj_pts = obj.points()
+    w = np.minimum(np.hypot(obj_pts[:, 0], obj_pts[:, 1]), p.weight_cap)
+    pose, score, best_per_angle, angles = _grid_pass(ref_pts, obj_pts, w, guess, p)
     found = pose
     if p.refine:
-        fine = p.replace(window_xy=1.5 * p.cell, window_theta=2 * p.angle_step, cell=p.fine_cell,
-                         angle_step=p.fine_angle_step, sigma=p.fine_sigma)
-        found = _grid_pass(R, O, w, pose, fine)[0]
+        fine = p.replace(
+            window_xy=1.5 * p.cell,
+            window_theta=2 * p.angle_step,
+            cell=p.fine_cell,
+            angle_step=p.fine_angle_step,
+            sigma=p.fine_sigma,
+        )
+        found = _grid_pass(ref_pts, obj_pts, w, pose, fine)[0]
     return SearchResult(found, pose, score, best_per_angle, angles)
 
 
-def _grid_pass(R: np.ndarray, O: np.ndarray, w: np.ndarray, guess: Pose2, g: SearchParams
-               ) -> tuple[Pose2, float, np.ndarray, np.ndarray]:
-    """Best candidate of one grid (window, cell, angle step and sigma of ``g``) around ``guess``, its
-    score, the best score per rotation and the rotations.
+def _grid_pass(
+    ref_pts: np.ndarray, obj_pts: np.ndarray, w: np.ndarray, guess: Pose2, g: SearchParams
+) -> tuple[Pose2, float, np.ndarray, np.ndarray]:
+    """Best candidate of one grid (window, cell, angle step and sigma of ``g``) around ``guess``,
+    its score, the best score per rotation and the rotations.
 
     For one rotation every translation is scored at once: each point adds the window of the
     likelihood field it can land in. The field covers only where the object points can land (at
@@ -84,32 +94,43 @@ def _grid_pass(R: np.ndarray, O: np.ndarray, w: np.ndarray, guess: Pose2, g: Sea
     just outside, so a fine field stays small."""
     n = int(round(g.window_xy / g.cell))
     k = int(round(g.window_theta / g.angle_step))
-    work = (2 * k + 1) * len(O) * (2 * n + 1) ** 2
+    work = (2 * k + 1) * len(obj_pts) * (2 * n + 1) ** 2
     if work > MAX_WORK:
-        raise ParamError("window_xy", f"a search of +/-{g.window_xy:g} m in {g.cell:g} m cells and +/-"
-                                      f"{np.degrees(g.window_theta):g} deg in {np.degrees(g.angle_step):g} deg steps "
-                                      f"scores {work:.2g} point placements (at most {MAX_WORK:.0e}): narrow the "
-                                      "window or coarsen the grid")
+        raise ParamError(
+            "window_xy",
+            f"a search of +/-{g.window_xy:g} m in {g.cell:g} m cells and +/-"
+            f"{np.degrees(g.window_theta):g} deg in {np.degrees(g.angle_step):g} deg steps "
+            f"scores {work:.2g} point placements (at most {MAX_WORK:.0e}): narrow the "
+            "window or coarsen the grid",
+        )
     angles = np.arange(-k, k + 1) * g.angle_step
-    moved = [Pose2(guess.x, guess.y, guess.theta + dth).apply(O) for dth in angles]
+    moved = [Pose2(guess.x, guess.y, guess.theta + dth).apply(obj_pts) for dth in angles]
     landing = np.concatenate(moved)
     margin = g.window_xy + 3 * g.sigma + 2 * g.cell
     origin = landing.min(axis=0) - margin
     shape = tuple(np.ceil((landing.max(axis=0) + margin - origin) / g.cell).astype(int) + 1)
-    field = likelihood_field(R, origin, shape, g.cell, g.sigma)
+    field = likelihood_field(ref_pts, origin, shape, g.cell, g.sigma)
     # every (2n+1)^2 window of the field, as a view: a point at cell u scores window u - n
     windows = np.lib.stride_tricks.sliding_window_view(field, (2 * n + 1, 2 * n + 1))
-    chunk = max(1, WINDOW_ELEMENTS // (2 * n + 1) ** 2)  # points scored at once: memory bounded by the grid
+    # points scored at once: memory bounded by the grid
+    chunk = max(1, WINDOW_ELEMENTS // (2 * n + 1) ** 2)
     best_per_angle = np.empty(len(angles))
     best, best_pose = -1.0, guess
     for a, dth in enumerate(angles):
         u = np.round((moved[a] - origin) / g.cell).astype(np.int64) - n
-        score = sum(np.einsum("p,pij->ij", w[k:k + chunk], windows[u[k:k + chunk, 0], u[k:k + chunk, 1]])
-                    for k in range(0, len(u), chunk))
+        score = sum(
+            np.einsum(
+                "p,pij->ij", w[k : k + chunk], windows[u[k : k + chunk, 0], u[k : k + chunk, 1]]
+            )
+            for k in range(0, len(u), chunk)
+        )
         ij = np.unravel_index(int(np.argmax(score)), score.shape)
         best_per_angle[a] = score[ij]
         if score[ij] > best:
             best = float(score[ij])
-            best_pose = Pose2(float(guess.x + (ij[0] - n) * g.cell), float(guess.y + (ij[1] - n) * g.cell),
-                              float(wrap_angle(guess.theta + dth)))
+            best_pose = Pose2(
+                float(guess.x + (ij[0] - n) * g.cell),
+                float(guess.y + (ij[1] - n) * g.cell),
+                float(wrap_angle(guess.theta + dth)),
+            )
     return best_pose, best, best_per_angle, angles

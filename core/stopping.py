@@ -21,8 +21,9 @@ CYCLE_PERIOD_MAX = 4
 
 
 @kernel
-def returned(recent: np.ndarray, n: int, x: float, y: float, th: float, errx: float, erry: float,
-             errt: float) -> bool:
+def returned(
+    recent: np.ndarray, n: int, x: float, y: float, th: float, errx: float, erry: float, errt: float
+) -> bool:
     """Whether the estimate (x, y, th) lies within the stopping thresholds of one of the ``n``
     estimates in ``recent`` (rows x, y, theta), measured in that estimate's frame."""
     for k in range(n):
@@ -61,7 +62,17 @@ class CycleWatch:
     def step(self, before: Pose2, after: Pose2) -> int:
         """Record one iteration's move from ``before`` to ``after``; the current count."""
         p = self.params
-        back = run(returned, self.recent, self.n, after.x, after.y, after.theta, p.errx_out, p.erry_out, p.errt_out)
+        back = run(
+            returned,
+            self.recent,
+            self.n,
+            after.x,
+            after.y,
+            after.theta,
+            p.errx_out,
+            p.erry_out,
+            p.errt_out,
+        )
         self.n = run(remember, self.recent, self.n, before.x, before.y, before.theta)
         self.count = self.count + 1 if back else 0
         return self.count

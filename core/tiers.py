@@ -45,8 +45,10 @@ except ImportError:  # not POSIX: no background compile, every process eager
 
 LOCK_NAME = "mbicp-viz-compiling.lock"  # held by the background compile while it runs
 # What the front ends say while it runs (the command line on stderr, the debugger on its page)
-INTERPRETED = ("numba is compiling the matchers' kernels in the background (the first run after an install): "
-               "until it is done they run interpreted — the same results, slower")
+INTERPRETED = (
+    "numba is compiling the matchers' kernels in the background (the first run after an install): "
+    "until it is done they run interpreted — the same results, slower"
+)
 _KERNELS: list = []  # every kernel (with a cache entry of its own) of the modules imported so far
 
 
@@ -55,7 +57,8 @@ def kernel(fn=None, *, inline: str = "never"):
     if fn is None:
         return lambda f: kernel(f, inline=inline)
     k = njit(cache=True, inline=inline)(fn)
-    if inline == "never":  # an inlined kernel is compiled into its callers only: no cache entry of its own
+    # an inlined kernel is compiled into its callers only: no cache entry of its own
+    if inline == "never":
         _KERNELS.append(k)
     return k
 
@@ -72,8 +75,12 @@ class _Tiers:
 
     def __init__(self):
         self.quick = False
-        self.lock: Path | None = None  # the background compile's lock, once one was started or found
-        self.tried = False  # one background compile per process: after it, kernels compile here if need be
+        self.lock: Path | None = (
+            None  # the background compile's lock, once one was started or found
+        )
+        self.tried = (
+            False  # one background compile per process: after it, kernels compile here if need be
+        )
         self.ready: set[int] = set()  # ids of kernels known compiled or cached in this process
         self.twins: dict[int, types.FunctionType] = {}
 
@@ -82,7 +89,8 @@ class _Tiers:
             if self.compiling() or (not self.tried and not cached(k) and self.start(k)):
                 with np.errstate(all="ignore"):  # compiled code wraps and divides without a warning
                     return self.twin(k)(*args)
-            self.ready.add(id(k))  # cached, or the background compile ended: numba loads (or compiles)
+            # cached, or the background compile ended: numba loads (or compiles)
+            self.ready.add(id(k))
         return k(*args)
 
     def compiling(self) -> bool:
@@ -90,7 +98,8 @@ class _Tiers:
         return self.lock is not None and held(self.lock)
 
     def start(self, k) -> bool:
-        """Start the background compile (unless one already runs for this cache); whether one runs."""
+        """Start the background compile (unless one already runs for this cache); whether one "
+        "runs."""
         self.tried = True
         try:
             self.lock = lock_path(k)
@@ -104,8 +113,11 @@ class _Tiers:
         twin = self.twins.get(id(k))
         if twin is None:
             f = python_function(k)
-            names = dict(f.__globals__)  # a copy: numba reads the module's own names when it compiles
-            twin = self.twins[id(k)] = types.FunctionType(f.__code__, names, f.__name__, f.__defaults__, f.__closure__)
+            # a copy: numba reads the module's own names when it compiles
+            names = dict(f.__globals__)
+            twin = self.twins[id(k)] = types.FunctionType(
+                f.__code__, names, f.__name__, f.__defaults__, f.__closure__
+            )
             for name, value in f.__globals__.items():
                 if isinstance(value, (Dispatcher, DUFunc)):
                     names[name] = self.twin(value)
@@ -135,7 +147,11 @@ def compile_in_background() -> bool:
     from the cache (a front end that knows it will match soon); whether one runs."""
     if _TIERS.compiling():
         return True
-    cold = next((k for k in _KERNELS if not cached(k)), None) if _TIERS.quick and not _TIERS.tried else None
+    cold = (
+        next((k for k in _KERNELS if not cached(k)), None)
+        if _TIERS.quick and not _TIERS.tried
+        else None
+    )
     return cold is not None and _TIERS.start(cold)
 
 
@@ -153,7 +169,8 @@ def wait_unlocked(lock: Path) -> None:
 
 
 def lock_path(k) -> Path:
-    """The background compile's lock, beside numba's cache of the kernels (they share one folder)."""
+    """The background compile's lock, beside numba's cache of the kernels (they share one "
+    "folder)."""
     return Path(function_cache(k).cache_path) / LOCK_NAME
 
 
@@ -193,12 +210,20 @@ def start_background(lock: Path) -> bool:
         os.close(fd)
         return False
     try:  # the child inherits the locked file (the lock ends when the child does), which names it
-        child = subprocess.Popen([sys.executable, "-m", "mbicp_viz.core.warmup"], pass_fds=(fd,), start_new_session=True,
-                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                 env=os.environ | {"MBICP_VIZ_JIT": "eager"})
+        child = subprocess.Popen(
+            [sys.executable, "-m", "mbicp_viz.core.warmup"],
+            pass_fds=(fd,),
+            start_new_session=True,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=os.environ | {"MBICP_VIZ_JIT": "eager"},
+        )
         os.ftruncate(fd, 0)
         os.write(fd, f"{child.pid}\n".encode())
-        threading.Thread(target=child.wait, daemon=True).start()  # reaped when it ends (a server lives on)
+        threading.Thread(
+            target=child.wait, daemon=True
+        ).start()  # reaped when it ends (a server lives on)
     finally:
         os.close(fd)
     return True

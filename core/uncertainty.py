@@ -29,9 +29,9 @@ def _covariance(A: np.ndarray, error: float, n_pairs: int):
 
 
 def surface_tangents(points: np.ndarray, full_circle: bool, at: np.ndarray) -> np.ndarray:
-    """Unit surface direction at the scan points ``at`` (central differences in scan order; one-sided
-    at the ends of a partial scan); (1, 0) where neighbours coincide. Only where asked: the final
-    pairs' targets are a fraction of the scan."""
+    """Unit surface direction at the scan points ``at`` (central differences in scan order;
+    one-sided at the ends of a partial scan); (1, 0) where neighbours coincide. Only where asked:
+    the final pairs' targets are a fraction of the scan."""
     return run(_tangents, points, bool(full_circle), np.asarray(at, dtype=np.int64))
 
 
@@ -119,12 +119,40 @@ class FinalSystem:
     n_rejected: int
 
 
-def build_result(name: str, est: Pose2, reason: Termination, iterations: int, last: FinalSystem | None,
-                 ref_points: np.ndarray, full_circle: bool, L: float) -> MatchResult:
-    """The MatchResult of a finished loop (``ref_points``: the reference scan's points in scan order)."""
+def build_result(
+    name: str,
+    est: Pose2,
+    reason: Termination,
+    iterations: int,
+    last: FinalSystem | None,
+    ref_points: np.ndarray,
+    full_circle: bool,
+    L: float,
+) -> MatchResult:
+    """The MatchResult of a finished loop (``ref_points``: the reference scan's points in scan "
+    "order)."""
     if last is None:
         return MatchResult(name, est, False, reason, iterations, float("nan"), 0, 0, None, None)
-    cov, has_cov, cond, w, v = run(_final_numbers, last.A, float(last.error), int(last.n_kept), last.targets,
-                                   ref_points, bool(full_circle), np.asarray(last.ref_index, dtype=np.int64), float(L))
-    return MatchResult(name, est, reason.converged, reason, iterations, last.error, last.n_kept, last.n_rejected,
-                       cov if has_cov else None, None if np.isnan(cond) else _degeneracy(cond, w, v, L))
+    cov, has_cov, cond, w, v = run(
+        _final_numbers,
+        last.A,
+        float(last.error),
+        int(last.n_kept),
+        last.targets,
+        ref_points,
+        bool(full_circle),
+        np.asarray(last.ref_index, dtype=np.int64),
+        float(L),
+    )
+    return MatchResult(
+        name,
+        est,
+        reason.converged,
+        reason,
+        iterations,
+        last.error,
+        last.n_kept,
+        last.n_rejected,
+        cov if has_cov else None,
+        None if np.isnan(cond) else _degeneracy(cond, w, v, L),
+    )

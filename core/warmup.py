@@ -33,7 +33,9 @@ def room_scan(sensor: Pose2) -> Scan:
     b = d @ (o - PILLAR_M)
     disc = b * b - (np.sum((o - PILLAR_M) ** 2) - PILLAR_RADIUS_M**2)
     pillar = np.where(disc > 0, -b - np.sqrt(np.maximum(disc, 0.0)), np.inf)
-    return make_scan(np.minimum(walls, np.where(pillar > 0, pillar, np.inf)), bearings, range_max=30.0)
+    return make_scan(
+        np.minimum(walls, np.where(pillar > 0, pillar, np.inf)), bearings, range_max=30.0
+    )
 
 
 def compile_all() -> None:

@@ -25,7 +25,9 @@ class _CheckoutFinder(importlib.abc.MetaPathFinder):
         init = _HERE.parent / folder / "__init__.py" if folder else None
         if init is None or not init.is_file():
             return None
-        return importlib.util.spec_from_file_location(name, init, submodule_search_locations=[str(init.parent)])
+        return importlib.util.spec_from_file_location(
+            name, init, submodule_search_locations=[str(init.parent)]
+        )
 
 
 if not (_HERE / "core").is_dir():  # a checkout (installed, core/ sits inside the package)

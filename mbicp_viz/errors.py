@@ -6,8 +6,15 @@ from __future__ import annotations
 class InputError(Exception):
     """Bad input, reported as one line ``file:line: field: message`` and exit code 2."""
 
-    def __init__(self, message: str, path: str | None = None, line: int | None = None, field: str | None = None):
-        message = " ".join(message.split("\n"))  # one line, whatever a library's text it quotes holds
+    def __init__(
+        self,
+        message: str,
+        path: str | None = None,
+        line: int | None = None,
+        field: str | None = None,
+    ):
+        # one line, whatever a library's text it quotes holds
+        message = " ".join(message.split("\n"))
         self.path, self.line, self.field, self.message = path, line, field, message
         where = ":".join(str(p) for p in (path, line) if p is not None)
         text = f"{field}: {message}" if field else message

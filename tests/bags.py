@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
 from mbicp_viz.core import Pose2, Scan
 
 
@@ -48,8 +47,8 @@ def _quat(yaw: float, roll: float = 0.0):
 
 
 def write(path: Path, robot: Robot, kind: str) -> Path:
-    """Write ``robot`` as a ROS 1 bag (``ros1``), a ROS 2 sqlite3 bag as Humble's recorder writes it,
-    without message definitions (``humble``), or a ROS 2 MCAP bag (``mcap``)."""
+    """Write ``robot`` as a ROS 1 bag (``ros1``), a ROS 2 sqlite3 bag as Humble's recorder writes
+    it, without message definitions (``humble``), or a ROS 2 MCAP bag (``mcap``)."""
     from rosbags.typesys import Stores, get_typestore
 
     ros1 = kind == "ros1"
@@ -57,21 +56,32 @@ def write(path: Path, robot: Robot, kind: str) -> Path:
     if ros1:  # Noetic's store lacks tf2_msgs; its definition is one line
         from rosbags.typesys import get_types_from_msg
 
-        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+        ts.register(
+            get_types_from_msg(
+                "geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"
+            )
+        )
     T = ts.types
     Time = T["builtin_interfaces/msg/Time"]
 
     def header(t, frame):
         stamp = Time(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)))
-        return T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame) if ros1 else \
-            T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+        return (
+            T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+            if ros1
+            else T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+        )
 
     def transform(t, parent, child, pose: Pose2, roll=0.0):
         x, y, z, w = _quat(pose.theta, roll)
         return T["geometry_msgs/msg/TransformStamped"](
-            header=header(t, parent), child_frame_id=child,
-            transform=T["geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](x=pose.x, y=pose.y, z=0.2),
-                                                       rotation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)))
+            header=header(t, parent),
+            child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=pose.x, y=pose.y, z=0.2),
+                rotation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
+            ),
+        )
 
     def scan_msg(t, frame, scan: Scan, upside_down: bool, increment: float | None, dt: float):
         r = np.where(scan.valid, scan.ranges, np.inf).astype(np.float32)
@@ -80,37 +90,75 @@ def write(path: Path, robot: Robot, kind: str) -> Path:
             r, b = np.ascontiguousarray(r[::-1]), -b[::-1]
         inc = increment if increment is not None else float(np.median(np.diff(b)))
         return T["sensor_msgs/msg/LaserScan"](
-            header=header(t, frame), angle_min=float(b[0]), angle_max=float(b[0] + inc * (len(b) - 1)),
-            angle_increment=inc, time_increment=dt, scan_time=0.1, range_min=0.05, range_max=80.0, ranges=r,
-            intensities=np.zeros(0, dtype=np.float32))
+            header=header(t, frame),
+            angle_min=float(b[0]),
+            angle_max=float(b[0] + inc * (len(b) - 1)),
+            angle_increment=inc,
+            time_increment=dt,
+            scan_time=0.1,
+            range_min=0.05,
+            range_max=80.0,
+            ranges=r,
+            intensities=np.zeros(0, dtype=np.float32),
+        )
 
     out = []  # (topic, msgtype, t, msg)
     for topic in robot.topics:
         for k, (t, scan) in enumerate(zip(robot.stamps, topic.scans)):
             inc = topic.increments[k] if topic.increments else None
-            out.append((topic.name, "sensor_msgs/msg/LaserScan", t, scan_msg(t, topic.frame_id, scan, topic.upside_down,
-                                                                            inc, topic.time_increment)))
+            out.append(
+                (
+                    topic.name,
+                    "sensor_msgs/msg/LaserScan",
+                    t,
+                    scan_msg(t, topic.frame_id, scan, topic.upside_down, inc, topic.time_increment),
+                )
+            )
     tf = T["tf2_msgs/msg/TFMessage"]
     if robot.mount is not None:
         laser = robot.topics[0].frame_id
-        tr = transform(robot.stamps[0], "base_link", laser, robot.mount, math.pi if robot.upside_down else 0.0)
-        out.append((robot.mount_on, "tf2_msgs/msg/TFMessage", robot.stamps[0] - 1e-3, tf(transforms=[tr])))
+        tr = transform(
+            robot.stamps[0], "base_link", laser, robot.mount, math.pi if robot.upside_down else 0.0
+        )
+        out.append(
+            (robot.mount_on, "tf2_msgs/msg/TFMessage", robot.stamps[0] - 1e-3, tf(transforms=[tr]))
+        )
     for t, pose in zip(robot.stamps, robot.odometry or []):
         if robot.odometry_on == "/tf":
-            out.append(("/tf", "tf2_msgs/msg/TFMessage", t, tf(transforms=[transform(t, "odom", "base_link", pose)])))
+            out.append(
+                (
+                    "/tf",
+                    "tf2_msgs/msg/TFMessage",
+                    t,
+                    tf(transforms=[transform(t, "odom", "base_link", pose)]),
+                )
+            )
         else:
             x, y, z, w = _quat(pose.theta)
             pwc = T["geometry_msgs/msg/PoseWithCovariance"](
-                pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=pose.x, y=pose.y, z=0.0),
-                                                 orientation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)),
-                covariance=np.zeros(36))
+                pose=T["geometry_msgs/msg/Pose"](
+                    position=T["geometry_msgs/msg/Point"](x=pose.x, y=pose.y, z=0.0),
+                    orientation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
+                ),
+                covariance=np.zeros(36),
+            )
             twc = T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](linear=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
-                                                   angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
-                covariance=np.zeros(36))
-            out.append(("/odom", "nav_msgs/msg/Odometry", t,
-                        T["nav_msgs/msg/Odometry"](header=header(t, "odom"), child_frame_id="base_link", pose=pwc,
-                                                   twist=twc)))
+                twist=T["geometry_msgs/msg/Twist"](
+                    linear=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                    angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                ),
+                covariance=np.zeros(36),
+            )
+            out.append(
+                (
+                    "/odom",
+                    "nav_msgs/msg/Odometry",
+                    t,
+                    T["nav_msgs/msg/Odometry"](
+                        header=header(t, "odom"), child_frame_id="base_link", pose=pwc, twist=twc
+                    ),
+                )
+            )
     out.sort(key=lambda m: m[2])
     if ros1:
         return _write_ros1(path, ts, out)
@@ -158,14 +206,24 @@ def _as_humble(path: Path) -> None:
     meta.write_text(text.replace("version: 8", "version: 5"))
 
 
-def intel_robot(intel, first: int, count: int, mount: Pose2 | None, upside_down: bool = False, **kw) -> Robot:
-    """Intel scans ``first`` .. ``first + count - 1`` driven by a robot whose laser sits at ``mount``."""
+def intel_robot(
+    intel, first: int, count: int, mount: Pose2 | None, upside_down: bool = False, **kw
+) -> Robot:
+    """Intel scans ``first`` .. ``first + count - 1`` driven by a robot whose laser sits at "
+    "``mount``."""
     scans = [intel.scan(first + k) for k in range(count)]
     stamps = [100.0 + 0.5 * k for k in range(count)]
     odometry = None
     if mount is not None:
         odometry = [s.pose @ mount.inverse() for s in scans]  # the base's poses
-    return Robot([Topic("/scan", "laser", scans, upside_down=upside_down)], stamps, mount, upside_down, odometry, **kw)
+    return Robot(
+        [Topic("/scan", "laser", scans, upside_down=upside_down)],
+        stamps,
+        mount,
+        upside_down,
+        odometry,
+        **kw,
+    )
 
 
 def copy_bag(src: Path, dst: Path) -> Path:

@@ -57,8 +57,11 @@ def rerun_viewer(size: str = "1400x900"):
     from rerun.experimental import ViewerClient
 
     port = free_port()
-    proc = subprocess.Popen([RERUN, "--headless", "--port", str(port), "--bind", "127.0.0.1", "--window-size", size],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [RERUN, "--headless", "--port", str(port), "--bind", "127.0.0.1", "--window-size", size],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 60
         while True:

@@ -1,15 +1,16 @@
-"""Improved MbICP's ``extrapolate`` (Aitken, after Besl & McKay's accelerated ICP): a step that follows
-the previous one and is shorter goes on by the rest of their geometric series; fewer iterations to
-the same answers on real pairs, and every front end says which steps were extrapolated."""
+"""Improved MbICP's ``extrapolate`` (Aitken, after Besl & McKay's accelerated ICP): a step that
+follows the previous one and is shorter goes on by the rest of their geometric series; fewer
+iterations to the same answers on real pairs, and every front end says which steps were
+extrapolated."""
 
 import math
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from mbicp_viz.core import ImprovedParams, Pose2, Recorder, match, pose_error
 from mbicp_viz.core.mbicp import _extrapolate
+
 from mbicp_viz.evaluation.bench import bench_guesses
 from mbicp_viz.evaluation.pairs import stored_truth
 from mbicp_viz.readers.params_toml import load_params
@@ -21,7 +22,8 @@ L = 3.0
 
 
 def _steps(x, y, th, ratio, dx, dy, dth):
-    """Two increments of a linear convergence along one direction: d, then ratio * d (in x, y, L theta)."""
+    """Two increments of a linear convergence along one direction: d, then ratio * d (in x, y, L "
+    "theta)."""
     d_prev = np.array([dx, dy, L * dth])
     # the second step from the pose the first one reached, composed as the loop composes it
     x1, y1, th1 = x + dx, y + dy, th + dth
@@ -32,8 +34,15 @@ def _steps(x, y, th, ratio, dx, dy, dth):
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.floats(-5, 5), st.floats(-5, 5), st.floats(-3, 3), st.floats(0.05, 0.74),
-       st.floats(-0.3, 0.3), st.floats(-0.3, 0.3), st.floats(-0.2, 0.2))
+@given(
+    st.floats(-5, 5),
+    st.floats(-5, 5),
+    st.floats(-3, 3),
+    st.floats(0.05, 0.74),
+    st.floats(-0.3, 0.3),
+    st.floats(-0.3, 0.3),
+    st.floats(-0.2, 0.2),
+)
 def test_a_geometric_sequence_of_steps_lands_on_its_limit(x, y, th, ratio, dx, dy, dth):
     # the loop extrapolates no step below its stop thresholds (1e-4 m and rad by default); a
     # micrometre step composed at 5 m keeps only about 9 digits, too few for the 1e-9 below
@@ -56,7 +65,12 @@ def test_no_extrapolation_when_the_step_grows_or_turns_back(ratio, dx, dy, dth):
         return
     for r in (ratio, -1.0 / ratio):  # longer, or back the way it came
         (x1, y1, th1), (ix, iy, ith), d_prev = _steps(0.2, -0.1, 0.3, r, dx, dy, dth)
-        assert _extrapolate(x1, y1, th1, ix, iy, ith, d_prev.copy(), True, L, 3.0) == (ix, iy, ith, 0.0)
+        assert _extrapolate(x1, y1, th1, ix, iy, ith, d_prev.copy(), True, L, 3.0) == (
+            ix,
+            iy,
+            ith,
+            0.0,
+        )
     # and never before a previous step exists
     (x1, y1, th1), (ix, iy, ith), d_prev = _steps(0.2, -0.1, 0.3, 0.5, dx, dy, dth)
     assert _extrapolate(x1, y1, th1, ix, iy, ith, d_prev, False, L, 3.0)[3] == 0.0
@@ -83,7 +97,11 @@ def test_fewer_iterations_to_the_same_answers_on_real_pairs(laserazos):
             counts[key][1] += r.iterations
         for ev in rec.iterations:
             # the events carry the composed step: after = increment @ before, extrapolated or not
-            assert np.allclose((ev.increment @ ev.estimate_before).as_array(), ev.estimate_after.as_array(), atol=1e-12)
+            assert np.allclose(
+                (ev.increment @ ev.estimate_before).as_array(),
+                ev.estimate_after.as_array(),
+                atol=1e-12,
+            )
             if ev.extrapolated:
                 assert 0.0 < ev.extrapolated <= option.extrapolate
                 seen.append(iteration_text(ev))
@@ -108,15 +126,37 @@ def test_match_and_the_debugger_say_which_steps_went_on(laserazos):
     from mbicp_viz.views.debugger.state import DebugState, Source
 
     option = "poor-guess"
-    res = CliRunner().invoke(app, ["match", str(DATA / "laserazosSM3-40.log"), "--pair", "5", "6", "--algo", "improved",
-                                   "--params", option, "--init", "0.2", "-0.1", "10"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "match",
+            str(DATA / "laserazosSM3-40.log"),
+            "--pair",
+            "5",
+            "6",
+            "--algo",
+            "improved",
+            "--params",
+            option,
+            "--init",
+            "0.2",
+            "-0.1",
+            "10",
+        ],
+    )
     assert res.exit_code == 0, res.output
     marked = [line for line in res.stdout.splitlines() if "extrapolated x" in line]
     assert marked and all(float(line.rsplit("x", 1)[1]) > 1.0 for line in marked)
 
     params = load_params(option, "improved")
-    state = DebugState(Source("laserazos", laserazos, guess=Pose2(0.2, -0.1, math.radians(10.0)),
-                              params={"improved": params}))
+    state = DebugState(
+        Source(
+            "laserazos",
+            laserazos,
+            guess=Pose2(0.2, -0.1, math.radians(10.0)),
+            params={"improved": params},
+        )
+    )
     assert state.set_pair(5, 6) is None
     assert state.set_guess(Pose2(0.2, -0.1, math.radians(10.0))) is None
     texts = []

@@ -5,14 +5,14 @@ import math
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from typer.testing import CliRunner
-
 from mbicp_viz.core import Pose2
 from mbicp_viz.core.agreement import inlier_fraction
+from typer.testing import CliRunner
+
 from mbicp_viz.cli import app
-from mbicp_viz.readers import read_log
 from mbicp_viz.evaluation.pairs import seen_from
 from mbicp_viz.evaluation.sequence import truth_doubted
+from mbicp_viz.readers import read_log
 
 from .conftest import INTEL
 
@@ -20,7 +20,9 @@ SCANS = read_log(INTEL).scans
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.integers(0, len(SCANS) - 1), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3))
+@given(
+    st.integers(0, len(SCANS) - 1), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3)
+)
 def test_the_true_displacement_lays_every_point_on_the_reference(k, x, y, theta):
     ref = SCANS[k]
     truth = Pose2(x, y, theta)
@@ -38,11 +40,29 @@ def test_a_failure_is_doubted_only_when_the_points_side_with_the_matcher():
 
 def test_eval_sequence_reports_failures_the_points_doubt(tmp_path):
     out = tmp_path / "rows.json"
-    res = CliRunner().invoke(app, ["eval", "sequence", str(INTEL), "--guess", "identity", "--truth", "pose",
-                                   "--limit", "12", "--out", str(out), "--workers", "1"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(INTEL),
+            "--guess",
+            "identity",
+            "--truth",
+            "pose",
+            "--limit",
+            "12",
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     rows = json.loads(out.read_text())
     failed = [r for r in rows if not r["success"]]
-    assert failed and all(0.0 <= r["inliers_match"] <= 1.0 and 0.0 <= r["inliers_truth"] <= 1.0 for r in failed)
+    assert failed and all(
+        0.0 <= r["inliers_match"] <= 1.0 and 0.0 <= r["inliers_truth"] <= 1.0 for r in failed
+    )
     doubted = sum(truth_doubted(r) for r in rows)
     assert f"than at the scan poses: {doubted} of {len(failed)}" in res.output

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from mbicp_viz.core import Scan, ScanError, make_scan
 from typer.testing import CliRunner
 
-from mbicp_viz.core import Scan, ScanError, make_scan
 from mbicp_viz.cli import app
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import read_log
@@ -41,23 +41,40 @@ def write(tmp_path, name, text):
     return p
 
 
-@pytest.mark.parametrize("body, needles", [
-    ("FLASER 3 1.0 x 1.2 0 0 0 0 0 0 1 h 1\n", ["bad.log:1", "range[1]", "'x'"]),  # malformed number
-    ("# ok\n12.5 abc\n", ["bad.log:2", "message"]),  # not a message at all
-    ("FLASER 5 1.0 1.1 1.2\n", ["bad.log:1", "num_readings", "5 ranges announced"]),  # wrong beam count
-    ("FLASER 3 0 nan inf 0 0 0 0 0 0 1 h 1\n", ["bad.log:1", "scan 0", "no valid reading"]),  # all invalid
-    ("FLASER 3 1 1 1 nan 0 0 0 0 0 1 h 1\n", ["bad.log:1", "laser_pose_x"]),  # NaN pose
-    ("ODOM 1 2\n", ["bad.log:1", "odom_theta"]),
-    ("NEFF 15\n", ["bad.log", "no laser scans"]),  # only unknown (skipped) messages: empty log
-    ("", ["bad.log", "no laser scans"]),  # empty file
-])
+@pytest.mark.parametrize(
+    "body, needles",
+    [
+        # malformed number
+        (
+            "FLASER 3 1.0 x 1.2 0 0 0 0 0 0 1 h 1\n",
+            ["bad.log:1", "range[1]", "'x'"],
+        ),
+        ("# ok\n12.5 abc\n", ["bad.log:2", "message"]),  # not a message at all
+        # wrong beam count
+        (
+            "FLASER 5 1.0 1.1 1.2\n",
+            ["bad.log:1", "num_readings", "5 ranges announced"],
+        ),
+        # all invalid
+        (
+            "FLASER 3 0 nan inf 0 0 0 0 0 0 1 h 1\n",
+            ["bad.log:1", "scan 0", "no valid reading"],
+        ),
+        ("FLASER 3 1 1 1 nan 0 0 0 0 0 1 h 1\n", ["bad.log:1", "laser_pose_x"]),  # NaN pose
+        ("ODOM 1 2\n", ["bad.log:1", "odom_theta"]),
+        ("NEFF 15\n", ["bad.log", "no laser scans"]),  # only unknown (skipped) messages: empty log
+        ("", ["bad.log", "no laser scans"]),  # empty file
+    ],
+)
 def test_carmen_errors_name_file_line_field(tmp_path, body, needles):
     p = write(tmp_path, "bad.log", body)
     assert_clean_error(*run("match", p, "--pair", 0, 1), *needles)
 
 
 def test_missing_file():
-    assert_clean_error(*run("match", "no/such/file.log", "--pair", 0, 1), "no/such/file.log", "no such file")
+    assert_clean_error(
+        *run("match", "no/such/file.log", "--pair", 0, 1), "no/such/file.log", "no such file"
+    )
 
 
 def test_unknown_suffix(tmp_path):
@@ -71,49 +88,69 @@ def test_pair_out_of_range():
 
 def test_nan_and_unknown_parameters(tmp_path):
     p = write(tmp_path, "p.toml", "Br = nan\n")
-    assert_clean_error(*run("match", INTEL, "--pair", 0, 1, "--params", p), "p.toml", "Br", "finite")
+    assert_clean_error(
+        *run("match", INTEL, "--pair", 0, 1, "--params", p), "p.toml", "Br", "finite"
+    )
     p = write(tmp_path, "p.toml", "Bw_deg = -5\n")
-    assert_clean_error(*run("match", INTEL, "--pair", 0, 1, "--params", p), "Bw", "below the minimum")
+    assert_clean_error(
+        *run("match", INTEL, "--pair", 0, 1, "--params", p), "Bw", "below the minimum"
+    )
     p = write(tmp_path, "p.toml", "[improved]\nextrapolate = -1\n")
     code, out = run("match", INTEL, "--pair", 0, 1, "--params", p)
     assert_clean_error(code, out, "improved.extrapolate", "below the minimum 0.0")
     assert out.strip().endswith("minimum 0.0")  # a ratio: no unit to name after the bound
     p = write(tmp_path, "p.toml", "bogus = 1\n")
-    assert_clean_error(*run("match", INTEL, "--pair", 0, 1, "--params", p), "bogus", "unknown parameter")
+    assert_clean_error(
+        *run("match", INTEL, "--pair", 0, 1, "--params", p), "bogus", "unknown parameter"
+    )
     p = write(tmp_path, "p.toml", "Br = [1\n")
     assert_clean_error(*run("match", INTEL, "--pair", 0, 1, "--params", p), "invalid TOML")
 
 
 def test_nan_initial_guess():
-    assert_clean_error(*run("match", INTEL, "--pair", 0, 1, "--init", "nan", 0, 0), "--init X", "finite")
+    assert_clean_error(
+        *run("match", INTEL, "--pair", 0, 1, "--init", "nan", 0, 0), "--init X", "finite"
+    )
 
 
 def test_unknown_algorithm():
-    assert_clean_error(*run("match", INTEL, "--algo", "sift"), "--algo", "'sift' is not one of 'icp'")
+    assert_clean_error(
+        *run("match", INTEL, "--algo", "sift"), "--algo", "'sift' is not one of 'icp'"
+    )
 
 
-@pytest.mark.parametrize("args, field, needle", [
-    (("eval", "overlap", INTEL, "--scans", "1,x"), "--scans", "expected numbers"),
-    (("eval", "overlap", INTEL, "--ratios", "100,sixty"), "--ratios", "expected numbers"),
-    (("eval", "basin", INTEL, "--pair", 0, 1, "--thetas-deg=a"), "--thetas-deg", "expected numbers"),
-    (("eval", "basin", INTEL, "--pair", 0, 1, "--thetas-deg=0,inf"), "--thetas-deg", "finite"),
-    (("compare", INTEL, "--pair", 0, 1, "--truth", "nan", 0, 0), "--truth X", "finite"),
-    (("compare", INTEL, "--pair", 0, 1, "--algos", ","), "--algos", "at least one matcher"),
-    (("eval", "ceiling", INTEL, "--algos", " "), "--algos", "at least one matcher"),
-    (("eval", "overlap", INTEL, "--algos", ",,"), "--algos", "at least one matcher"),
-])
+@pytest.mark.parametrize(
+    "args, field, needle",
+    [
+        (("eval", "overlap", INTEL, "--scans", "1,x"), "--scans", "expected numbers"),
+        (("eval", "overlap", INTEL, "--ratios", "100,sixty"), "--ratios", "expected numbers"),
+        (
+            ("eval", "basin", INTEL, "--pair", 0, 1, "--thetas-deg=a"),
+            "--thetas-deg",
+            "expected numbers",
+        ),
+        (("eval", "basin", INTEL, "--pair", 0, 1, "--thetas-deg=0,inf"), "--thetas-deg", "finite"),
+        (("compare", INTEL, "--pair", 0, 1, "--truth", "nan", 0, 0), "--truth X", "finite"),
+        (("compare", INTEL, "--pair", 0, 1, "--algos", ","), "--algos", "at least one matcher"),
+        (("eval", "ceiling", INTEL, "--algos", " "), "--algos", "at least one matcher"),
+        (("eval", "overlap", INTEL, "--algos", ",,"), "--algos", "at least one matcher"),
+    ],
+)
 def test_lists_of_numbers_and_matchers(args, field, needle):
     assert_clean_error(*run(*args), field, needle)
 
 
-@pytest.mark.parametrize("args, option", [
-    (("eval", "overlap", INTEL, "--max-xy", "inf"), "--max-xy"),
-    (("eval", "protocol", INTEL, "--max-xy", "nan"), "--max-xy"),
-    (("eval", "basin", INTEL, "--pair", 0, 1, "--range-xy", "inf"), "--range-xy"),
-    (("eval", "relations", INTEL, INTEL, "--offset", "nan"), "--offset"),
-    (("eval", "relations", INTEL, INTEL, "--tolerance", "inf"), "--tolerance"),
-    (("eval", "protocol", INTEL, "--seed", "-1"), "--seed"),
-])
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (("eval", "overlap", INTEL, "--max-xy", "inf"), "--max-xy"),
+        (("eval", "protocol", INTEL, "--max-xy", "nan"), "--max-xy"),
+        (("eval", "basin", INTEL, "--pair", 0, 1, "--range-xy", "inf"), "--range-xy"),
+        (("eval", "relations", INTEL, INTEL, "--offset", "nan"), "--offset"),
+        (("eval", "relations", INTEL, INTEL, "--tolerance", "inf"), "--tolerance"),
+        (("eval", "protocol", INTEL, "--seed", "-1"), "--seed"),
+    ],
+)
 def test_numeric_options_out_of_their_domain(args, option):
     """Checked by the command line parser (typer's own message, exit 2), before any work."""
     code, out = run(*args)
@@ -122,19 +159,26 @@ def test_numeric_options_out_of_their_domain(args, option):
 
 
 def test_overlap_protocol_choices():
-    assert_clean_error(*run("eval", "overlap", INTEL, "--thin", "both"), "--thin", "'reference', 'object'")
-    assert_clean_error(*run("eval", "overlap", INTEL, "--removal", "holes"), "--removal", "'block', 'random'")
+    assert_clean_error(
+        *run("eval", "overlap", INTEL, "--thin", "both"), "--thin", "'reference', 'object'"
+    )
+    assert_clean_error(
+        *run("eval", "overlap", INTEL, "--removal", "holes"), "--removal", "'block', 'random'"
+    )
 
 
-@pytest.mark.parametrize("args", [
-    ("match", INTEL, "--pair", 0, 1, "--rrd"),
-    ("compare", INTEL, "--pair", 0, 1, "--rrd"),
-    ("eval", "overlap", INTEL, "--csv"),
-    ("eval", "overlap", INTEL, "--png"),
-    ("eval", "sequence", INTEL, "--tum"),
-    ("eval", "basin", INTEL, "--pair", 0, 1, "--png"),
-    ("params", "--out"),
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("match", INTEL, "--pair", 0, 1, "--rrd"),
+        ("compare", INTEL, "--pair", 0, 1, "--rrd"),
+        ("eval", "overlap", INTEL, "--csv"),
+        ("eval", "overlap", INTEL, "--png"),
+        ("eval", "sequence", INTEL, "--tum"),
+        ("eval", "basin", INTEL, "--pair", 0, 1, "--png"),
+        ("params", "--out"),
+    ],
+)
 def test_an_unwritable_output_is_refused_before_the_work(tmp_path, args):
     """A missing folder or a folder given as the file: a clean error up front, not a traceback
     after the whole run."""
@@ -151,8 +195,11 @@ def test_record_makes_its_output_folder(tmp_path):
     assert code == 0, text
     assert (out / "large-rotation.rrd").stat().st_size > 0
     (tmp_path / "file").write_text("")
-    assert_clean_error(*run("record", "large-rotation", "--out-dir", tmp_path / "file" / "x"), "--out-dir",
-                       "cannot make folder")
+    assert_clean_error(
+        *run("record", "large-rotation", "--out-dir", tmp_path / "file" / "x"),
+        "--out-dir",
+        "cannot make folder",
+    )
 
 
 def test_csm_json_errors(tmp_path):
@@ -194,10 +241,37 @@ def test_scan_with_nan_and_inf_masks_them():
         make_scan([1.0, 1.0], [0.1, 0.0])
 
 
-# Fuzzing: every reader sees random bytes and random lines, and only ever returns scans or InputError.
+# Fuzzing: every reader sees random bytes and random lines, and only ever returns scans or
+# InputError.
 SUFFIXES = [".log", ".off", ".jsonl", ".scans", ".npz", ".bag", ".log.gz"]
-token = st.sampled_from(["FLASER", "ODOM", "PARAM", "ROBOTLASER1", "RAWLASER1", "NEFF", "3", "0", "1.5", "-2",
-                         "nan", "inf", "x", "{", "}", '"nrays":', "[", "]", ",", "null", "8.19", "81.9", "#", "1e400"])
+token = st.sampled_from(
+    [
+        "FLASER",
+        "ODOM",
+        "PARAM",
+        "ROBOTLASER1",
+        "RAWLASER1",
+        "NEFF",
+        "3",
+        "0",
+        "1.5",
+        "-2",
+        "nan",
+        "inf",
+        "x",
+        "{",
+        "}",
+        '"nrays":',
+        "[",
+        "]",
+        ",",
+        "null",
+        "8.19",
+        "81.9",
+        "#",
+        "1e400",
+    ]
+)
 line = st.lists(token, max_size=14).map(" ".join)
 
 
@@ -213,7 +287,9 @@ def check_reader(path):
         assert np.all(np.isfinite(s.points()))
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(suffix=st.sampled_from(SUFFIXES), data=st.binary(max_size=400))
 def test_random_bytes_never_crash_a_reader(tmp_path, suffix, data):
     p = tmp_path / f"fuzz{suffix}"
@@ -221,8 +297,12 @@ def test_random_bytes_never_crash_a_reader(tmp_path, suffix, data):
     check_reader(p)
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(suffix=st.sampled_from([".log", ".off", ".jsonl", ".scans"]), lines=st.lists(line, max_size=6))
+@settings(
+    max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    suffix=st.sampled_from([".log", ".off", ".jsonl", ".scans"]), lines=st.lists(line, max_size=6)
+)
 def test_random_lines_never_crash_a_reader(tmp_path, suffix, lines):
     p = tmp_path / f"fuzz{suffix}"
     p.write_text("\n".join(lines) + "\n")
@@ -243,10 +323,14 @@ def test_errors_raised_in_worker_processes_arrive_whole():
     """Evaluations run in a process pool, which sends exceptions back pickled: each error type
     must rebuild with its fields, else the user gets BrokenProcessPool instead of the message."""
     from mbicp_viz.core import ParamError
+
     from mbicp_viz.evaluation.pool import ordered_map
 
-    for e in (ScanError(read_log(INTEL).scans[0].source, "why"), ParamError("Br", "must be > 0"),
-              InputError("bad value", "a.log", 3, "ranges")):
+    for e in (
+        ScanError(read_log(INTEL).scans[0].source, "why"),
+        ParamError("Br", "must be > 0"),
+        InputError("bad value", "a.log", 3, "ranges"),
+    ):
         back = pickle.loads(pickle.dumps(e))
         assert type(back) is type(e) and str(back) == str(e) and vars(back) == vars(e)
     scans = read_log(INTEL).scans[:4]

@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 import pytest
+from mbicp_viz.core import Pose2, make_scan, pose_error, relative
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.core import Pose2, make_scan, pose_error, relative
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ReadOptions, read_log
 
@@ -22,14 +22,21 @@ MOUNT = Pose2(0.25, -0.1, math.pi)  # a laser looking backwards, like a Neato's
 
 
 def same_scan(a, b) -> bool:
-    return (np.allclose(a.bearings, b.bearings, atol=1e-6) and np.array_equal(a.valid, b.valid)
-            and np.allclose(a.ranges[a.valid], b.ranges[b.valid], atol=1e-5))
+    return (
+        np.allclose(a.bearings, b.bearings, atol=1e-6)
+        and np.array_equal(a.valid, b.valid)
+        and np.allclose(a.ranges[a.valid], b.ranges[b.valid], atol=1e-5)
+    )
 
 
 @pytest.mark.parametrize("kind", ["ros1", "humble", "mcap"])
 @pytest.mark.parametrize("upside_down", [False, True])
 def test_bags_of_every_kind_read_their_scans_mount_and_odometry(tmp_path, intel, kind, upside_down):
-    path = write(tmp_path / ("r.bag" if kind == "ros1" else "r"), intel_robot(intel, 10, 6, MOUNT, upside_down), kind)
+    path = write(
+        tmp_path / ("r.bag" if kind == "ros1" else "r"),
+        intel_robot(intel, 10, 6, MOUNT, upside_down),
+        kind,
+    )
     log = read_log(path)
     assert len(log.scans) == 6 and log.topic == "/scan" and log.frames.frame_id == "laser"
     for k, s in enumerate(log.scans):  # the scans the robot's laser saw, upright
@@ -37,7 +44,9 @@ def test_bags_of_every_kind_read_their_scans_mount_and_odometry(tmp_path, intel,
         assert pose_error(s.odometry, intel.scan(10 + k).pose)[0] < 1e-9  # the laser's pose in odom
     m = log.frames.mount
     assert (m.x, m.y, m.theta) == pytest.approx((MOUNT.x, MOUNT.y, MOUNT.theta), abs=1e-9)
-    assert log.frames.mount_source == "tf base_link -> laser" and log.frames.base_frame == "base_link"
+    assert (
+        log.frames.mount_source == "tf base_link -> laser" and log.frames.base_frame == "base_link"
+    )
 
 
 def test_a_humble_bag_needs_a_typestore_and_a_wrong_one_is_named(tmp_path, intel):
@@ -50,8 +59,10 @@ def test_a_humble_bag_needs_a_typestore_and_a_wrong_one_is_named(tmp_path, intel
 def test_matches_answer_in_the_base_frame_and_agree_with_the_odometry(tmp_path, intel):
     path = write(tmp_path / "r.bag", intel_robot(intel, 10, 8, MOUNT), "ros1")
     out = tmp_path / "rows.json"
-    res = CliRunner().invoke(app, ["eval", "sequence", str(path), "--guess", "odometry", "--out", str(out),
-                                   "--workers", "1"])
+    res = CliRunner().invoke(
+        app,
+        ["eval", "sequence", str(path), "--guess", "odometry", "--out", str(out), "--workers", "1"],
+    )
     assert res.exit_code == 0, res.output
     rows = json.loads(out.read_text())
     assert all(r["frame"] == "base_link" for r in rows)
@@ -62,24 +73,55 @@ def test_matches_answer_in_the_base_frame_and_agree_with_the_odometry(tmp_path, 
         base = MOUNT.conjugate(laser)
         assert pose_error(Pose2(r["x"], r["y"], r["theta"]), base)[0] < 0.05
     laser_rows = tmp_path / "laser.json"
-    res = CliRunner().invoke(app, ["eval", "sequence", str(path), "--guess", "odometry", "--out", str(laser_rows),
-                                   "--frame", "laser", "--workers", "1", "--limit", "1"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(path),
+            "--guess",
+            "odometry",
+            "--out",
+            str(laser_rows),
+            "--frame",
+            "laser",
+            "--workers",
+            "1",
+            "--limit",
+            "1",
+        ],
+    )
     first = json.loads(laser_rows.read_text())[0]
     assert first["frame"] == "laser"
-    assert pose_error(MOUNT.conjugate(Pose2(first["x"], first["y"], first["theta"])),
-                      Pose2(rows[0]["x"], rows[0]["y"], rows[0]["theta"]))[0] < 1e-9
+    assert (
+        pose_error(
+            MOUNT.conjugate(Pose2(first["x"], first["y"], first["theta"])),
+            Pose2(rows[0]["x"], rows[0]["y"], rows[0]["theta"]),
+        )[0]
+        < 1e-9
+    )
 
 
 def test_odometry_on_tf_and_a_mount_published_on_tf(tmp_path, intel):
     robot = intel_robot(intel, 20, 5, Pose2(0.1, 0.05, 0.3), odometry_on="/tf", mount_on="/tf")
     log = read_log(write(tmp_path / "tf", robot, "mcap"))
-    assert log.odometry_source == "tf odom -> base_link" and log.frames.mount_source == "tf base_link -> laser"
-    assert all(pose_error(s.odometry, intel.scan(20 + k).pose)[0] < 1e-9 for k, s in enumerate(log.scans))
+    assert (
+        log.odometry_source == "tf odom -> base_link"
+        and log.frames.mount_source == "tf base_link -> laser"
+    )
+    assert all(
+        pose_error(s.odometry, intel.scan(20 + k).pose)[0] < 1e-9 for k, s in enumerate(log.scans)
+    )
 
 
 def test_two_scanners_are_never_merged(tmp_path, intel, laserazos):
-    robot = Robot([Topic("/front/scan", "front_laser", [intel.scan(k) for k in range(4)]),
-                   Topic("/rear/scan", "rear_laser", [laserazos.scan(k) for k in range(4)])], [1.0, 1.2, 1.4, 1.6])
+    robot = Robot(
+        [
+            Topic("/front/scan", "front_laser", [intel.scan(k) for k in range(4)]),
+            Topic("/rear/scan", "rear_laser", [laserazos.scan(k) for k in range(4)]),
+        ],
+        [1.0, 1.2, 1.4, 1.6],
+    )
     path = write(tmp_path / "two.bag", robot, "ros1")
     with pytest.raises(InputError) as e:
         read_log(path)
@@ -87,7 +129,9 @@ def test_two_scanners_are_never_merged(tmp_path, intel, laserazos):
     assert "/front/scan (4 messages, frame_id 'front_laser')" in str(e.value)
     assert "/rear/scan (4 messages, frame_id 'rear_laser')" in str(e.value)
     rear = read_log(path, ReadOptions(topic="/rear/scan"))
-    assert rear.frames.frame_id == "rear_laser" and all(same_scan(s, laserazos.scan(k)) for k, s in enumerate(rear.scans))
+    assert rear.frames.frame_id == "rear_laser" and all(
+        same_scan(s, laserazos.scan(k)) for k, s in enumerate(rear.scans)
+    )
     res = CliRunner().invoke(app, ["match", str(path), "--pair", "0", "1", "--topic", "/nope"])
     assert res.exit_code == 2 and "no LaserScan topic '/nope'" in res.output
 
@@ -103,14 +147,22 @@ def test_a_360_degree_lidar_whose_span_rounds_past_a_full_turn(tmp_path):
     for k in (0, 1):
         s = stallo(k)
         b = -math.pi + np.arange(1147) * math.radians(360.0003) / 1146
-        r = np.interp(b, s.bearings[s.valid] - 2 * math.pi * (s.bearings[s.valid] > math.pi),
-                      s.ranges[s.valid], period=2 * math.pi)
+        r = np.interp(
+            b,
+            s.bearings[s.valid] - 2 * math.pi * (s.bearings[s.valid] > math.pi),
+            s.ranges[s.valid],
+            period=2 * math.pi,
+        )
         scans.append(make_scan(r, b))
-    robot = Robot([Topic("/scan", "laser", scans, increments=[math.radians(360.0003) / 1146] * 2)], [1.0, 1.1])
+    robot = Robot(
+        [Topic("/scan", "laser", scans, increments=[math.radians(360.0003) / 1146] * 2)], [1.0, 1.1]
+    )
     log = read_log(write(tmp_path / "l360.bag", robot, "ros1"))
     assert [len(s.bearings) for s in log.scans] == [1146, 1146]
     assert log.scans[0].is_full_circle() and log.scans[0].angular_span() < 2 * math.pi
-    res = CliRunner().invoke(app, ["match", str(tmp_path / "l360.bag"), "--pair", "0", "1", "--json", "--algo", "psm"])
+    res = CliRunner().invoke(
+        app, ["match", str(tmp_path / "l360.bag"), "--pair", "0", "1", "--json", "--algo", "psm"]
+    )
     assert res.exit_code == 0 and json.loads(res.output)["converged"], res.output
 
 
@@ -120,20 +172,32 @@ def test_beam_counts_that_vary_keep_their_own_bearings(tmp_path):
     keep = [slice(None), slice(0, None, 2), slice(1, None, 3)]
     scans = [make_scan(s.ranges[k], s.bearings[k]) for s, k in zip(base, keep)]
     incs = [float(np.median(np.diff(s.bearings))) for s in scans]
-    log = read_log(write(tmp_path / "rp.bag", Robot([Topic("/scan", "laser", scans, increments=incs)], [1, 2, 3]),
-                         "ros1"))
-    assert [len(s.bearings) for s in log.scans] == [len(s.bearings) for s in scans] == [1024, 512, 341]
+    log = read_log(
+        write(
+            tmp_path / "rp.bag",
+            Robot([Topic("/scan", "laser", scans, increments=incs)], [1, 2, 3]),
+            "ros1",
+        )
+    )
+    assert (
+        [len(s.bearings) for s in log.scans] == [len(s.bearings) for s in scans] == [1024, 512, 341]
+    )
     for name in ("improved", "psm"):  # a coarse reference or a coarse object: every matcher copes
-        res = CliRunner().invoke(app, ["match", str(tmp_path / "rp.bag"), "--pair", "0", "2", "--algo", name,
-                                       "--json"])
+        res = CliRunner().invoke(
+            app, ["match", str(tmp_path / "rp.bag"), "--pair", "0", "2", "--algo", name, "--json"]
+        )
         assert res.exit_code == 0 and json.loads(res.output)["converged"], (name, res.output)
 
 
 def test_an_empty_scan_is_skipped_counted_and_refused_only_when_asked_for(tmp_path, intel):
     scans = [intel.scan(k) for k in range(5)]
-    empty = make_scan(np.full(180, 81.9), scans[2].bearings, valid=np.ones(180, bool), invalid_values=())
+    empty = make_scan(
+        np.full(180, 81.9), scans[2].bearings, valid=np.ones(180, bool), invalid_values=()
+    )
     scans[2] = empty  # every reading a no-return code: written as 81.9 m, beyond range_max
-    path = write(tmp_path / "e.bag", Robot([Topic("/scan", "laser", scans)], [1, 2, 3, 4, 5]), "ros1")
+    path = write(
+        tmp_path / "e.bag", Robot([Topic("/scan", "laser", scans)], [1, 2, 3, 4, 5]), "ros1"
+    )
     log = read_log(path)
     assert len(log.scans) == 4 and list(log.unusable) == [2] and log.records == 5
     assert log.consecutive_pairs() == [(0, 1), (1, 3), (3, 4)]
@@ -145,12 +209,36 @@ def test_an_empty_scan_is_skipped_counted_and_refused_only_when_asked_for(tmp_pa
 def test_mount_for_files_without_tf(tmp_path, intel):
     path = write(tmp_path / "plain.bag", intel_robot(intel, 10, 3, None, upside_down=True), "ros1")
     as_written = read_log(path)
-    assert as_written.frames.mount_source is None and not same_scan(as_written.scans[0], intel.scan(10))
-    log = read_log(path, ReadOptions(mount=MOUNT, upside_down=True))  # the user says how the laser sits
+    assert as_written.frames.mount_source is None and not same_scan(
+        as_written.scans[0], intel.scan(10)
+    )
+    # the user says how the laser sits
+    log = read_log(path, ReadOptions(mount=MOUNT, upside_down=True))
     assert same_scan(log.scans[0], intel.scan(10)) and log.frames.mount == MOUNT
-    res = CliRunner().invoke(app, ["match", str(path), "--pair", "0", "1", "--mount", "0.25", "-0.1", "180",
-                                   "--upside-down", "--init", "0.6", "0", "6"])
-    assert res.exit_code == 0 and "motion of the robot's base (laser mount (0.25 m, -0.1 m, 180 deg) from --mount" in res.output, res.output
+    res = CliRunner().invoke(
+        app,
+        [
+            "match",
+            str(path),
+            "--pair",
+            "0",
+            "1",
+            "--mount",
+            "0.25",
+            "-0.1",
+            "180",
+            "--upside-down",
+            "--init",
+            "0.6",
+            "0",
+            "6",
+        ],
+    )
+    assert (
+        res.exit_code == 0
+        and "motion of the robot's base (laser mount (0.25 m, -0.1 m, 180 deg) from --mount"
+        in res.output
+    ), res.output
 
 
 def test_a_bag_cut_short_keeps_its_intact_chunks_and_says_what_was_lost(tmp_path, intel):
@@ -159,7 +247,9 @@ def test_a_bag_cut_short_keeps_its_intact_chunks_and_says_what_was_lost(tmp_path
     cut = tmp_path / "cut.bag"
     cut.write_bytes(data[: int(len(data) * 0.6)])
     log = read_log(cut)
-    assert 0 < len(log.scans) < 30 and all(same_scan(s, intel.scan(10 + k)) for k, s in enumerate(log.scans))
+    assert 0 < len(log.scans) < 30 and all(
+        same_scan(s, intel.scan(10 + k)) for k, s in enumerate(log.scans)
+    )
     assert any("cut short" in n and "the rest is lost" in n for n in log.notes)
     res = CliRunner().invoke(app, ["eval", "sequence", str(cut), "--out", str(tmp_path / "o.json")])
     assert res.exit_code == 0 and "cut short" in res.output
@@ -170,7 +260,8 @@ def test_a_bag_cut_short_keeps_its_intact_chunks_and_says_what_was_lost(tmp_path
 
 def test_the_debugger_switches_topics_and_shows_the_odometry(tmp_path, intel, laserazos):
     """A bag with two scanners opens on the topic asked for; the debugger's picker reads the other
-    one (never both); the object scan at the bag's odometry is a layer, with its distance in the result."""
+    one (never both); the object scan at the bag's odometry is a layer, with its distance in the
+    result."""
     from mbicp_viz.views import scene
     from mbicp_viz.views.debugger.sources import files_source
     from mbicp_viz.views.debugger.state import DebugState
@@ -178,7 +269,9 @@ def test_the_debugger_switches_topics_and_shows_the_odometry(tmp_path, intel, la
     robot = intel_robot(intel, 30, 4, MOUNT)
     robot.topics.append(Topic("/rear/scan", "rear_laser", [laserazos.scan(k) for k in range(4)]))
     path = write(tmp_path / "two.bag", robot, "ros1")
-    state = DebugState(files_source(str(path), None, guess="identity", options=ReadOptions(topic="/scan")))
+    state = DebugState(
+        files_source(str(path), None, guess="identity", options=ReadOptions(topic="/scan"))
+    )
     assert state.rematch() is None and set(state.source.log.scan_topics) == {"/scan", "/rear/scan"}
     paths = {ly.path: ly for ly in state.layers(state.runs[0])}
     odometry = paths[f"{scene.SCANS}/odometry"]
@@ -189,6 +282,9 @@ def test_the_debugger_switches_topics_and_shows_the_odometry(tmp_path, intel, la
 
     assert state.set_topic("/rear/scan") is None
     log = state.source.log
-    assert log.topic == "/rear/scan" and log.frames.frame_id == "rear_laser" and state.pair == (0, 1)
+    assert (
+        log.topic == "/rear/scan" and log.frames.frame_id == "rear_laser" and state.pair == (0, 1)
+    )
     assert same_scan(state.ref, laserazos.scan(0)) and same_scan(state.obj, laserazos.scan(1))
-    assert state.set_topic("/nope") is not None and state.source.log.topic == "/rear/scan"  # refused, kept
+    # refused, kept
+    assert state.set_topic("/nope") is not None and state.source.log.topic == "/rear/scan"

@@ -41,7 +41,9 @@ print(0.001 * len(out), len(out), file=sys.stderr)
 def stand_ins(folder, drop=0):
     for name, per_ray, header in (("mbicp_pairs", 2, 15), ("csm_pairs", 3, 0)):
         exe = folder / name
-        exe.write_text(ECHO_GUESS.format(python=sys.executable, per_ray=per_ray, header=header, drop=drop))
+        exe.write_text(
+            ECHO_GUESS.format(python=sys.executable, per_ray=per_ray, header=header, drop=drop)
+        )
         exe.chmod(exe.stat().st_mode | stat.S_IXUSR)
     return folder
 
@@ -52,7 +54,9 @@ def run(*args):
 
 
 def test_every_pair_and_guess_reach_the_original_and_its_answers_are_scored(tmp_path):
-    code, out = run(stand_ins(tmp_path), LASERAZOS, "--limit", 12, "--repeat", 1, "--perturb", 0.1, 4)
+    code, out = run(
+        stand_ins(tmp_path), LASERAZOS, "--limit", 12, "--repeat", 1, "--perturb", 0.1, 4
+    )
     assert code == 0, out
     log = read_log(LASERAZOS)
     pairs = log.consecutive_pairs(12)
@@ -66,19 +70,27 @@ def test_every_pair_and_guess_reach_the_original_and_its_answers_are_scored(tmp_
         row = next(line for line in lines if line.startswith(f"{name} "))
         assert f"successes original {by_guess}, ours " in row and "(ratio " in row, row
     # 1 ms per match by the stand-ins' clock, against this project's improved MbICP as published
-    assert any(line.startswith("improved MbICP (as published)") and "against CSM's PL-ICP 1.000 ms" in line
-               for line in lines), out
+    assert any(
+        line.startswith("improved MbICP (as published)") and "against CSM's PL-ICP 1.000 ms" in line
+        for line in lines
+    ), out
 
 
 def test_without_a_build_one_line_says_how_to_build(tmp_path):
-    assert_clean_error(*run(tmp_path, LASERAZOS), str(tmp_path / "mbicp_pairs"), "tools/originals/build.sh")
+    assert_clean_error(
+        *run(tmp_path, LASERAZOS), str(tmp_path / "mbicp_pairs"), "tools/originals/build.sh"
+    )
 
 
 def test_a_driver_that_answers_too_few_pairs_ends_in_one_line(tmp_path):
     code, out = run(stand_ins(tmp_path, drop=1), LASERAZOS, "--limit", 3, "--repeat", 1)
     header, error = out.strip().splitlines()  # what runs, then why it stopped
     assert code == 2 and header.startswith(str(LASERAZOS)), out
-    assert error.startswith("mbicp-viz: error:") and "mbicp_pairs" in error and "2 poses for 3 pairs" in error
+    assert (
+        error.startswith("mbicp-viz: error:")
+        and "mbicp_pairs" in error
+        and "2 poses for 3 pairs" in error
+    )
 
 
 def test_more_rays_than_the_c_mbicp_takes_skip_it_and_compare_the_rest(tmp_path):
@@ -88,8 +100,11 @@ def test_more_rays_than_the_c_mbicp_takes_skip_it_and_compare_the_rest(tmp_path)
     assert code == 0, out
     lines = out.splitlines()
     assert "2 pairs of 681 beams" in lines[0]
-    assert "mbicp  not compared: the original takes at most 361 rays and these scans have 681: --every 2 keeps " \
-           "one beam in 2" in lines
+    assert (
+        "mbicp  not compared: the original takes at most 361 rays and these scans have 681: "
+        "--every 2 keeps "
+        "one beam in 2" in lines
+    )
     assert [line.split()[0] for line in lines[1:5]] == ["mbicp", "icp", "plicp", "improved"], out
 
 
@@ -104,7 +119,9 @@ def test_a_driver_that_never_answers_is_stopped_and_named(tmp_path, monkeypatch)
     from mbicp_viz.evaluation import originals
 
     stand_ins(tmp_path)
-    (tmp_path / "mbicp_pairs").write_text(f"#!{sys.executable}\nimport signal, sys\nsys.stdin.read()\nsignal.pause()\n")
+    (tmp_path / "mbicp_pairs").write_text(
+        f"#!{sys.executable}\nimport signal, sys\nsys.stdin.read()\nsignal.pause()\n"
+    )
     monkeypatch.setattr(originals, "DRIVER_TIMEOUT_S", 1)
     code, out = run(tmp_path, LASERAZOS, "--limit", 2, "--repeat", 1)
     error = out.strip().splitlines()[-1]
@@ -114,6 +131,12 @@ def test_a_driver_that_never_answers_is_stopped_and_named(tmp_path, monkeypatch)
 def test_a_log_without_stored_poses_says_so_instead_of_zero_successes(tmp_path):
     code, out = run(stand_ins(tmp_path), HOKUYO_BAG, "--every", 2, "--limit", 2, "--repeat", 1)
     assert code == 0, out
-    rows = [line for line in out.splitlines() if line.startswith(("mbicp ", "icp ", "plicp ", "improved "))]
-    assert len(rows) == 4 and all("no stored poses to count successes" in r and "successes " not in r for r in rows), out
+    rows = [
+        line
+        for line in out.splitlines()
+        if line.startswith(("mbicp ", "icp ", "plicp ", "improved "))
+    ]
+    assert len(rows) == 4 and all(
+        "no stored poses to count successes" in r and "successes " not in r for r in rows
+    ), out
     assert "2 pairs of 341 beams" in out.splitlines()[0]

@@ -5,9 +5,9 @@ import math
 
 import numpy as np
 import pytest
+from mbicp_viz.core import Pose2
 from playwright.sync_api import sync_playwright
 
-from mbicp_viz.core import Pose2
 from mbicp_viz.readers import read_log
 from mbicp_viz.views.debugger.app import App
 from mbicp_viz.views.debugger.state import Source
@@ -16,13 +16,24 @@ from mbicp_viz.views.scene import OBJECT, REFERENCE
 from .conftest import DATA, EXAMPLES, interpreted_kernels, wait_for
 
 CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run"]
+ARGS = [
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--no-sandbox",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 
 
 @pytest.fixture(scope="module")
 def app():
-    a = App(Source("hokuyo pair", read_log(EXAMPLES / "hokuyo-125-130.npz"), guess=Pose2()), "127.0.0.1", 0)
+    a = App(
+        Source("hokuyo pair", read_log(EXAMPLES / "hokuyo-125-130.npz"), guess=Pose2()),
+        "127.0.0.1",
+        0,
+    )
     yield a
     a.stop()
 
@@ -48,9 +59,12 @@ def open_tab(browser, app):
 
 
 def box(page, label):
-    """The input of the GUI row labelled ``label`` (viser's text boxes are not tied to their labels)."""
-    return page.locator(f"xpath=//label[normalize-space(.)='{label}']"
-                        "/ancestor::div[contains(@class, 'mantine-Flex-root')][1]//*[self::input or self::textarea]").first
+    """The input of the GUI row labelled ``label`` (viser's text boxes are not tied to their "
+    "labels)."""
+    return page.locator(
+        f"xpath=//label[normalize-space(.)='{label}']"
+        "/ancestor::div[contains(@class, 'mantine-Flex-root')][1]//*[self::input or self::textarea]"
+    ).first
 
 
 def type_into(page, label, text):
@@ -98,7 +112,8 @@ def test_number_boxes_send_exactly_what_was_typed(browser, app):
     type_into(page, "MaxIter", "2.5")  # refused: a whole number is needed, nothing changes
     page.get_by_text("expected a whole number").first.wait_for(timeout=10000)
     assert session.state.params["improved"].MaxIter == 100
-    assert wait_for(lambda: box(page, "MaxIter").input_value() == "100")  # the box shows what the matcher uses
+    # the box shows what the matcher uses
+    assert wait_for(lambda: box(page, "MaxIter").input_value() == "100")
     type_into(page, "Bw [deg]", "500")  # out of bounds: refused, not clamped
     page.get_by_text("outside").first.wait_for(timeout=10000)
     box(page, "L [m]").click()  # the box loses focus: still nothing applied
@@ -139,7 +154,10 @@ def test_plots_read_numbers_not_dates(browser, app):
             plot.scroll_into_view_if_needed(timeout=2000)
             box = plot.bounding_box()
             page.mouse.move(box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.5)
-            return legend.locator(".u-value").first.inner_text(timeout=2000).strip() not in ("", "--")
+            return legend.locator(".u-value").first.inner_text(timeout=2000).strip() not in (
+                "",
+                "--",
+            )
         except Error:
             return False
 
@@ -172,8 +190,11 @@ def test_arrow_keys_on_the_slider_leave_the_view_top_down(browser, app):
     assert wait_for(lambda: session.camera.placed_at > placed, 10)
     page.keyboard.up("ArrowUp")
     cam = session.client.camera
-    assert wait_for(lambda: TopDownCamera.is_top_down(cam.position, cam.look_at, cam.up_direction), 20)
-    assert wait_for(lambda: session.state.iteration == 1)  # the keys moved the slider too: down to 0, one up
+    assert wait_for(
+        lambda: TopDownCamera.is_top_down(cam.position, cam.look_at, cam.up_direction), 20
+    )
+    # the keys moved the slider too: down to 0, one up
+    assert wait_for(lambda: session.state.iteration == 1)
     page.close()
 
 
@@ -183,8 +204,11 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
     from mbicp_viz.views.scene import RUN_COLORS, run_style
 
     page, session = open_tab(browser, app)
-    page.locator("xpath=//label[normalize-space(.)='icp']/ancestor::div[contains(@class, 'mantine-Flex-root')][1]"
-                 "//input").first.check()
+    page.locator(
+        "xpath=//label[normalize-space(.)='icp']/ancestor::div[contains(@class, "
+        "'mantine-Flex-root')][1]"
+        "//input"
+    ).first.check()
     assert wait_for(lambda: [r.name for r in session.state.runs] == ["icp", "improved"])
     legend = page.locator(".mbicp-legend")
     assert wait_for(lambda: run_style("icp").label in legend.inner_text())
@@ -195,7 +219,8 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
 
     def both_drawn() -> bool:  # the view draws the new nodes on its next frames
         page.screenshot(path=str(shot))
-        img = np.asarray(Image.open(shot).convert("RGB")).astype(int)[:, :1000]  # the view, not the panel
+        # the view, not the panel
+        img = np.asarray(Image.open(shot).convert("RGB")).astype(int)[:, :1000]
         near = lambda rgb: int(np.count_nonzero(np.abs(img - np.array(rgb)).max(axis=2) < 30))  # noqa: E731
         return near(RUN_COLORS["icp"]) > 100 and near(RUN_COLORS["improved"]) > 100
 
@@ -213,8 +238,22 @@ def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
     from mbicp_viz.views.debugger.sources import files_source
 
     log, rows = DATA / "intel-relations.log", tmp_path / "rows.json"
-    res = CliRunner().invoke(cli, ["eval", "sequence", str(log), "--guess", "identity", "--truth", "pose",
-                                   "--out", str(rows), "--workers", "1"])
+    res = CliRunner().invoke(
+        cli,
+        [
+            "eval",
+            "sequence",
+            str(log),
+            "--guess",
+            "identity",
+            "--truth",
+            "pose",
+            "--out",
+            str(rows),
+            "--workers",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     src = files_source(str(log), None, rows=str(rows))
     assert len(src.failures) >= 2
@@ -230,7 +269,9 @@ def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
         second = src.failures[1]
         page.get_by_text(f"line {second.line}").first.wait_for(timeout=30000)
         page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
-        assert session.state.pair == (second.ref, second.obj) and session.state.guess == second.guess
+        assert (
+            session.state.pair == (second.ref, second.obj) and session.state.guess == second.guess
+        )
         assert box(page, "reference scan").input_value() == str(second.ref)
         page.close()
     finally:
@@ -243,8 +284,8 @@ def test_the_lesson_step_by_step(browser, tmp_path):
     L re-runs the step's matcher while its text keeps the step's own numbers."""
     from PIL import Image
 
-    from mbicp_viz.views.lesson.steps import load_lesson, run_step
     from mbicp_viz.views.debugger.lesson import step_source
+    from mbicp_viz.views.lesson.steps import load_lesson, run_step
 
     steps = tuple(load_lesson())
     app = App(step_source(steps[0], steps), "127.0.0.1", 0)
@@ -254,31 +295,47 @@ def test_the_lesson_step_by_step(browser, tmp_path):
         for k, step in enumerate(steps):
             if k:
                 page.get_by_role("button", name="next step").click()
-            page.get_by_text(f"Step {step.number} of {len(steps)}: {step.title}").first.wait_for(timeout=60000)
+            page.get_by_text(f"Step {step.number} of {len(steps)}: {step.title}").first.wait_for(
+                timeout=60000
+            )
             session = next(iter(app.sessions.values()))
             sr = run_step(step)
-            page.get_by_text(sr.text[:60]).first.wait_for(timeout=30000)  # the text, with its numbers
+            # the text, with its numbers
+            page.get_by_text(sr.text[:60]).first.wait_for(timeout=30000)
             state = session.state
-            assert state.algorithms == list(step.scenario.params) and state.iteration == sr.iteration
+            assert (
+                state.algorithms == list(step.scenario.params) and state.iteration == sr.iteration
+            )
             own = {s.label for s in step.layers} | {f"{r}: object scan" for r in state.algorithms}
 
-            def legend_is_the_steps() -> bool:  # what the legend lists: the step's layers, and the grid
+            # what the legend lists: the step's layers, and the grid
+            def legend_is_the_steps(own=own) -> bool:
                 legend = page.locator(".mbicp-legend .legend-entry").all_inner_texts()
-                return REFERENCE.label in legend and all(e in own or e.startswith("grid:") for e in legend)
+                return REFERENCE.label in legend and all(
+                    e in own or e.startswith("grid:") for e in legend
+                )
 
-            assert wait_for(legend_is_the_steps), page.locator(".mbicp-legend .legend-entry").all_inner_texts()
+            assert wait_for(legend_is_the_steps), page.locator(
+                ".mbicp-legend .legend-entry"
+            ).all_inner_texts()
             shot = tmp_path / f"step{step.number}.png"
 
-            def reference_drawn() -> bool:  # the canvas draws once the scene has arrived
+            # the canvas draws once the scene has arrived
+            def reference_drawn(shot=shot) -> bool:
                 page.screenshot(path=str(shot))
-                img = np.asarray(Image.open(shot).convert("RGB")).astype(int)[:, :1000]  # the view, not the panel
-                return np.count_nonzero(np.abs(img - np.array(REFERENCE.color)).max(axis=2) < 45) > 100
+                img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+                img = img[:, :1000]  # the view, not the panel
+                return (
+                    np.count_nonzero(np.abs(img - np.array(REFERENCE.color)).max(axis=2) < 45) > 100
+                )
 
             assert wait_for(reference_drawn), step.title
         page.get_by_role("button", name="previous step").click()
         page.get_by_text(f"Step {steps[-2].number} of {len(steps)}").first.wait_for(timeout=30000)
         page.get_by_role("combobox", name="step").click()  # the step list
-        assert page.get_by_role("option").all_inner_texts() == [f"{s.number}. {s.title}" for s in steps]
+        assert page.get_by_role("option").all_inner_texts() == [
+            f"{s.number}. {s.title}" for s in steps
+        ]
         page.get_by_role("option", name=f"3. {steps[2].title}").click()
         page.get_by_text(f"Step 3 of {len(steps)}").first.wait_for(timeout=30000)
         session = next(iter(app.sessions.values()))
@@ -286,15 +343,28 @@ def test_the_lesson_step_by_step(browser, tmp_path):
 
         def shows_the_steps_L() -> bool:  # the box is step 3's (L = 1.5), not the panel it replaced
             try:
-                return float(box(page, "L [m]").input_value()) == session.state.params["mbicp"].L == 1.5
+                return (
+                    float(box(page, "L [m]").input_value())
+                    == session.state.params["mbicp"].L
+                    == 1.5
+                )
             except ValueError:
                 return False
 
         assert wait_for(shows_the_steps_L), box(page, "L [m]").input_value()
         type_into(page, "L [m]", "0.5")
-        assert wait_for(lambda: session.state.params["mbicp"].L == 0.5 and session.state.runs[0].result.pose != before), \
-            (box(page, "L [m]").input_value(), session.state.params["mbicp"].L, session.h_status.content)
-        page.get_by_text(run_step(steps[2]).text[:60]).first.wait_for(timeout=10000)  # the step's own numbers
+        assert wait_for(
+            lambda: (
+                session.state.params["mbicp"].L == 0.5
+                and session.state.runs[0].result.pose != before
+            )
+        ), (
+            box(page, "L [m]").input_value(),
+            session.state.params["mbicp"].L,
+            session.h_status.content,
+        )
+        # the step's own numbers
+        page.get_by_text(run_step(steps[2]).text[:60]).first.wait_for(timeout=10000)
         page.close()
     finally:
         app.stop()
@@ -330,8 +400,13 @@ def test_extrapolated_steps_are_named_in_the_playback_text(browser, app):
     for _ in range(ev.iteration):
         slider.press("ArrowRight")
     assert wait_for(lambda: session.state.iteration == ev.iteration)
-    page.get_by_text(f"went on to {1.0 + ev.extrapolated:.2f} times its length").first.wait_for(timeout=10000)
-    assert float(box(page, "extrapolate").input_value()) == session.state.params["improved"].extrapolate
+    page.get_by_text(f"went on to {1.0 + ev.extrapolated:.2f} times its length").first.wait_for(
+        timeout=10000
+    )
+    assert (
+        float(box(page, "extrapolate").input_value())
+        == session.state.params["improved"].extrapolate
+    )
     page.close()
 
 
@@ -345,24 +420,39 @@ def test_a_preset_picked_on_the_page_loads_and_the_picker_says_what_is_loaded(br
     picker = page.get_by_role("combobox", name="preset")
     assert picker.input_value() == DEFAULTS
     picker.click()
-    assert page.get_by_role("option").all_inner_texts() == [DEFAULTS, *presets_for("improved"), TYPED]
+    assert page.get_by_role("option").all_inner_texts() == [
+        DEFAULTS,
+        *presets_for("improved"),
+        TYPED,
+    ]
     before = session.state.max_iteration()
     page.get_by_role("option", name="poor-guess").click()
-    assert wait_for(lambda: session.state.params["improved"] == presets_for("improved")["poor-guess"])
+    assert wait_for(
+        lambda: session.state.params["improved"] == presets_for("improved")["poor-guess"]
+    )
     assert wait_for(lambda: box(page, "mad_anneal").input_value() == "0.7")  # what the page shows
     assert wait_for(lambda: session.state.max_iteration() != before)
-    page.get_by_text(f"after {session.state.max_iteration()} iterations").first.wait_for(timeout=10000)
+    page.get_by_text(f"after {session.state.max_iteration()} iterations").first.wait_for(
+        timeout=10000
+    )
     type_into(page, "MaxIter", "7")
     assert wait_for(lambda: session.state.params["improved"].MaxIter == 7)
     assert wait_for(lambda: picker.input_value() == TYPED)
     picker.click()
     page.get_by_role("option", name=DEFAULTS).click()
-    assert wait_for(lambda: box(page, "MaxIter").input_value() == "100" and box(page, "mad_anneal").input_value() == "0.0")
+    assert wait_for(
+        lambda: (
+            box(page, "MaxIter").input_value() == "100"
+            and box(page, "mad_anneal").input_value() == "0.0"
+        )
+    )
     assert wait_for(lambda: picker.input_value() == DEFAULTS)
     page.close()
 
 
-def test_a_log_with_two_lasers_opens_the_front_one_and_the_page_says_which_stream_it_shows(browser, tmp_path, intel):
+def test_a_log_with_two_lasers_opens_the_front_one_and_the_page_says_which_stream_it_shows(
+    browser, tmp_path, intel
+):
     """A CARMEN log with FLASER, RAWLASER1 and RAWLASER2 opens on FLASER with a note naming the
     others; picking RAWLASER2 in "scan stream" shows that laser's scans, and the note that said
     FLASER is gone from the page."""
@@ -375,7 +465,9 @@ def test_a_log_with_two_lasers_opens_the_front_one_and_the_page_says_which_strea
     try:
         page, session = open_tab(browser, application)
         note = "read FLASER (4 scans), the front laser with its poses"
-        assert note in page.inner_text("body") and "records 0 .. 3 of FLASER" in page.inner_text("body")
+        assert note in page.inner_text("body") and "records 0 .. 3 of FLASER" in page.inner_text(
+            "body"
+        )
         picker = page.get_by_role("combobox", name="scan stream")
         assert picker.input_value() == "FLASER"
         picker.click()

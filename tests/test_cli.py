@@ -5,9 +5,9 @@ import math
 import re
 
 import pytest
+from mbicp_viz.core import MATCHERS, field_specs
 from typer.testing import CliRunner
 
-from mbicp_viz.core import MATCHERS, field_specs
 from mbicp_viz.cli import app
 from mbicp_viz.readers.params_toml import load_params
 
@@ -24,12 +24,26 @@ def ok(*args):
 
 
 def test_match_json_has_the_stable_keys():
-    out = ok("match", LASERAZOS, "--pair", 5, 6, "--algo", "mbicp", "--init", "0.08", "-0.01", "-1.5", "--json")
+    out = ok(
+        "match",
+        LASERAZOS,
+        "--pair",
+        5,
+        6,
+        "--algo",
+        "mbicp",
+        "--init",
+        "0.08",
+        "-0.01",
+        "-1.5",
+        "--json",
+    )
     row = json.loads(out)
     assert ROW_KEYS <= set(row)
     assert (row["ref"], row["obj"]) == (5, 6) and row["converged"] is True
     assert row["reason"] == "converged" and row["iterations"] > 0
-    assert 0.9 < row["on_ref"] <= 1.0  # consecutive scans 0.1 s apart: most points land on the reference
+    # consecutive scans 0.1 s apart: most points land on the reference
+    assert 0.9 < row["on_ref"] <= 1.0
 
 
 def test_match_two_files_prints_every_iteration(tmp_path):
@@ -70,20 +84,35 @@ def test_params_file_round_trip(tmp_path, algo):
     loaded = load_params(str(path), algo)
     defaults = MATCHERS[algo].params_type()
     for s in field_specs(type(defaults)):
-        assert getattr(loaded, s.name) == pytest.approx(getattr(defaults, s.name), rel=1e-12), s.name
+        assert getattr(loaded, s.name) == pytest.approx(getattr(defaults, s.name), rel=1e-12), (
+            s.name
+        )
     # and --params reads it
     ok("match", INTEL, "--pair", 1, 2, "--algo", algo, "--params", path, "--json")
 
 
 def test_failed_match_is_valid_json_with_its_reason():
-    out = ok("match", LASERAZOS, "--pair", 0, 1, "--algo", "mbicp", "--init", "40", "40", "0", "--json")
+    out = ok(
+        "match", LASERAZOS, "--pair", 0, 1, "--algo", "mbicp", "--init", "40", "40", "0", "--json"
+    )
     row = json.loads(out)  # strict: no NaN
     assert row["converged"] is False and row["reason"] == "too_few_pairs" and row["error"] is None
 
 
 def test_eval_protocol_reports_the_success_rate():
-    out = ok("eval", "protocol", LASERAZOS, "--algo", "mbicp", "--params", "mbicp-protocol",
-             "--cases", 20, "--seed", 3)
+    out = ok(
+        "eval",
+        "protocol",
+        LASERAZOS,
+        "--algo",
+        "mbicp",
+        "--params",
+        "mbicp-protocol",
+        "--cases",
+        20,
+        "--seed",
+        3,
+    )
     assert out.startswith("mbicp: 20/20 within 1 cm and 0.1 deg (100.0 %)")
 
 
@@ -122,9 +151,25 @@ def test_ctrl_c_stops_a_parallel_run_and_keeps_its_rows(tmp_path):
     import time
 
     out_file = tmp_path / "seq.json"
-    proc = subprocess.Popen([sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess",
-                             "search", "--out", str(out_file), "--workers", "2"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "mbicp_viz",
+            "eval",
+            "sequence",
+            str(HOKUYO_BAG),
+            "--guess",
+            "search",
+            "--out",
+            str(out_file),
+            "--workers",
+            "2",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     # interrupt once the first pairs are finished (the progress line of a run whose stderr is not a
     # terminal); a fixed delay raced the run's own length, which varies with the machine's speed
     seen, deadline = "", time.monotonic() + 120
@@ -143,13 +188,22 @@ def test_ctrl_c_stops_a_parallel_run_and_keeps_its_rows(tmp_path):
 
 def test_eval_ceiling_separates_what_the_data_allows_from_the_matcher():
     out = ok("eval", "ceiling", INTEL, "--algos", "improved,psm")
-    rows = re.findall(r"(\w+) started at the scan poses: (\d+)/59 .*; of the (\d+) it leaves, (\d+) lay more", out)
+    rows = re.findall(
+        r"(\w+) started at the scan poses: (\d+)/59 .*; of the (\d+) it leaves, (\d+) lay more", out
+    )
     hits = {name: int(n) for name, n, _, _ in rows}
     search = int(re.search(r"correlative search alone: (\d+)/59", out).group(1))
-    assert hits["improved"] == 59 and hits["psm"] < hits["improved"] and search >= 53  # PSM walks off some
-    assert all(int(left) == 59 - int(n) and int(doubted) <= int(left) for _, n, left, doubted in rows)
+    # PSM walks off some
+    assert hits["improved"] == 59 and hits["psm"] < hits["improved"] and search >= 53
+    assert all(
+        int(left) == 59 - int(n) and int(doubted) <= int(left) for _, n, left, doubted in rows
+    )
 
 
 def test_eval_ceiling_needs_scan_poses():
     res = runner.invoke(app, ["eval", "ceiling", str(HOKUYO_BAG), "--limit", "3"])
-    assert res.exit_code == 2 and "no pose to score against" in res.output and "Traceback" not in res.output
+    assert (
+        res.exit_code == 2
+        and "no pose to score against" in res.output
+        and "Traceback" not in res.output
+    )

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error
 from mbicp_viz.core.correspondence import ReferenceIndex, nearest, point_line_pairs, polar
 from mbicp_viz.core.events import PairKind
 from mbicp_viz.core.mbicp import rejection_floor
 from mbicp_viz.core.metric import metric_distance_sq
+
 from mbicp_viz.evaluation.overlap import case_pair, make_cases
 from mbicp_viz.readers import read_log
 
@@ -19,7 +19,8 @@ from .conftest import DATA
 
 
 def brute_force_nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, L: float) -> np.ndarray:
-    """Smallest squared metric distance over every reference point within +/-Bw of each point's bearing."""
+    """Smallest squared metric distance over every reference point within +/-Bw of each point's "
+    "bearing."""
     alpha = np.arctan2(moved[:, 1], moved[:, 0])
     gap = np.abs((ref.bearings[None, :] - alpha[:, None] + np.pi) % (2 * np.pi) - np.pi)
     d2 = metric_distance_sq(moved[:, None, :], ref.points[None, :, :], L)
@@ -28,15 +29,26 @@ def brute_force_nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, L: fl
 
 @pytest.fixture(scope="module")
 def scans():
-    return {"intel": read_log(DATA.parent.parent / "mbicp_viz" / "examples" / "intel-excerpt.log.gz").scans[:30],
-            "laserazos": read_log(DATA / "laserazosSM3-40.log").scans[:30],
-            "stallo2 (360 deg)": read_log(DATA / "stallo2.jsonl").scans}
+    return {
+        "intel": read_log(
+            DATA.parent.parent / "mbicp_viz" / "examples" / "intel-excerpt.log.gz"
+        ).scans[:30],
+        "laserazos": read_log(DATA / "laserazosSM3-40.log").scans[:30],
+        "stallo2 (360 deg)": read_log(DATA / "stallo2.jsonl").scans,
+    }
 
 
 @settings(max_examples=60, deadline=None)
-@given(which=st.sampled_from(["intel", "laserazos", "stallo2 (360 deg)"]), k=st.integers(0, 29),
-       x=st.floats(-0.5, 0.5), y=st.floats(-0.5, 0.5), t=st.floats(-0.8, 0.8),
-       Bw_deg=st.floats(1.0, 180.0), Br=st.floats(0.05, 3.0), L=st.floats(0.3, 10.0))
+@given(
+    which=st.sampled_from(["intel", "laserazos", "stallo2 (360 deg)"]),
+    k=st.integers(0, 29),
+    x=st.floats(-0.5, 0.5),
+    y=st.floats(-0.5, 0.5),
+    t=st.floats(-0.8, 0.8),
+    Bw_deg=st.floats(1.0, 180.0),
+    Br=st.floats(0.05, 3.0),
+    L=st.floats(0.3, 10.0),
+)
 def test_nearest_equals_the_brute_force_window_search(scans, which, k, x, y, t, Bw_deg, Br, L):
     """The narrowed search finds exactly MbICP's metric-nearest point for every pair within Br."""
     ref_scan = scans[which][k % len(scans[which])]
@@ -46,10 +58,15 @@ def test_nearest_equals_the_brute_force_window_search(scans, which, k, x, y, t, 
     Bw = math.radians(Bw_deg)
     idx, d2 = nearest(ref, moved, Bw, Br, L)
     # a beam exactly at +/-Bw is in or out by round-off: bracket the answer between both windows
-    inner, outer = brute_force_nearest(ref, moved, Bw - 1e-9, L), brute_force_nearest(ref, moved, Bw + 1e-9, L)
+    inner, outer = (
+        brute_force_nearest(ref, moved, Bw - 1e-9, L),
+        brute_force_nearest(ref, moved, Bw + 1e-9, L),
+    )
     tol = 1e-9 * np.maximum(np.where(np.isfinite(outer), outer, 0.0), 1.0)
     within = outer <= Br * Br
-    assert np.all(d2[within] >= outer[within] - tol[within]) and np.all(d2[within] <= inner[within] + tol[within])
+    assert np.all(d2[within] >= outer[within] - tol[within]) and np.all(
+        d2[within] <= inner[within] + tol[within]
+    )
     # the reported point is the one at that distance
     got = metric_distance_sq(moved[within], ref.points[idx[within]], L)
     np.testing.assert_allclose(got, d2[within], rtol=1e-9, atol=1e-12)
@@ -58,8 +75,14 @@ def test_nearest_equals_the_brute_force_window_search(scans, which, k, x, y, t, 
 
 
 @settings(max_examples=40, deadline=None)
-@given(which=st.sampled_from(["intel", "laserazos", "stallo2 (360 deg)"]), k=st.integers(0, 29),
-       x=st.floats(-0.3, 0.3), y=st.floats(-0.3, 0.3), t=st.floats(-0.3, 0.3), max_len=st.floats(0.05, 1.0))
+@given(
+    which=st.sampled_from(["intel", "laserazos", "stallo2 (360 deg)"]),
+    k=st.integers(0, 29),
+    x=st.floats(-0.3, 0.3),
+    y=st.floats(-0.3, 0.3),
+    t=st.floats(-0.3, 0.3),
+    max_len=st.floats(0.05, 1.0),
+)
 def test_point_line_pairs_follow_paper_000(scans, which, k, x, y, t, max_len):
     """§2.4.1 pair by pair: of the points sharing a metric-nearest reference point m_j the closest
     keeps it; each other one goes to the foot of its perpendicular on the segment from m_j to the
@@ -92,12 +115,20 @@ def test_point_line_pairs_follow_paper_000(scans, which, k, x, y, t, max_len):
             foot = a + np.clip(np.dot(p - a, e) / np.dot(e, e), 0.0, 1.0) * e
             assert pairs.kind[g] == PairKind.INTERPOLATED and pairs.ref_index[g, 1] == second
             np.testing.assert_allclose(pairs.target[g], foot, atol=1e-12)
-            assert pairs.dist[g] == pytest.approx(math.sqrt(max(metric_distance_sq(p, foot, 3.0), 0.0)), abs=1e-12)
+            assert pairs.dist[g] == pytest.approx(
+                math.sqrt(max(metric_distance_sq(p, foot, 3.0), 0.0)), abs=1e-12
+            )
 
 
 def test_rejection_floor_shrinks_from_br_to_the_floor():
     p = ImprovedParams(Br=1.0, mad_floor=0.1, mad_anneal=0.5)
-    assert [rejection_floor(p.Br, p.mad_floor, p.mad_anneal, i) for i in range(1, 6)] == [1.0, 0.5, 0.25, 0.125, 0.1]
+    assert [rejection_floor(p.Br, p.mad_floor, p.mad_anneal, i) for i in range(1, 6)] == [
+        1.0,
+        0.5,
+        0.25,
+        0.125,
+        0.1,
+    ]
     assert rejection_floor(p.Br, p.mad_floor, 0.0, 1) == 0.1  # as published: MAD from the start
 
 
@@ -105,6 +136,7 @@ def test_annealed_rejection_widens_the_basin(intel):
     """Paper 000's protocol on Intel scans (0.5 m, 0.5 m, 15 deg; random removal): with MAD from
     the first iteration the scan slides into the corridor's local minimum (§2.4.2); with the
     floor shrinking from Br it comes home."""
+
     def successes(params):
         ok = 0
         for i in (10, 30):

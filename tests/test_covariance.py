@@ -1,22 +1,26 @@
-"""``eval covariance``: NEES of real matches against the truth, split along and across the weakest direction."""
+"""``eval covariance``: NEES of real matches against the truth, split along and across the weakest "
+"direction."""
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from mbicp_viz.core import IcpParams, PlIcpParams, match
+from mbicp_viz.core.events import IterationEvent, PairStatus
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.core import IcpParams, PlIcpParams, match
-from mbicp_viz.core.events import IterationEvent, PairStatus
 from mbicp_viz.evaluation.covariance import chi2_mean_bounds, nees
 
 from .conftest import DATA
 
 
 @settings(max_examples=50, deadline=None)
-@given(st.lists(st.floats(-1, 1), min_size=3, max_size=3), st.lists(st.floats(-1, 1), min_size=3, max_size=3),
-       st.floats(0.5, 5.0))
+@given(
+    st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+    st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+    st.floats(0.5, 5.0),
+)
 def test_nees_splits_into_along_and_across_when_the_direction_is_an_axis_of_the_covariance(e, v, L):
     """With Sigma's eigenvectors along the weakest direction and across it, the 3-dof NEES is the
     sum of its 1-dof and 2-dof parts; a sample drawn from Sigma has NEES ~ chi2(3) (mean 3)."""
@@ -39,8 +43,20 @@ def test_nees_splits_into_along_and_across_when_the_direction_is_an_axis_of_the_
 
 def test_eval_covariance_on_real_pairs(tmp_path):
     png = tmp_path / "nees.png"
-    res = CliRunner().invoke(app, ["eval", "covariance", str(DATA / "intel-relations.log"), "--algos", "plicp,psm",
-                                   "--workers", "1", "--png", str(png)])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "covariance",
+            str(DATA / "intel-relations.log"),
+            "--algos",
+            "plicp,psm",
+            "--workers",
+            "1",
+            "--png",
+            str(png),
+        ],
+    )
     assert res.exit_code == 0, res.output
     out = res.stdout
     assert "plicp:" in out and "pairs right" in out and "chi2(3) 95 % bounds for the mean" in out
@@ -49,16 +65,25 @@ def test_eval_covariance_on_real_pairs(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-@pytest.mark.parametrize("params", [IcpParams(restart=False), PlIcpParams(restart=False)], ids=["icp", "plicp"])
-def test_csm_covariance_is_sigma2_A_inverse_of_the_last_pairs_seen_from_the_result(params, intel, laserazos):
+@pytest.mark.parametrize(
+    "params", [IcpParams(restart=False), PlIcpParams(restart=False)], ids=["icp", "plicp"]
+)
+def test_csm_covariance_is_sigma2_A_inverse_of_the_last_pairs_seen_from_the_result(
+    params, intel, laserazos
+):
     """ICP's and PL-ICP's covariance, recomputed here from the pairs of the last iteration's event:
     A = sum J^T C J at the points moved by the result (C: I for ICP, n n^T of the segment for
     PL-ICP), the error the mean squared distance to the segments' feet, sigma^2 A^-1."""
     for log in (intel, laserazos):
         for i in range(5):
             events = []
-            result = match(log.scan(i), log.scan(i + 1), log.scan(i).pose.inverse() @ log.scan(i + 1).pose, params,
-                           events.append)
+            result = match(
+                log.scan(i),
+                log.scan(i + 1),
+                log.scan(i).pose.inverse() @ log.scan(i + 1).pose,
+                params,
+                events.append,
+            )
             start, last = events[0], [e for e in events if isinstance(e, IterationEvent)][-1]
             kept = last.pairs.status == PairStatus.KEPT
             moved = result.pose.apply(start.obj_points[last.pairs.obj_index[kept]])
@@ -68,11 +93,17 @@ def test_csm_covariance_is_sigma2_A_inverse_of_the_last_pairs_seen_from_the_resu
             err = np.mean(np.sum((moved - (a + t[:, None] * e)) ** 2, axis=1))
             n = np.column_stack((e[:, 1], -e[:, 0])) / np.linalg.norm(e, axis=1)[:, None]
             line = isinstance(params, PlIcpParams)
-            C = np.einsum("ki,kj->kij", n, n) if line else np.broadcast_to(np.eye(2), (len(n), 2, 2))
+            C = (
+                np.einsum("ki,kj->kij", n, n)
+                if line
+                else np.broadcast_to(np.eye(2), (len(n), 2, 2))
+            )
             J = np.zeros((len(moved), 2, 3))
             J[:, 0, 0] = J[:, 1, 1] = 1.0
             J[:, 0, 2], J[:, 1, 2] = -moved[:, 1], moved[:, 0]
             A = np.einsum("kji,kjl,klm->im", J, C, J)
             K = len(moved)
             assert result.pairs_kept == K and np.isclose(result.error, err, rtol=1e-9)
-            np.testing.assert_allclose(result.covariance, err * K / (2 * K - 3) * np.linalg.inv(A), rtol=1e-6)
+            np.testing.assert_allclose(
+                result.covariance, err * K / (2 * K - 3) * np.linalg.inv(A), rtol=1e-6
+            )

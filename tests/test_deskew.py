@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from mbicp_viz.core import Pose2, Scan, deskew, make_scan, relative, twist
 from mbicp_viz.core.deskew import motion
+
 from mbicp_viz.readers import ReadOptions, read_log
 
 from .bags import Robot, Topic, intel_robot, write
@@ -73,40 +73,63 @@ def test_bags_carry_beam_times_and_odometry_corrects_them(tmp_path, intel):
     assert s.beam_times == pytest.approx(1e-4 * np.arange(len(s.ranges)))
     fixed = read_log(path, ReadOptions(deskew="odometry"))
     assert any("--deskew odometry" in n for n in fixed.notes)
-    for k, c in enumerate(fixed.scans):  # each scan corrected by the odometry's velocity to the next one
+    # each scan corrected by the odometry's velocity to the next one
+    for k, c in enumerate(fixed.scans):
         j = min(k, len(log.scans) - 2)
         a, b = log.scans[j], log.scans[j + 1]
         expected = deskew(log.scans[k], twist(relative(a.odometry, b.odometry), b.stamp - a.stamp))
         assert c.raw is not None and np.allclose(c.points(), expected.points())
-        assert np.abs(c.points() - log.scans[k].points()).max() > 1e-4  # the correction moved something
+        # the correction moved something
+        assert np.abs(c.points() - log.scans[k].points()).max() > 1e-4
 
 
 def test_velocity_from_the_matches_without_odometry(tmp_path, hokuyo):
     scans = [hokuyo.scan(0), hokuyo.scan(1)]
-    path = write(tmp_path / "h", Robot([Topic("/scan", "laser", scans, time_increment=HOKUYO_DT)], [10.0, 10.5]),
-                 "humble")
+    path = write(
+        tmp_path / "h",
+        Robot([Topic("/scan", "laser", scans, time_increment=HOKUYO_DT)], [10.0, 10.5]),
+        "humble",
+    )
     log = read_log(path, ReadOptions(deskew="velocity"))
     assert all(s.raw is not None for s in log.scans)
     turned = [np.median(s.bearings[s.valid] - s.raw.bearings[s.raw.valid]) for s in log.scans]
-    # a hand-held scanner turning about -17 deg in half a second turns about -2.3 deg during one sweep
+    # a hand-held scanner turning about -17 deg in half a second turns about -2.3 deg during one
+    # sweep
     assert all(-0.5 < math.degrees(t) < 0 for t in turned)
 
 
-@pytest.mark.parametrize("args,why", [
-    ([str(EXAMPLES / "intel-excerpt.log.gz"), "--deskew", "odometry"], "time_increment"),
-])
+@pytest.mark.parametrize(
+    "args,why",
+    [
+        ([str(EXAMPLES / "intel-excerpt.log.gz"), "--deskew", "odometry"], "time_increment"),
+    ],
+)
 def test_a_log_that_cannot_be_corrected_says_so_in_one_line(args, why):
-    res = subprocess.run([sys.executable, "-m", "mbicp_viz", "match", *args, "--pair", "0", "1"], capture_output=True,
-                         text=True, timeout=120)
+    res = subprocess.run(
+        [sys.executable, "-m", "mbicp_viz", "match", *args, "--pair", "0", "1"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert res.returncode == 2 and why in res.stderr and "--deskew" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and "Traceback" not in res.stderr
 
 
 def test_odometry_correction_needs_odometry(tmp_path, hokuyo):
-    path = write(tmp_path / "h", Robot([Topic("/scan", "laser", [hokuyo.scan(0), hokuyo.scan(1)],
-                                              time_increment=HOKUYO_DT)], [10.0, 10.5]), "humble")
-    res = subprocess.run([sys.executable, "-m", "mbicp_viz", "match", str(path), "--deskew", "odometry"],
-                         capture_output=True, text=True, timeout=120)
+    path = write(
+        tmp_path / "h",
+        Robot(
+            [Topic("/scan", "laser", [hokuyo.scan(0), hokuyo.scan(1)], time_increment=HOKUYO_DT)],
+            [10.0, 10.5],
+        ),
+        "humble",
+    )
+    res = subprocess.run(
+        [sys.executable, "-m", "mbicp_viz", "match", str(path), "--deskew", "odometry"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert res.returncode == 2 and "use --deskew velocity" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
 
@@ -115,12 +138,18 @@ def test_the_debugger_shows_the_scans_as_measured_and_the_seam(tmp_path, hokuyo)
     from mbicp_viz.views import scene
     from mbicp_viz.views.debugger.state import DebugState, Source
 
-    path = write(tmp_path / "h", Robot([Topic("/scan", "laser", [hokuyo.scan(0), hokuyo.scan(1)],
-                                              time_increment=HOKUYO_DT)], [10.0, 10.5]), "humble")
+    path = write(
+        tmp_path / "h",
+        Robot(
+            [Topic("/scan", "laser", [hokuyo.scan(0), hokuyo.scan(1)], time_increment=HOKUYO_DT)],
+            [10.0, 10.5],
+        ),
+        "humble",
+    )
     log = read_log(path, ReadOptions(deskew="velocity"))
     state = DebugState(Source("deskewed", log, guess=Pose2()))
     assert state.rematch() is None
-    layers = {getattr(ly, 'style', None): ly for ly in state.layers(state.runs[0])}
+    layers = {getattr(ly, "style", None): ly for ly in state.layers(state.runs[0])}
     raw = layers[scene.RAW]
     assert len(raw.xy) == log.scans[0].raw.n_valid + log.scans[1].raw.n_valid
     assert scene.SEAM not in layers  # a 239-degree scan has no seam
@@ -128,7 +157,7 @@ def test_the_debugger_shows_the_scans_as_measured_and_the_seam(tmp_path, hokuyo)
     stallo = read_log(DATA.parent.parent / "recordings" / "inputs" / "stallo2.jsonl")
     state = DebugState(Source("360", stallo, guess=Pose2()))
     assert state.rematch() is None
-    seam = {getattr(ly, 'style', None): ly for ly in state.layers(state.runs[0])}[scene.SEAM]
+    seam = {getattr(ly, "style", None): ly for ly in state.layers(state.runs[0])}[scene.SEAM]
     assert np.allclose(seam.ends, stallo.scans[0].points()[[0, -1]])
 
 
@@ -137,6 +166,7 @@ def test_on_a_real_hand_held_recording_the_correction_makes_scans_agree(hokuyo):
     matches, scans three apart (whose velocities differ) agree better than as measured, and
     corrected with the opposite velocity, worse: the correction goes the right way."""
     from mbicp_viz.core import ImprovedParams, match
+
     from mbicp_viz.readers.deskew import velocities
 
     v = velocities(hokuyo, "velocity")
@@ -147,17 +177,29 @@ def test_on_a_real_hand_held_recording_the_correction_makes_scans_agree(hokuyo):
         return match(scans[k], scans[k + 3], Pose2(), ImprovedParams()).error
 
     ks = range(0, len(hokuyo.scans) - 3, 2)
-    raw, good, bad = (np.median([residual(scans, k) for k in ks]) for scans in (hokuyo.scans, fixed, backwards))
+    raw, good, bad = (
+        np.median([residual(scans, k) for k in ks]) for scans in (hokuyo.scans, fixed, backwards)
+    )
     assert good < raw < bad
 
 
 def test_beam_times_longer_than_the_gap_between_scans_are_refused(tmp_path, hokuyo):
     """A driver's time_increment that makes a sweep outlast the time to the next scan is wrong: the
     correction would move the points by whatever it says, so it is refused in one line."""
-    path = write(tmp_path / "h", Robot([Topic("/scan", "laser", [hokuyo.scan(0), hokuyo.scan(1)],
-                                              time_increment=0.01)], [10.0, 10.5]), "humble")
-    res = subprocess.run([sys.executable, "-m", "mbicp_viz", "match", str(path), "--deskew", "velocity"],
-                         capture_output=True, text=True, timeout=120)
+    path = write(
+        tmp_path / "h",
+        Robot(
+            [Topic("/scan", "laser", [hokuyo.scan(0), hokuyo.scan(1)], time_increment=0.01)],
+            [10.0, 10.5],
+        ),
+        "humble",
+    )
+    res = subprocess.run(
+        [sys.executable, "-m", "mbicp_viz", "match", str(path), "--deskew", "velocity"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert res.returncode == 2 and "beam times are wrong" in res.stderr and "--deskew" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
 

@@ -1,11 +1,20 @@
 """The event stream: what the observer receives is consistent with the result and the geometry."""
 
+import mbicp_viz.core.mbicp
 import numpy as np
 import pytest
-
-import mbicp_viz.core.mbicp
-from mbicp_viz.core import (FinishEvent, ImprovedParams, IterationEvent, MATCHERS, PairKind, PairStatus, Pose2, Recorder,
-                  StartEvent, match)
+from mbicp_viz.core import (
+    MATCHERS,
+    FinishEvent,
+    ImprovedParams,
+    IterationEvent,
+    PairKind,
+    PairStatus,
+    Pose2,
+    Recorder,
+    StartEvent,
+    match,
+)
 
 
 @pytest.mark.parametrize("algo", list(MATCHERS))
@@ -34,9 +43,23 @@ def test_iterations_chain_and_moved_points(algo, intel):
         assert e.estimate_before == est
         after = e.increment @ e.estimate_before
         assert np.allclose(after.as_array(), e.estimate_after.as_array())
-        np.testing.assert_allclose(e.moved_points, e.estimate_before.apply(start.obj_points[start.used]), atol=1e-12)
+        np.testing.assert_allclose(
+            e.moved_points, e.estimate_before.apply(start.obj_points[start.used]), atol=1e-12
+        )
         p = e.pairs
-        assert len({len(p.obj_index), len(p.target), len(p.kind), len(p.ref_index), len(p.distance), len(p.status)}) == 1
+        assert (
+            len(
+                {
+                    len(p.obj_index),
+                    len(p.target),
+                    len(p.kind),
+                    len(p.ref_index),
+                    len(p.distance),
+                    len(p.status),
+                }
+            )
+            == 1
+        )
         # point pairs sit exactly on their reference point
         pt = p.kind == PairKind.POINT
         np.testing.assert_allclose(p.target[pt], start.ref_points[p.ref_index[pt, 0]])
@@ -85,7 +108,9 @@ def test_point_line_resolves_shared_targets(intel):
     runs = {}
     for pl in (True, False):
         rec = Recorder()
-        match(intel.scans[11], intel.scans[12], Pose2(), ImprovedParams(point_line=pl), observer=rec)
+        match(
+            intel.scans[11], intel.scans[12], Pose2(), ImprovedParams(point_line=pl), observer=rec
+        )
         runs[pl] = rec.iterations[0].pairs
     assert shared_point_targets(runs[False]) > 0
     # the only sharing left is where the segment to the second point is longer than MaxDistInter
@@ -95,8 +120,14 @@ def test_point_line_resolves_shared_targets(intel):
 def test_no_event_payload_is_built_without_observer(intel, monkeypatch):
     built = []
     for cls in (StartEvent, IterationEvent, FinishEvent):
-        monkeypatch.setattr(mbicp_viz.core.mbicp, cls.__name__, lambda *a, _c=cls, **k: built.append(_c) or _c(*a, **k))
+        monkeypatch.setattr(
+            mbicp_viz.core.mbicp,
+            cls.__name__,
+            lambda *a, _c=cls, **k: built.append(_c) or _c(*a, **k),
+        )
     match(intel.scans[11], intel.scans[12], Pose2(), ImprovedParams())
     assert built == []
     match(intel.scans[11], intel.scans[12], Pose2(), ImprovedParams(), observer=Recorder())
-    assert built.count(StartEvent) == 1 and built.count(FinishEvent) == 1 and IterationEvent in built
+    assert (
+        built.count(StartEvent) == 1 and built.count(FinishEvent) == 1 and IterationEvent in built
+    )

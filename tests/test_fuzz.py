@@ -12,23 +12,42 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from mbicp_viz.core import MATCHERS, Pose2
+from mbicp_viz.core.scan import ABSURD_RANGE_M
+
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.log import MIN_BEARING_STEP_RAD
 from mbicp_viz.readers.relations import read_relations
-from mbicp_viz.core.scan import ABSURD_RANGE_M
 
 from .bags import intel_robot, write
 from .conftest import DATA, EXAMPLES, INTEL
 
-TEXT_FILES = {"carmen.log": DATA / "intel-relations.log", "laserazos.log": DATA / "laserazosSM3-40.log",
-              "datos.off": DATA / "datos.off", "blocks.off": DATA / "laserazosSM3-6.off",
-              "stallo2.jsonl": DATA / "stallo2.jsonl"}
-NUMBERS = ["nan", "inf", "-inf", "1e400", "-1e308", "1e150", "0", "-1", "1e-300", "99999999999", "x", "",
-           "1" + "0" * 400]
-FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+TEXT_FILES = {
+    "carmen.log": DATA / "intel-relations.log",
+    "laserazos.log": DATA / "laserazosSM3-40.log",
+    "datos.off": DATA / "datos.off",
+    "blocks.off": DATA / "laserazosSM3-6.off",
+    "stallo2.jsonl": DATA / "stallo2.jsonl",
+}
+NUMBERS = [
+    "nan",
+    "inf",
+    "-inf",
+    "1e400",
+    "-1e308",
+    "1e150",
+    "0",
+    "-1",
+    "1e-300",
+    "99999999999",
+    "x",
+    "",
+    "1" + "0" * 400,
+]
+FUZZ = settings(
+    max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 
 
 def invariants(log) -> None:
@@ -58,7 +77,9 @@ def text_mutation(draw):
     lines = TEXT_FILES[name].read_text().split("\n")
     i = draw(st.integers(0, max(len(lines) - 2, 0)))
     toks = lines[i].split()
-    kind = draw(st.sampled_from(["truncate", "delete", "repeat", "number", "drop", "add", "count", "flip"]))
+    kind = draw(
+        st.sampled_from(["truncate", "delete", "repeat", "number", "drop", "add", "count", "flip"])
+    )
     changes_fields = False
     if kind == "truncate":
         text = "\n".join(lines)
@@ -87,7 +108,11 @@ def text_mutation(draw):
         if kind in ("number", "drop", "add", "count") and toks:
             lines[i] = " ".join(toks)
         text = "\n".join(lines)
-    fixed = name.endswith(".log") and lines and lines[min(i, len(lines) - 1)].split()[:1] in (["FLASER"], ["ODOM"])
+    fixed = (
+        name.endswith(".log")
+        and lines
+        and lines[min(i, len(lines) - 1)].split()[:1] in (["FLASER"], ["ODOM"])
+    )
     return name, text, kind, changes_fields and fixed
 
 
@@ -98,13 +123,17 @@ def test_text_readers_on_mutated_real_files(tmp_path, case):
     path = tmp_path / name
     path.write_bytes(text.encode("latin-1", "replace"))
     log = read(path)
-    if changed_layout:  # a FLASER or ODOM record with a field too many or too few: never read as another
+    # a FLASER or ODOM record with a field too many or too few: never read as another
+    if changed_layout:
         assert log is None, (kind, text[:200])
 
 
 @FUZZ
-@given(cut=st.floats(0.0, 0.999), flips=st.lists(st.tuples(st.floats(0, 0.999), st.integers(0, 255)), max_size=6),
-       inner=st.booleans())
+@given(
+    cut=st.floats(0.0, 0.999),
+    flips=st.lists(st.tuples(st.floats(0, 0.999), st.integers(0, 255)), max_size=6),
+    inner=st.booleans(),
+)
 def test_damaged_gzip(tmp_path, cut, flips, inner):
     data = (DATA / "aces-10.log.gz").read_bytes()
     if inner:  # damage inside the compressed stream, keeping its header
@@ -126,17 +155,25 @@ def npz_bytes(**arrays) -> bytes:
 
 
 @FUZZ
-@given(mutation=st.sampled_from(["flip", "cut", "complex", "object", "shape", "nan_bearings", "huge"]),
-       at=st.floats(0, 0.999), value=st.integers(0, 255))
+@given(
+    mutation=st.sampled_from(["flip", "cut", "complex", "object", "shape", "nan_bearings", "huge"]),
+    at=st.floats(0, 0.999),
+    value=st.integers(0, 255),
+)
 def test_damaged_npz(tmp_path, mutation, at, value):
     with np.load(EXAMPLES / "hokuyo-125-130.npz") as z:
         ranges, bearings = z["ranges"], z["bearings"]
-    data = {"flip": None, "cut": None, "complex": npz_bytes(ranges=ranges.astype(complex), bearings=bearings),
-            "object": npz_bytes(ranges=np.array([ranges[0], "x"], dtype=object), bearings=bearings),
-            "shape": npz_bytes(ranges=ranges, bearings=bearings[..., :-3]),
-            "nan_bearings": npz_bytes(ranges=ranges, bearings=np.where(np.arange(bearings.shape[-1]) == 5, np.nan,
-                                                                       bearings)),
-            "huge": npz_bytes(ranges=ranges * 1e150, bearings=bearings)}[mutation]
+    data = {
+        "flip": None,
+        "cut": None,
+        "complex": npz_bytes(ranges=ranges.astype(complex), bearings=bearings),
+        "object": npz_bytes(ranges=np.array([ranges[0], "x"], dtype=object), bearings=bearings),
+        "shape": npz_bytes(ranges=ranges, bearings=bearings[..., :-3]),
+        "nan_bearings": npz_bytes(
+            ranges=ranges, bearings=np.where(np.arange(bearings.shape[-1]) == 5, np.nan, bearings)
+        ),
+        "huge": npz_bytes(ranges=ranges * 1e150, bearings=bearings),
+    }[mutation]
     if data is None:
         raw = bytearray((EXAMPLES / "hokuyo-125-130.npz").read_bytes())
         if mutation == "flip":
@@ -152,12 +189,18 @@ def test_damaged_npz(tmp_path, mutation, at, value):
 
 @pytest.fixture(scope="module")
 def small_bag(tmp_path_factory, intel):
-    return write(tmp_path_factory.mktemp("bag") / "small.bag", intel_robot(intel, 10, 12, Pose2(0.1, 0.0, 0.0)),
-                 "ros1").read_bytes()
+    return write(
+        tmp_path_factory.mktemp("bag") / "small.bag",
+        intel_robot(intel, 10, 12, Pose2(0.1, 0.0, 0.0)),
+        "ros1",
+    ).read_bytes()
 
 
 @FUZZ
-@given(cut=st.floats(0.0, 1.0), flips=st.lists(st.tuples(st.floats(0, 0.999), st.integers(0, 255)), max_size=8))
+@given(
+    cut=st.floats(0.0, 1.0),
+    flips=st.lists(st.tuples(st.floats(0, 0.999), st.integers(0, 255)), max_size=8),
+)
 def test_damaged_bags(tmp_path, small_bag, cut, flips):
     b = bytearray(small_bag[: int(cut * len(small_bag))] if not flips else small_bag)
     for at, v in flips:
@@ -166,7 +209,9 @@ def test_damaged_bags(tmp_path, small_bag, cut, flips):
     path.write_bytes(bytes(b))
     log = read(path)
     if log is not None and len(log.scans) >= 2:  # what survives still matches without a traceback
-        MATCHERS["improved"].run(log.scans[0], log.scans[1], Pose2(), MATCHERS["improved"].params_type())
+        MATCHERS["improved"].run(
+            log.scans[0], log.scans[1], Pose2(), MATCHERS["improved"].params_type()
+        )
 
 
 @FUZZ
@@ -187,7 +232,8 @@ def test_hostile_files_that_are_no_data(tmp_path):
     (tmp_path / "dir.log").mkdir()
     assert read(tmp_path / "dir.log") is None
     zero = tmp_path / "zero.log"
-    zero.write_bytes(b"\0" * 9_000_000)  # a line that never ends: refused at the cap, not read whole
+    # a line that never ends: refused at the cap, not read whole
+    zero.write_bytes(b"\0" * 9_000_000)
     assert read(zero) is None
     bomb = tmp_path / "bomb.npz"
     with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as z:

@@ -15,21 +15,34 @@ PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setupt
 
 def test_core_is_mbicp_viz_core_and_never_a_top_level_core(tmp_path):
     # from the checkout's top level, where a folder named core/ sits on sys.path
-    res = subprocess.run([sys.executable, "-c", "import core"], cwd=ROOT, capture_output=True, text=True)
+    res = subprocess.run(
+        [sys.executable, "-c", "import core"], cwd=ROOT, capture_output=True, text=True
+    )
     assert res.returncode != 0 and "mbicp_viz.core" in res.stderr
     # from anywhere else: there is no top-level core at all
-    res = subprocess.run([sys.executable, "-c", "import core"], cwd=tmp_path, capture_output=True, text=True)
+    res = subprocess.run(
+        [sys.executable, "-c", "import core"], cwd=tmp_path, capture_output=True, text=True
+    )
     assert res.returncode != 0 and "No module named 'core'" in res.stderr
-    res = subprocess.run([sys.executable, "-c", "import mbicp_viz.core as c; print(c.Pose2.__module__)"],
-                         cwd=tmp_path, capture_output=True, text=True)
+    res = subprocess.run(
+        [sys.executable, "-c", "import mbicp_viz.core as c; print(c.Pose2.__module__)"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+    )
     assert res.returncode == 0 and res.stdout.strip() == "mbicp_viz.core.se2", res.stderr
 
 
 def test_every_package_is_shipped_and_the_checkout_maps_them_alike():
-    on_disk = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "mbicp_viz").rglob("__init__.py")}
+    on_disk = {
+        ".".join(p.parent.relative_to(ROOT).parts)
+        for p in (ROOT / "mbicp_viz").rglob("__init__.py")
+    }
     on_disk |= {"mbicp_viz.core"}
     assert on_disk <= set(PYPROJECT["packages"]), on_disk - set(PYPROJECT["packages"])
-    mapped = {k: v for k, v in PYPROJECT["package-dir"].items() if (ROOT / v / "__init__.py").exists()}
+    mapped = {
+        k: v for k, v in PYPROJECT["package-dir"].items() if (ROOT / v / "__init__.py").exists()
+    }
     assert mapped == mbicp_viz.CHECKOUT_PACKAGES
 
 
@@ -51,8 +64,12 @@ def test_every_command_answers_help(tmp_path):
     shown = 0
     for name in names:
         res = CliRunner().invoke(app, [*name.split(), "--help"], terminal_width=400)
-        assert res.exit_code == 0 and "Usage" in res.output and "<bool>" not in res.output, (name, res.output)
-        # units and table names in brackets ("[m]", "[deg]", "a [search] table") are shown as written, not
+        assert res.exit_code == 0 and "Usage" in res.output and "<bool>" not in res.output, (
+            name,
+            res.output,
+        )
+        # units and table names in brackets ("[m]", "[deg]", "a [search] table") are shown as
+        # written, not
         # taken for markup and dropped
         for param in _command(app, name).params:
             # a metavar names as many values as the option takes (X Y THETA_DEG: three)
@@ -77,7 +94,9 @@ def test_every_command_that_reads_scans_can_choose_the_stream():
         arguments = {p.name for p in command.params if p.param_type_name == "argument"}
         if arguments & {"first", "log", "logs", "scans"}:
             reading += 1
-            assert any("--topic" in p.opts for p in command.params if p.param_type_name == "option"), name
+            assert any(
+                "--topic" in p.opts for p in command.params if p.param_type_name == "option"
+            ), name
     assert reading >= 14
 
 

@@ -1,4 +1,5 @@
-"""The three matchers on real scans: identity, equivariance, known displacements, MbICP's protocol."""
+"""The three matchers on real scans: identity, equivariance, known displacements, MbICP's "
+"protocol."""
 
 import math
 
@@ -6,13 +7,24 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from mbicp_viz.core import (
+    MATCHERS,
+    IcpParams,
+    ImprovedParams,
+    MbicpParams,
+    PlIcpParams,
+    PmwnParams,
+    Pose2,
+    PsmParams,
+    Termination,
+    make_scan,
+    match,
+    pose_error,
+)
 
-from mbicp_viz.core import (MATCHERS, IcpParams, ImprovedParams, MbicpParams, PlIcpParams, PmwnParams, Pose2, PsmParams,
-                            Termination,
-                  make_scan, match, pose_error)
-from mbicp_viz.readers.params_toml import load_params
 from mbicp_viz.evaluation.protocols import displaced_self_matches
 from mbicp_viz.readers import read_log
+from mbicp_viz.readers.params_toml import load_params
 
 from .conftest import DATA
 
@@ -21,7 +33,8 @@ PROTOCOL_PARAMS = "mbicp-protocol"
 
 
 def moved_scan(scan, T: Pose2):
-    """The same scan seen from a sensor whose pose in the original sensor frame is T (same beams)."""
+    """The same scan seen from a sensor whose pose in the original sensor frame is T (same "
+    "beams)."""
     pts = T.inverse().apply(scan.points())
     b = np.arctan2(pts[:, 1], pts[:, 0])
     order = np.argsort(b)
@@ -58,10 +71,16 @@ def rotated(scan, phi):
     return make_scan(scan.ranges, scan.bearings + phi, valid=scan.valid)
 
 
-EQUIVARIANT = {# CSM's restarts move the result along the reference frame's axes: equivariant without them
-               "icp": IcpParams(restart=False), "plicp": PlIcpParams(restart=False), "mbicp": MbicpParams(),
-               # the resampling grid is aligned with the sensor axes: rotation-invariant only without it
-               "improved": ImprovedParams(resample=False), "psm": PsmParams(), "pmwn": PmwnParams()}
+# CSM's restarts move the result along the reference frame's axes: equivariant without them
+EQUIVARIANT = {
+    "icp": IcpParams(restart=False),
+    "plicp": PlIcpParams(restart=False),
+    "mbicp": MbicpParams(),
+    # the resampling grid is aligned with the sensor axes: rotation-invariant only without it
+    "improved": ImprovedParams(resample=False),
+    "psm": PsmParams(),
+    "pmwn": PmwnParams(),
+}
 
 
 @pytest.mark.parametrize("algo", ALGOS)
@@ -112,7 +131,8 @@ def test_mbicp_protocol_icp_fails_on_large_rotations():
 
 
 def test_mbicp_protocol_improved():
-    """Improved MbICP on the same protocol; what it misses are large turns (README: full-log figures)."""
+    """Improved MbICP on the same protocol; what it misses are large turns (README: full-log "
+    "figures)."""
     rate, cases = protocol("improved")
     assert rate >= 0.99
     failures = [c for c in cases if c.error_m >= 0.01 or c.error_rad >= math.radians(0.1)]
@@ -128,15 +148,22 @@ def test_too_few_pairs_is_reported_not_hidden(laserazos):
 def test_each_improvement_is_switchable(laserazos):
     scan, obj = laserazos.scans[0], laserazos.scans[1]
     base = ImprovedParams()
-    results = {k: match(scan, obj, Pose2(), base.replace(**{k: False}))
-               for k in ("resample", "point_line", "mad_rejection")}
+    results = {
+        k: match(scan, obj, Pose2(), base.replace(**{k: False}))
+        for k in ("resample", "point_line", "mad_rejection")
+    }
     full = match(scan, obj, Pose2(), base)
     # switching an addition off changes the run (iterations or pose differ)
     for k, r in results.items():
         assert (r.iterations, r.pose) != (full.iterations, full.pose), k
     # with every addition off, improved MbICP is exactly MbICP
     off = base.replace(resample=False, point_line=False, mad_rejection=False)
-    plain = match(scan, obj, Pose2(), MbicpParams(**{f: getattr(off, f) for f in MbicpParams.__dataclass_fields__}))
+    plain = match(
+        scan,
+        obj,
+        Pose2(),
+        MbicpParams(**{f: getattr(off, f) for f in MbicpParams.__dataclass_fields__}),
+    )
     r_off = match(scan, obj, Pose2(), off)
     assert r_off.pose == plain.pose and r_off.iterations == plain.iterations
 
@@ -144,7 +171,12 @@ def test_each_improvement_is_switchable(laserazos):
 def test_corridor_degeneracy_points_along_the_walls():
     # Two parallel walls, 2 m apart, 30 m long: nothing constrains motion along x.
     xs = np.linspace(-15, 15, 600)
-    pts = np.vstack((np.column_stack((xs, np.full_like(xs, 1.0))), np.column_stack((xs, np.full_like(xs, -1.0)))))
+    pts = np.vstack(
+        (
+            np.column_stack((xs, np.full_like(xs, 1.0))),
+            np.column_stack((xs, np.full_like(xs, -1.0))),
+        )
+    )
     b = np.arctan2(pts[:, 1], pts[:, 0])
     o = np.argsort(b)
     scan = make_scan(np.hypot(*pts[o].T), b[o])

@@ -1,18 +1,47 @@
-"""MbICP's metric distance and least squares; paper 000's MAD rejection; CSM's exact pose solver (GPC)."""
+"""MbICP's metric distance and least squares; paper 000's MAD rejection; CSM's exact pose solver "
+"(GPC)."""
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from mbicp_viz.core import PairStatus
 from mbicp_viz.core.gpc import normal_terms, solve
-from mbicp_viz.core.metric import mad_threshold, metric_distance_sq, metric_exact_sq, metric_normal_equations, solve3
+from mbicp_viz.core.metric import (
+    mad_threshold,
+    metric_distance_sq,
+    metric_exact_sq,
+    metric_normal_equations,
+    solve3,
+)
 from mbicp_viz.core.rejection import reject
 
 # Paper 000 §2.4.2, Figure 9: 21 correspondence distances.
-PAPER_DISTANCES = np.array([12.281, 12.270, 12.712, 11.932, 11.053, 10.768, 11.077, 11.685, 6.393, 6.001, 5.549,
-                            38.760, 86.305, 34.497, 2.988, 3.227, 1.297, 3.539, 6.409, 12.477, 12.381])
+PAPER_DISTANCES = np.array(
+    [
+        12.281,
+        12.270,
+        12.712,
+        11.932,
+        11.053,
+        10.768,
+        11.077,
+        11.685,
+        6.393,
+        6.001,
+        5.549,
+        38.760,
+        86.305,
+        34.497,
+        2.988,
+        3.227,
+        1.297,
+        3.539,
+        6.409,
+        12.477,
+        12.381,
+    ]
+)
 
 
 def test_paper_mad_example():
@@ -36,8 +65,11 @@ def test_mad_floor_never_rejects_close_pairs():
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.lists(st.floats(0.0, 2.0, allow_nan=False), min_size=1, max_size=40), st.floats(0.0, 1.5),
-       st.floats(0.5, 3.0))
+@given(
+    st.lists(st.floats(0.0, 2.0, allow_nan=False), min_size=1, max_size=40),
+    st.floats(0.0, 1.5),
+    st.floats(0.5, 3.0),
+)
 def test_mad_decides_alike_whether_its_threshold_is_shown_or_not(d, floor, k):
     """The matcher's unrecorded run skips MAD's selections where no pair lies above the floor: the
     same decisions, and the threshold it shows when recorded."""
@@ -76,7 +108,7 @@ def test_closed_form_matches_brute_force_minimisation(qx, qy, dx, dy, L):
     # (theta as the closed form picks it, at most |p - q| |q| / (|q|^2 + L^2)).
     d, r = float(np.hypot(dx, dy)), float(np.hypot(qx, qy))
     theta = d * r / (r * r + L * L)
-    assert approx == pytest.approx(exact, rel=0.05, abs=1.5 * d * r * theta ** 2 + 1e-9)
+    assert approx == pytest.approx(exact, rel=0.05, abs=1.5 * d * r * theta**2 + 1e-9)
     assert approx <= np.dot(p - q, p - q) + 1e-12  # never above the Euclidean distance
 
 
@@ -114,7 +146,9 @@ def test_gpc_point_to_point_recovers_any_motion(x, y, t):
     q = p @ rotation(t).T + [x, y]
     tx, ty, th, ok = solve(*normal_terms(p, q, np.tile(np.eye(2), (30, 1, 1))))
     assert ok
-    np.testing.assert_allclose([tx, ty, (th - t + np.pi) % (2 * np.pi) - np.pi], [x, y, 0.0], atol=1e-8)
+    np.testing.assert_allclose(
+        [tx, ty, (th - t + np.pi) % (2 * np.pi) - np.pi], [x, y, 0.0], atol=1e-8
+    )
 
 
 @settings(max_examples=30, deadline=None)
@@ -124,7 +158,11 @@ def test_gpc_point_to_line_is_the_global_minimum(seed):
     one-dimensional: a fine grid finds its global minimum, which GPC's pose must match."""
     rng = np.random.default_rng(seed)
     p = rng.uniform(-5, 5, (25, 2))
-    q = p @ rotation(rng.uniform(-np.pi, np.pi)).T + rng.uniform(-2, 2, 2) + rng.normal(0, 0.05, (25, 2))
+    q = (
+        p @ rotation(rng.uniform(-np.pi, np.pi)).T
+        + rng.uniform(-2, 2, 2)
+        + rng.normal(0, 0.05, (25, 2))
+    )
     n = rng.normal(size=(25, 2))
     n /= np.linalg.norm(n, axis=1)[:, None]
     C = n[:, :, None] * n[:, None, :]

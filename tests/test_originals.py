@@ -16,24 +16,58 @@ Guesses: the log's relative pose perturbed uniformly within +/-0.2 m, +/-10 deg 
 import math
 
 import pytest
-
 from mbicp_viz.core import IcpParams, MbicpParams, PlIcpParams, Pose2, match, pose_error
+
 from mbicp_viz.readers import read_log
 
 from .conftest import DATA, EXAMPLES
 
-FILES = {"laserazosSM3-40.log": DATA / "laserazosSM3-40.log", "intel-excerpt.log.gz": EXAMPLES / "intel-excerpt.log.gz",
-         "aces-10.log.gz": DATA / "aces-10.log.gz"}
+FILES = {
+    "laserazosSM3-40.log": DATA / "laserazosSM3-40.log",
+    "intel-excerpt.log.gz": EXAMPLES / "intel-excerpt.log.gz",
+    "aces-10.log.gz": DATA / "aces-10.log.gz",
+}
 
 # (file, reference scan k (object k + 1), guess (x, y, theta), the C code's pose)
 MBICP_C = [
     ("laserazosSM3-40.log", 1, (0.068597, 0.158797, 0.087776), (0.0263137, -0.0399866, -0.0583488)),
-    ("laserazosSM3-40.log", 4, (-0.029549, -0.080956, 0.105472), (0.0649131, -0.0195396, -0.0291036)),
-    ("laserazosSM3-40.log", 7, (-0.120589, 0.128829, 0.114823), (0.0704202, -0.0052696, -0.0039520)),
-    ("intel-excerpt.log.gz", 1, (-0.008292, -0.063391, -0.584401), (-0.0632630, -0.1019849, -0.5125844)),
-    ("intel-excerpt.log.gz", 4, (-0.142683, -0.092831, -0.535442), (-0.0326295, -0.0524158, -0.5492290)),
-    ("intel-excerpt.log.gz", 7, (0.021266, 0.173959, -0.432642), (0.1618918, 0.1799398, -0.5395532)),
-    ("aces-10.log.gz", 1, (0.05827, 0.147456, -0.621376), (-0.0049478, -0.0296554, -0.5266451)),  # MaxIter reached
+    (
+        "laserazosSM3-40.log",
+        4,
+        (-0.029549, -0.080956, 0.105472),
+        (0.0649131, -0.0195396, -0.0291036),
+    ),
+    (
+        "laserazosSM3-40.log",
+        7,
+        (-0.120589, 0.128829, 0.114823),
+        (0.0704202, -0.0052696, -0.0039520),
+    ),
+    (
+        "intel-excerpt.log.gz",
+        1,
+        (-0.008292, -0.063391, -0.584401),
+        (-0.0632630, -0.1019849, -0.5125844),
+    ),
+    (
+        "intel-excerpt.log.gz",
+        4,
+        (-0.142683, -0.092831, -0.535442),
+        (-0.0326295, -0.0524158, -0.5492290),
+    ),
+    (
+        "intel-excerpt.log.gz",
+        7,
+        (0.021266, 0.173959, -0.432642),
+        (0.1618918, 0.1799398, -0.5395532),
+    ),
+    # MaxIter reached
+    (
+        "aces-10.log.gz",
+        1,
+        (0.05827, 0.147456, -0.621376),
+        (-0.0049478, -0.0296554, -0.5266451),
+    ),
     ("aces-10.log.gz", 4, (0.69962, 0.244163, 0.476316), (0.7804480, 0.1686427, 0.6435190)),
     ("aces-10.log.gz", 7, (-0.192978, 0.001017, 0.562553), (-0.0150480, 0.0328591, 0.5805267)),
 ]
@@ -41,23 +75,101 @@ MBICP_C = [
 
 # (file, k, guess, CSM's pose, CSM's iterations)
 ICP_CSM = [
-    ("laserazosSM3-40.log", 1, (0.068597, 0.158797, 0.087776), (0.0263295, -0.0390476, -0.0590846), 35),
-    ("laserazosSM3-40.log", 4, (-0.029549, -0.080956, 0.105472), (0.0648673, -0.0189952, -0.0290133), 22),
-    ("laserazosSM3-40.log", 7, (-0.120589, 0.128829, 0.114823), (0.0699064, -0.0049979, -0.0039439), 25),
-    ("intel-excerpt.log.gz", 1, (-0.008292, -0.063391, -0.584401), (-0.0662085, -0.1076106, -0.5123996), 3),
-    ("intel-excerpt.log.gz", 4, (-0.142683, -0.092831, -0.535442), (-0.0331765, -0.0520900, -0.5493208), 17),
-    ("intel-excerpt.log.gz", 7, (0.021266, 0.173959, -0.432642), (0.1334879, 0.1430999, -0.5403429), 19),
-    ("aces-10.log.gz", 1, (0.05827, 0.147456, -0.621376), (-0.0102950, -0.0293314, -0.5264179), 158),
+    (
+        "laserazosSM3-40.log",
+        1,
+        (0.068597, 0.158797, 0.087776),
+        (0.0263295, -0.0390476, -0.0590846),
+        35,
+    ),
+    (
+        "laserazosSM3-40.log",
+        4,
+        (-0.029549, -0.080956, 0.105472),
+        (0.0648673, -0.0189952, -0.0290133),
+        22,
+    ),
+    (
+        "laserazosSM3-40.log",
+        7,
+        (-0.120589, 0.128829, 0.114823),
+        (0.0699064, -0.0049979, -0.0039439),
+        25,
+    ),
+    (
+        "intel-excerpt.log.gz",
+        1,
+        (-0.008292, -0.063391, -0.584401),
+        (-0.0662085, -0.1076106, -0.5123996),
+        3,
+    ),
+    (
+        "intel-excerpt.log.gz",
+        4,
+        (-0.142683, -0.092831, -0.535442),
+        (-0.0331765, -0.0520900, -0.5493208),
+        17,
+    ),
+    (
+        "intel-excerpt.log.gz",
+        7,
+        (0.021266, 0.173959, -0.432642),
+        (0.1334879, 0.1430999, -0.5403429),
+        19,
+    ),
+    (
+        "aces-10.log.gz",
+        1,
+        (0.05827, 0.147456, -0.621376),
+        (-0.0102950, -0.0293314, -0.5264179),
+        158,
+    ),
     ("aces-10.log.gz", 4, (0.69962, 0.244163, 0.476316), (0.7195997, 0.1230982, 0.6461401), 196),
     ("aces-10.log.gz", 7, (-0.192978, 0.001017, 0.562553), (-0.0149069, 0.0308530, 0.5808143), 123),
 ]
 PLICP_CSM = [
-    ("laserazosSM3-40.log", 1, (0.068597, 0.158797, 0.087776), (0.0258696, -0.0391832, -0.0591721), 8),
-    ("laserazosSM3-40.log", 4, (-0.029549, -0.080956, 0.105472), (0.0649222, -0.0191205, -0.0291731), 7),
-    ("laserazosSM3-40.log", 7, (-0.120589, 0.128829, 0.114823), (0.0699424, -0.0049047, -0.0042021), 6),
-    ("intel-excerpt.log.gz", 1, (-0.008292, -0.063391, -0.584401), (-0.0656232, -0.1067512, -0.5123908), 4),
-    ("intel-excerpt.log.gz", 4, (-0.142683, -0.092831, -0.535442), (-0.0317290, -0.0527283, -0.5497267), 5),
-    ("intel-excerpt.log.gz", 7, (0.021266, 0.173959, -0.432642), (0.0302861, 0.0080054, -0.5410693), 11),
+    (
+        "laserazosSM3-40.log",
+        1,
+        (0.068597, 0.158797, 0.087776),
+        (0.0258696, -0.0391832, -0.0591721),
+        8,
+    ),
+    (
+        "laserazosSM3-40.log",
+        4,
+        (-0.029549, -0.080956, 0.105472),
+        (0.0649222, -0.0191205, -0.0291731),
+        7,
+    ),
+    (
+        "laserazosSM3-40.log",
+        7,
+        (-0.120589, 0.128829, 0.114823),
+        (0.0699424, -0.0049047, -0.0042021),
+        6,
+    ),
+    (
+        "intel-excerpt.log.gz",
+        1,
+        (-0.008292, -0.063391, -0.584401),
+        (-0.0656232, -0.1067512, -0.5123908),
+        4,
+    ),
+    (
+        "intel-excerpt.log.gz",
+        4,
+        (-0.142683, -0.092831, -0.535442),
+        (-0.0317290, -0.0527283, -0.5497267),
+        5,
+    ),
+    (
+        "intel-excerpt.log.gz",
+        7,
+        (0.021266, 0.173959, -0.432642),
+        (0.0302861, 0.0080054, -0.5410693),
+        11,
+    ),
     ("aces-10.log.gz", 1, (0.05827, 0.147456, -0.621376), (-0.0109800, -0.0273952, -0.5268215), 42),
     ("aces-10.log.gz", 4, (0.69962, 0.244163, 0.476316), (0.7231251, 0.1258486, 0.6458929), 59),
     ("aces-10.log.gz", 7, (-0.192978, 0.001017, 0.562553), (-0.0137399, 0.0257240, 0.5810611), 41),
@@ -78,11 +190,14 @@ def test_mbicp_returns_the_original_c_codes_pose(logs, name, k, guess, original)
     assert et < 1e-3 and er < math.radians(0.01), (et, math.degrees(er))
 
 
-@pytest.mark.parametrize("params, name, k, guess, original, iterations",
-                         [(IcpParams(), *case) for case in ICP_CSM] + [(PlIcpParams(), *case) for case in PLICP_CSM],
-                         ids=[f"icp-{c[0]}-{c[1]}" for c in ICP_CSM] + [f"plicp-{c[0]}-{c[1]}" for c in PLICP_CSM])
+@pytest.mark.parametrize(
+    "params, name, k, guess, original, iterations",
+    [(IcpParams(), *case) for case in ICP_CSM] + [(PlIcpParams(), *case) for case in PLICP_CSM],
+    ids=[f"icp-{c[0]}-{c[1]}" for c in ICP_CSM] + [f"plicp-{c[0]}-{c[1]}" for c in PLICP_CSM],
+)
 def test_icp_and_plicp_return_csms_pose(logs, params, name, k, guess, original, iterations):
-    """Within 0.01 mm and 0.001 deg, in as many iterations (CSM computes in double precision too)."""
+    """Within 0.01 mm and 0.001 deg, in as many iterations (CSM computes in double precision "
+    "too)."""
     scans = logs[name].scans
     result = match(scans[k], scans[k + 1], Pose2(*guess), params)
     et, er = pose_error(result.pose, Pose2(*original))

@@ -1,9 +1,10 @@
-"""``eval overlap``: paper 000's partial-overlap protocol, tables, CSV, plot, determinism, interruption."""
+"""``eval overlap``: paper 000's partial-overlap protocol, tables, CSV, plot, determinism, "
+"interruption."""
 
 import numpy as np
+from mbicp_viz.core import ImprovedParams, MbicpParams
 from typer.testing import CliRunner
 
-from mbicp_viz.core import ImprovedParams, MbicpParams
 from mbicp_viz.cli import app
 from mbicp_viz.evaluation.overlap import case_pair, classify, make_cases, run_overlap, tables
 from mbicp_viz.readers import read_log
@@ -13,8 +14,9 @@ from .conftest import LASERAZOS
 
 
 def test_classes_follow_the_paper():
-    assert [classify(c, ok) for c, ok in ((True, True), (True, False), (False, True), (False, False))] == \
-        ["TP", "FP", "TN", "FN"]
+    assert [
+        classify(c, ok) for c, ok in ((True, True), (True, False), (False, True), (False, False))
+    ] == ["TP", "FP", "TN", "FN"]
 
 
 def test_cases_keep_the_ratio_as_a_block_or_at_random():
@@ -31,17 +33,21 @@ def test_cases_keep_the_ratio_as_a_block_or_at_random():
 def test_the_reference_loses_the_points_so_object_points_lack_counterparts():
     scan = read_log(LASERAZOS).scans[5]
     for removal in ("block", "random"):
-        thin_ref, thin_obj = (make_cases([scan], [0.6], 1, removal, seed=4, max_xy=0.5, max_theta=0.26, thin=t)[0]
-                              for t in ("reference", "object"))
+        thin_ref, thin_obj = (
+            make_cases([scan], [0.6], 1, removal, seed=4, max_xy=0.5, max_theta=0.26, thin=t)[0]
+            for t in ("reference", "object")
+        )
         ref, obj = case_pair(scan, thin_ref)
         assert obj.n_valid == scan.n_valid and ref.n_valid == thin_ref.keep.sum()
-        np.testing.assert_array_equal(ref.bearings, scan.bearings)  # beams kept: PSM's uniform grid stays
+        # beams kept: PSM's uniform grid stays
+        np.testing.assert_array_equal(ref.bearings, scan.bearings)
         np.testing.assert_array_equal(ref.points(), scan.points()[thin_ref.keep])
         ref, obj = case_pair(scan, thin_obj)
         assert ref is scan and obj.n_valid == thin_obj.keep.sum()
 
 
-# Standard MbICP as paper 000 runs it: the parameters it shares with improved MbICP identical (§3.1).
+# Standard MbICP as paper 000 runs it: the parameters it shares with improved MbICP identical
+# (§3.1).
 COMMON = load_params("paper000-common", "mbicp")
 
 
@@ -53,7 +59,9 @@ def test_thinning_the_reference_is_what_makes_standard_mbicp_degrade():
     scenes = [scans[k] for k in (5, 15, 25, 35)]
 
     def at_60(removal, thin):
-        cases = make_cases(scenes, [0.6], 5, removal, seed=3, max_xy=0.5, max_theta=np.radians(15), thin=thin)
+        cases = make_cases(
+            scenes, [0.6], 5, removal, seed=3, max_xy=0.5, max_theta=np.radians(15), thin=thin
+        )
         return tables(run_overlap(scenes, {"mbicp": COMMON}, cases, workers=2))["mbicp"][0]
 
     assert at_60("block", "reference")["TP"] <= at_60("block", "object")["TP"] - 30.0
@@ -61,18 +69,54 @@ def test_thinning_the_reference_is_what_makes_standard_mbicp_degrade():
 
 
 def test_tables_and_files(tmp_path):
-    out = CliRunner().invoke(app, ["eval", "overlap", str(LASERAZOS), "--scenes-per-log", "2", "--runs", "2",
-                                   "--ratios", "100,60", "--algos", "mbicp,improved", "--csv", str(tmp_path / "a.csv"),
-                                   "--png", str(tmp_path / "a.png"), "--workers", "2"])
+    out = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "overlap",
+            str(LASERAZOS),
+            "--scenes-per-log",
+            "2",
+            "--runs",
+            "2",
+            "--ratios",
+            "100,60",
+            "--algos",
+            "mbicp,improved",
+            "--csv",
+            str(tmp_path / "a.csv"),
+            "--png",
+            str(tmp_path / "a.png"),
+            "--workers",
+            "2",
+        ],
+    )
     assert out.exit_code == 0, out.output
     assert "**mbicp**" in out.output and "**improved**" in out.output and "| 60 | 4 |" in out.output
     rows = (tmp_path / "a.csv").read_text().splitlines()
     assert len(rows) == 1 + 2 * 2 * 2 * 2  # header + scenes x ratios x runs x matchers
     assert (tmp_path / "a.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # the same seed regenerates the same numbers
-    again = CliRunner().invoke(app, ["eval", "overlap", str(LASERAZOS), "--scenes-per-log", "2", "--runs", "2",
-                                     "--ratios", "100,60", "--algos", "mbicp,improved", "--csv", str(tmp_path / "b.csv"),
-                                     "--workers", "1"])
+    again = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "overlap",
+            str(LASERAZOS),
+            "--scenes-per-log",
+            "2",
+            "--runs",
+            "2",
+            "--ratios",
+            "100,60",
+            "--algos",
+            "mbicp,improved",
+            "--csv",
+            str(tmp_path / "b.csv"),
+            "--workers",
+            "1",
+        ],
+    )
     assert (tmp_path / "b.csv").read_text() == (tmp_path / "a.csv").read_text()
     assert again.output.split("matches (")[0] == out.output.split("matches (")[0]
 

@@ -6,14 +6,24 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from mbicp_viz.core import (
+    PmwnParams,
+    Pose2,
+    PsmParams,
+    Recorder,
+    ScanError,
+    make_scan,
+    match,
+    pose_error,
+    relative,
+)
+from mbicp_viz.core.polar import refine_parabola, refine_v
 from typer.testing import CliRunner
 
-from mbicp_viz.core import PmwnParams, Pose2, PsmParams, Recorder, ScanError, make_scan, match, pose_error, relative
-from mbicp_viz.core.polar import refine_parabola, refine_v
 from mbicp_viz.cli import app
-from mbicp_viz.readers import read_log
-from mbicp_viz.evaluation.pairs import seen_from
 from mbicp_viz.evaluation.criteria import CONSECUTIVE
+from mbicp_viz.evaluation.pairs import seen_from
+from mbicp_viz.readers import read_log
 
 from .conftest import DATA, EXAMPLES
 
@@ -38,8 +48,11 @@ def test_v_fit_beats_the_parabola_on_a_v_shaped_cost():
     assert abs(refine_parabola(f(-1), f(0), f(1)) - 0.3) > 0.05
 
 
-LOGS = {"intel": EXAMPLES / "intel-excerpt.log.gz", "laserazos": DATA / "laserazosSM3-40.log",
-        "hokuyo": DATA / "hokuyo-demo.bag"}
+LOGS = {
+    "intel": EXAMPLES / "intel-excerpt.log.gz",
+    "laserazos": DATA / "laserazosSM3-40.log",
+    "hokuyo": DATA / "hokuyo-demo.bag",
+}
 _cache = {}
 
 
@@ -53,14 +66,20 @@ def displaced_cases(log: str, n: int = 40, seed: int = 7):
     """Seeded small motions (+/-0.1 m, +/-0.1 m, +/-8 deg) of real scans: (scan, truth) pairs."""
     rng = np.random.default_rng(seed)
     ss = scans(log)
-    return [(ss[int(rng.integers(len(ss)))], Pose2(*rng.uniform([-0.1, -0.1, -math.radians(8)],
-                                                              [0.1, 0.1, math.radians(8)]))) for _ in range(n)]
+    return [
+        (
+            ss[int(rng.integers(len(ss)))],
+            Pose2(*rng.uniform([-0.1, -0.1, -math.radians(8)], [0.1, 0.1, math.radians(8)])),
+        )
+        for _ in range(n)
+    ]
 
 
 @pytest.mark.parametrize("algo", ["psm", "pmwn"])
 @pytest.mark.parametrize("log", list(LOGS))
 def test_known_small_displacements_are_recovered(algo, log):
-    """Within 1 cm and 0.2 deg (issue 3), on at least 95 % of 40 seeded cases per log; the rest close."""
+    """Within 1 cm and 0.2 deg (issue 3), on at least 95 % of 40 seeded cases per log; the rest "
+    "close."""
     errors = []
     for ref, truth in displaced_cases(log):
         r = match(ref, seen_from(ref, truth), Pose2(), algorithm=algo)
@@ -97,7 +116,9 @@ def test_non_uniform_reference_is_a_clean_cli_error(tmp_path):
     res = CliRunner().invoke(app, ["match", str(p), str(p), "--algo", "psm", "--json"])
     assert res.exit_code == 0, res.output
     np.savez(tmp_path / "odd.npz", ranges=np.full((1, len(b)), 3.0), bearings=b)
-    res = CliRunner().invoke(app, ["match", str(tmp_path / "odd.npz"), str(tmp_path / "odd.npz"), "--algo", "pmwn"])
+    res = CliRunner().invoke(
+        app, ["match", str(tmp_path / "odd.npz"), str(tmp_path / "odd.npz"), "--algo", "pmwn"]
+    )
     assert res.exit_code == 2 and "uniformly spaced" in res.output and "Traceback" not in res.output
 
 
@@ -107,7 +128,8 @@ def test_pmwn_events_show_cost_fit_weight_and_circle():
     rec = Recorder()
     match(ref, seen_from(ref, truth), Pose2(), PmwnParams(), rec)
     first, second = rec.iterations[0].polar, rec.iterations[1].polar
-    assert first.metric_weight == 0.0 and second.metric_weight > 0.0  # lambda adapts after iteration 1
+    # lambda adapts after iteration 1
+    assert first.metric_weight == 0.0 and second.metric_weight > 0.0
     j = int(np.nanargmin(first.cost))
     assert first.fit == "V" and abs(first.best_shift - first.shifts[j]) <= 0.5
     assert first.fit_abc[1] == pytest.approx(first.cost[j])
@@ -115,10 +137,14 @@ def test_pmwn_events_show_cost_fit_weight_and_circle():
     # the projected circle's centre is half the translation step (Thales)
     np.testing.assert_allclose(2 * first.circle_centre, [inc.x, inc.y], atol=1e-9)
     assert len(first.circle_points) == len(first.residuals[np.abs(first.residuals) <= 1.0])
-    # the pairs are drawable like the MbICP family's: source on the projected surface, target on the reference
+    # the pairs are drawable like the MbICP family's: source on the projected surface, target on the
+    # reference
     p = rec.iterations[0].pairs
-    np.testing.assert_allclose(np.arctan2(p.source[:, 1], p.source[:, 0]), np.arctan2(p.target[:, 1], p.target[:, 0]),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        np.arctan2(p.source[:, 1], p.source[:, 0]),
+        np.arctan2(p.target[:, 1], p.target[:, 0]),
+        atol=1e-9,
+    )
 
 
 def test_psm_turns_with_the_parabola_on_every_iteration_as_diosi_alternates():
@@ -134,8 +160,9 @@ def test_psm_turns_with_the_parabola_on_every_iteration_as_diosi_alternates():
     assert fits[2][0] == "parabola" and fits[2][1] is None  # the option still skips
 
 
-
-@pytest.mark.parametrize("params", [PsmParams(C_switch=3), PmwnParams(C_switch=3)], ids=["psm", "pmwn"])
+@pytest.mark.parametrize(
+    "params", [PsmParams(C_switch=3), PmwnParams(C_switch=3)], ids=["psm", "pmwn"]
+)
 def test_translation_weights_follow_diosis_schedule(params):
     """w = C / (C + e^2) with C until C_switch, C_late after: PSM's schedule, which PMWN takes over
     with the weight (paper 003 §4.2, its ref. [22])."""
@@ -148,22 +175,72 @@ def test_translation_weights_follow_diosis_schedule(params):
         e = event.polar.residuals
         np.testing.assert_allclose(event.polar.weights, C / (C + e * e), rtol=1e-12)
 
+
 @pytest.mark.parametrize("algo", ["psm", "pmwn"])
 def test_algo_choice_reaches_eval_sequence_and_bench(tmp_path, algo):
     r = CliRunner()
     out = tmp_path / "s.json"
-    res = r.invoke(app, ["eval", "sequence", str(EXAMPLES / "intel-excerpt.log.gz"), "--algo", algo, "--out", str(out),
-                         "--limit", "4", "--guess", "identity", "--truth", "pose"])
+    res = r.invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(EXAMPLES / "intel-excerpt.log.gz"),
+            "--algo",
+            algo,
+            "--out",
+            str(out),
+            "--limit",
+            "4",
+            "--guess",
+            "identity",
+            "--truth",
+            "pose",
+        ],
+    )
     assert res.exit_code == 0 and "against the scan poses" in res.output, res.output
-    res = r.invoke(app, ["bench", "matches", str(DATA / "laserazosSM3-40.log"), "--algo", algo, "--limit", "3", "--repeat", "1"])
+    res = r.invoke(
+        app,
+        [
+            "bench",
+            "matches",
+            str(DATA / "laserazosSM3-40.log"),
+            "--algo",
+            algo,
+            "--limit",
+            "3",
+            "--repeat",
+            "1",
+        ],
+    )
     assert res.exit_code == 0 and "events off" in res.output
 
 
 def test_compare_prints_every_matcher_with_errors(tmp_path):
-    res = CliRunner().invoke(app, ["compare", str(DATA / "laserazosSM3-40.log"), "--pair", "5", "5",
-                                   "--init", "0.05", "-0.05", "5", "--truth", "0", "0", "0"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "compare",
+            str(DATA / "laserazosSM3-40.log"),
+            "--pair",
+            "5",
+            "5",
+            "--init",
+            "0.05",
+            "-0.05",
+            "5",
+            "--truth",
+            "0",
+            "0",
+            "0",
+        ],
+    )
     assert res.exit_code == 0, res.output
-    rows = {ln.split()[0]: ln.split() for ln in res.output.splitlines() if ln.split() and ln.split()[0] in ("icp", "mbicp", "improved", "psm", "pmwn")}
+    rows = {
+        ln.split()[0]: ln.split()
+        for ln in res.output.splitlines()
+        if ln.split() and ln.split()[0] in ("icp", "mbicp", "improved", "psm", "pmwn")
+    }
     assert set(rows) == {"icp", "mbicp", "improved", "psm", "pmwn"}
     for name, cols in rows.items():
         assert float(cols[4]) < 10.0 and float(cols[5]) < 0.2, (name, cols)  # err_mm, err_deg
@@ -182,11 +259,14 @@ def test_polar_recording_carries_cost_curves_and_the_circle(tmp_path):
     record([Run("pmwn", ref, obj, Pose2(), PmwnParams())], str(path), extra_observer=rec)
     counts = {}
     for c in RrdReader(str(path)).stream().to_chunks():
-        if "iteration" in c.to_record_batch().schema.names:  # per-iteration rows (not the static styles)
+        # per-iteration rows (not the static styles)
+        if "iteration" in c.to_record_batch().schema.names:
             counts[c.entity_path] = counts.get(c.entity_path, 0) + c.num_rows
     n = len(rec.iterations)
     assert counts["/pmwn/polar/cost/curve"] == n and counts["/pmwn/polar/cost/fit"] == n
-    assert counts["/pmwn/scene/polar/circle_points"] == n and counts["/pmwn/plots/metric_weight"] == n
+    assert (
+        counts["/pmwn/scene/polar/circle_points"] == n and counts["/pmwn/plots/metric_weight"] == n
+    )
     assert counts["/pmwn/polar/ranges/projected"] == n
 
 
@@ -201,7 +281,9 @@ def test_projection_compares_only_surfaces_facing_the_reference():
     cur = preprocess(wall, 1, 0.0, 30.0, 0.2)
     facing = project(grid, cur, Pose2())
     assert np.count_nonzero(np.isfinite(facing)) >= 39
-    np.testing.assert_allclose(facing[np.isfinite(facing)], wall.ranges[np.isfinite(facing)], atol=1e-9)
+    np.testing.assert_allclose(
+        facing[np.isfinite(facing)], wall.ranges[np.isfinite(facing)], atol=1e-9
+    )
     # the same wall after a half turn about (2, 0): it lies where it was, but its back faces us
     behind = project(grid, cur, Pose2(4.0, 0.0, math.pi))
     assert not np.isfinite(behind).any()
@@ -233,18 +315,22 @@ def test_projection_turns_with_the_scan(intel, k, m, x, y):
     K = 12
     base = project(grid, cur, Pose2(x, y, 0.0), K)
     turned = project(grid, cur, Pose2(0.0, 0.0, m * grid.step) @ Pose2(x, y, 0.0), K)
-    inner = slice(K + abs(m), K + grid.n - abs(m))  # bins whose shifted source lies inside the padding
-    shifted = base[inner.start - m: inner.stop - m]
+    # bins whose shifted source lies inside the padding
+    inner = slice(K + abs(m), K + grid.n - abs(m))
+    shifted = base[inner.start - m : inner.stop - m]
     both = np.isfinite(turned[inner]) & np.isfinite(shifted)
     assert np.count_nonzero(both) >= 0.95 * np.count_nonzero(np.isfinite(shifted))
     np.testing.assert_allclose(turned[inner][both], shifted[both], rtol=1e-6, atol=1e-9)
 
 
 def _held_from_the_truth(params) -> int:
-    """How many of the Intel excerpt's consecutive pairs, started at their corrected poses, stay there."""
+    """How many of the Intel excerpt's consecutive pairs, started at their corrected poses, stay "
+    "there."""
     ss = scans("intel")
     truths = [relative(a.pose, b.pose) for a, b in zip(ss, ss[1:])]
-    return sum(CONSECUTIVE.judge(match(a, b, t, params).pose, t) for a, b, t in zip(ss, ss[1:], truths))
+    return sum(
+        CONSECUTIVE.judge(match(a, b, t, params).pose, t) for a, b, t in zip(ss, ss[1:], truths)
+    )
 
 
 @pytest.mark.parametrize("params", [PsmParams, PmwnParams])
@@ -252,14 +338,22 @@ def test_surface_jacobian_holds_intel_corridors_where_diosis_model_drifts(params
     """Started at the corrected poses of Intel's consecutive pairs (the fixed point any guess can
     hope for), Diosi's translation model (range change u.dt) walks off along the corridors; the
     surface-aware step keeps the truth."""
-    diosi, surface = _held_from_the_truth(params()), _held_from_the_truth(params(surface_jacobian=True))
+    diosi, surface = (
+        _held_from_the_truth(params()),
+        _held_from_the_truth(params(surface_jacobian=True)),
+    )
     assert surface >= 0.93 * (len(scans("intel")) - 1)
     assert surface > diosi
 
 
-@given(st.lists(st.floats(0.2, 8.0), min_size=30, max_size=30), st.lists(st.floats(0.2, 8.0), min_size=34, max_size=34),
-       st.floats(0.05, 3.0))
-def test_capped_shift_cost_limits_every_difference_and_is_diosis_when_the_cap_is_loose(ref, proj, cap):
+@given(
+    st.lists(st.floats(0.2, 8.0), min_size=30, max_size=30),
+    st.lists(st.floats(0.2, 8.0), min_size=34, max_size=34),
+    st.floats(0.05, 3.0),
+)
+def test_capped_shift_cost_limits_every_difference_and_is_diosis_when_the_cap_is_loose(
+    ref, proj, cap
+):
     from mbicp_viz.core.polar import shift_costs
 
     ref_r, proj_ext = np.array(ref), np.array(proj)
@@ -277,11 +371,19 @@ def test_truncated_orientation_cost_keeps_intel_pairs_that_diosis_mean_turns_awa
     Diosi's mean and the turn runs away from the truth; capped at max_error, the bearings that
     agree decide (pairs 365 and 884 of the full log turn by 40 and 74 deg without the cap)."""
     for base in ({}, {"surface_jacobian": True}):
-        assert _held_from_the_truth(params(truncated_orientation=True, **base)) > _held_from_the_truth(params(**base))
+        assert _held_from_the_truth(
+            params(truncated_orientation=True, **base)
+        ) > _held_from_the_truth(params(**base))
 
 
-@given(st.lists(st.floats(-5.0, 5.0), min_size=50, max_size=120), st.integers(3, 40), st.floats(0.05, 2.0))
-def test_relaxed_cut_keeps_at_least_min_pairs_and_changes_nothing_when_enough_are_inside(e, min_pairs, max_error):
+@given(
+    st.lists(st.floats(-5.0, 5.0), min_size=50, max_size=120),
+    st.integers(3, 40),
+    st.floats(0.05, 2.0),
+)
+def test_relaxed_cut_keeps_at_least_min_pairs_and_changes_nothing_when_enough_are_inside(
+    e, min_pairs, max_error
+):
     from mbicp_viz.core.polar import preprocess, translation_residuals
 
     e = np.array(e)
@@ -313,11 +415,15 @@ def test_relaxed_cut_corrects_a_long_intel_move_that_ends_with_too_few_pairs(par
 
 
 @settings(max_examples=60)
-@given(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.lists(st.floats(0.05, 1.0), min_size=60, max_size=60),
-       st.booleans())
+@given(
+    st.floats(-0.5, 0.5),
+    st.floats(-0.5, 0.5),
+    st.lists(st.floats(0.05, 1.0), min_size=60, max_size=60),
+    st.booleans(),
+)
 def test_translation_step_solves_exact_residuals(tx, ty, weights, surface):
-    """Residuals made by a translation T under the step's own model (e_i = u_i . T, or with the surface
-    normals n_i: e_i (n_i . u_i) = n_i . T) give back T exactly, whatever the weights."""
+    """Residuals made by a translation T under the step's own model (e_i = u_i . T, or with the
+    surface normals n_i: e_i (n_i . u_i) = n_i . T) give back T exactly, whatever the weights."""
     from mbicp_viz.core.polar import preprocess, translation_step
 
     b = np.linspace(-1.5, 1.5, 60)
@@ -325,16 +431,25 @@ def test_translation_step_solves_exact_residuals(tx, ty, weights, surface):
     T = np.array([tx, ty])
     i = np.arange(60)
     if surface:
-        normals = np.column_stack((np.cos(2 * b + 0.3), np.sin(2 * b + 0.3)))  # n . u = cos(b + 0.3) > 0
+        # n . u = cos(b + 0.3) > 0
+        normals = np.column_stack((np.cos(2 * b + 0.3), np.sin(2 * b + 0.3)))
         e = normals @ T / np.einsum("ij,ij->i", normals, ref.rays)
     else:
         normals, e = None, ref.rays @ T
     step = translation_step(ref, i, e, np.array(weights), normals)
     np.testing.assert_allclose(step.dt, T, atol=1e-9)
-    assert step.error == pytest.approx(np.mean(e ** 2)) and step.mean_abs == pytest.approx(np.mean(np.abs(e)))
+    assert step.error == pytest.approx(np.mean(e**2)) and step.mean_abs == pytest.approx(
+        np.mean(np.abs(e))
+    )
 
 
-@given(st.lists(st.one_of(st.floats(0.0, 5.0), st.just(float("nan")), st.just(float("inf"))), min_size=1, max_size=40))
+@given(
+    st.lists(
+        st.one_of(st.floats(0.0, 5.0), st.just(float("nan")), st.just(float("inf"))),
+        min_size=1,
+        max_size=40,
+    )
+)
 def test_least_is_the_first_smallest_finite_cost(cost):
     from mbicp_viz.core.polar import least
 
@@ -346,15 +461,17 @@ def test_least_is_the_first_smallest_finite_cost(cost):
 
 @given(st.lists(st.floats(0.0, 10.0), min_size=1, max_size=40), st.integers(1, 21))
 def test_median_filter_is_scipys_with_the_ends_repeated(x, window):
-    from scipy.ndimage import median_filter
-
     from mbicp_viz.core.polar import median_nearest
+    from scipy.ndimage import median_filter
 
     x = np.array(x)
     assert np.array_equal(median_nearest(x, window), median_filter(x, size=window, mode="nearest"))
 
 
-@given(st.lists(st.tuples(st.floats(0.1, 5.0), st.booleans()), min_size=1, max_size=60), st.floats(0.05, 1.0))
+@given(
+    st.lists(st.tuples(st.floats(0.1, 5.0), st.booleans()), min_size=1, max_size=60),
+    st.floats(0.05, 1.0),
+)
 def test_segments_are_the_runs_of_close_valid_readings(beams, max_jump):
     """PSM §3 step 1: consecutive valid readings share a segment exactly when their ranges differ by
     at most max_jump; a reading with no such neighbour is in none."""

@@ -30,13 +30,14 @@ def documented_runs():
             m = re.search(r"mbicp-viz .*--params ([a-z0-9-]+)(`|\s|$)", command)
             if m is None:
                 continue
-            args = shlex.split(command[command.index("mbicp-viz"):].split("`")[0])
+            args = shlex.split(command[command.index("mbicp-viz") :].split("`")[0])
             algos = ["improved"]
             for flag in ("--algo", "--algos"):
                 if flag in args:
                     algos = args[args.index(flag) + 1].split(",")
             for algo in algos:
-                if not algo.isupper():  # "--algo A": any matcher, stands for the lines that name one
+                # "--algo A": any matcher, stands for the lines that name one
+                if not algo.isupper():
                     yield m.group(1), algo
 
 
@@ -52,7 +53,10 @@ def test_the_presets_are_package_data():
     patterns = setup["package-data"]["mbicp_viz.presets"]
     files = [p.name for p in PRESETS.iterdir()]
     assert "mbicp_viz.presets" in setup["packages"]
-    assert files and all(any(fnmatch.fnmatch(f, g) for g in patterns) for f in files), (files, patterns)
+    assert files and all(any(fnmatch.fnmatch(f, g) for g in patterns) for f in files), (
+        files,
+        patterns,
+    )
 
 
 def run(*args):
@@ -78,6 +82,13 @@ def test_a_name_that_is_no_preset_and_no_file_is_one_line(name, tmp_path, monkey
     monkeypatch.chdir(tmp_path)
     code, out = run("match", LASERAZOS, "--pair", 5, 6, "--params", name)
     lines = out.strip().splitlines()
-    assert code == 2 and len(lines) == 1 and lines[0].startswith("mbicp-viz: error:") and name in lines[0], out
+    assert (
+        code == 2
+        and len(lines) == 1
+        and lines[0].startswith("mbicp-viz: error:")
+        and name in lines[0]
+    ), out
     # a bare name lists the presets; a path is a path
-    assert ("poor-guess, robust-polar" in lines[0]) == ("/" not in name and "." not in name), lines[0]
+    assert ("poor-guess, robust-polar" in lines[0]) == ("/" not in name and "." not in name), lines[
+        0
+    ]

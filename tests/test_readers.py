@@ -16,7 +16,9 @@ def test_carmen_flaser_intel(intel):
     assert len(intel) == 60 and intel.skipped == {}  # NEFF lines were cut from the excerpt
     s = intel.scans[0]
     assert len(s.ranges) == 180 and s.n_valid > 100
-    assert s.bearings[0] == pytest.approx(-math.pi / 2) and s.bearings[-1] == pytest.approx(math.pi / 2)
+    assert s.bearings[0] == pytest.approx(-math.pi / 2) and s.bearings[-1] == pytest.approx(
+        math.pi / 2
+    )
     assert s.pose == s.odometry and s.pose.x == pytest.approx(0.600266)
     assert s.source.line is not None and s.stamp == pytest.approx(32.9068)
     assert len(intel.odometry) > 100  # ODOM lines
@@ -67,7 +69,7 @@ def test_csm_json_full_circle():
 def test_ros1_bag_with_damaged_index_is_recovered(hokuyo):
     from rosbags.highlevel import AnyReader
 
-    with pytest.raises(Exception):  # rosbags itself refuses this bag
+    with pytest.raises(Exception):  # noqa: B017 - rosbags itself refuses this bag, with its own types
         with AnyReader([HOKUYO_BAG]) as r:
             list(r.messages())
     assert len(hokuyo) == 360
@@ -90,13 +92,24 @@ def _write_bag(path, scans, version):
 
     def msg(s, k):
         sec = int(s.stamp)
-        head = Header(seq=k, stamp=Time(sec=sec, nanosec=int((s.stamp - sec) * 1e9)), frame_id="laser") \
-            if version == 1 else Header(stamp=Time(sec=sec, nanosec=int((s.stamp - sec) * 1e9)), frame_id="laser")
+        head = (
+            Header(seq=k, stamp=Time(sec=sec, nanosec=int((s.stamp - sec) * 1e9)), frame_id="laser")
+            if version == 1
+            else Header(stamp=Time(sec=sec, nanosec=int((s.stamp - sec) * 1e9)), frame_id="laser")
+        )
         inc = float(s.bearings[1] - s.bearings[0])
-        return LaserScan(header=head, angle_min=float(s.bearings[0]), angle_max=float(s.bearings[-1]),
-                         angle_increment=inc, time_increment=0.0, scan_time=0.1, range_min=0.02, range_max=5.6,
-                         ranges=np.where(s.valid, s.ranges, 0.0).astype(np.float32),
-                         intensities=np.zeros(0, np.float32))
+        return LaserScan(
+            header=head,
+            angle_min=float(s.bearings[0]),
+            angle_max=float(s.bearings[-1]),
+            angle_increment=inc,
+            time_increment=0.0,
+            scan_time=0.1,
+            range_min=0.02,
+            range_max=5.6,
+            ranges=np.where(s.valid, s.ranges, 0.0).astype(np.float32),
+            intensities=np.zeros(0, np.float32),
+        )
 
     if version == 1:
         from rosbags.rosbag1 import Writer
@@ -104,14 +117,22 @@ def _write_bag(path, scans, version):
         with Writer(path) as w:
             conn = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=store)
             for k, s in enumerate(scans):
-                w.write(conn, int(s.stamp * 1e9), store.serialize_ros1(msg(s, k), "sensor_msgs/msg/LaserScan"))
+                w.write(
+                    conn,
+                    int(s.stamp * 1e9),
+                    store.serialize_ros1(msg(s, k), "sensor_msgs/msg/LaserScan"),
+                )
     else:
         from rosbags.rosbag2 import Writer
 
         with Writer(path, version=8) as w:
             conn = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=store)
             for k, s in enumerate(scans):
-                w.write(conn, int(s.stamp * 1e9), store.serialize_cdr(msg(s, k), "sensor_msgs/msg/LaserScan"))
+                w.write(
+                    conn,
+                    int(s.stamp * 1e9),
+                    store.serialize_cdr(msg(s, k), "sensor_msgs/msg/LaserScan"),
+                )
 
 
 @pytest.mark.parametrize("version", [1, 2])
@@ -133,8 +154,12 @@ def test_plain_text_and_npz_round_trip(tmp_path, intel):
     lines = ["# mbicp-viz scans v1: angle_min_rad angle_increment_rad range_1_m ..."]
     for s in scans:
         r = np.where(s.valid, s.ranges, np.nan)
-        lines.append(" ".join([repr(float(s.bearings[0])), repr(float(s.bearings[1] - s.bearings[0]))]
-                              + [repr(float(v)) for v in r]))
+        lines.append(
+            " ".join(
+                [repr(float(s.bearings[0])), repr(float(s.bearings[1] - s.bearings[0]))]
+                + [repr(float(v)) for v in r]
+            )
+        )
     txt.write_text("\n".join(lines) + "\n")
     npz = tmp_path / "pair.npz"
     write_npz(npz, scans)
@@ -151,11 +176,15 @@ def test_rawlaser_and_robotlaser_lines_read_like_flaser(tmp_path, intel):
     lines_raw, lines_robot = [], []
     for s in intel.scans[:3]:
         n = len(s.ranges)
-        head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n} " + " ".join(str(float(v)) for v in s.ranges)
+        head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n} " + " ".join(
+            str(float(v)) for v in s.ranges
+        )
         lines_raw.append(f"RAWLASER1 {head} 0 {s.stamp} host {s.stamp}")
         p, o = s.pose, s.odometry
-        lines_robot.append(f"ROBOTLASER1 {head} 0 {p.x} {p.y} {p.theta} {o.x} {o.y} {o.theta} 0 0 0 0 0 "
-                           f"{s.stamp} host {s.stamp}")
+        lines_robot.append(
+            f"ROBOTLASER1 {head} 0 {p.x} {p.y} {p.theta} {o.x} {o.y} {o.theta} 0 0 0 0 0 "
+            f"{s.stamp} host {s.stamp}"
+        )
     for name, lines in (("raw.log", lines_raw), ("robot.log", lines_robot)):
         path = tmp_path / name
         path.write_text("\n".join(lines) + "\n")
@@ -171,16 +200,20 @@ def test_rawlaser_and_robotlaser_lines_read_like_flaser(tmp_path, intel):
 
 def two_lasers(path, intel, n_scans=4):
     """A CARMEN log of Intel's scans 0.. as FLASER and RAWLASER1 at the same instants (one laser,
-    logged twice) and its scans 10.. as RAWLASER2 (another laser), interleaved as a logger writes them."""
+    logged twice) and its scans 10.. as RAWLASER2 (another laser), interleaved as a logger writes
+    them."""
     lines = []
     for k, s in enumerate(intel.scans[:n_scans]):
         n, ranges = len(s.ranges), " ".join(str(float(v)) for v in s.ranges)
         p, o = s.pose, s.odometry
         other = " ".join(str(float(v)) for v in intel.scans[10 + k].ranges)
         head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n}"
-        lines += [f"FLASER {n} {ranges} {p.x} {p.y} {p.theta} {o.x} {o.y} {o.theta} {s.stamp} host {s.stamp}",
-                  f"RAWLASER1 {head} {ranges} 0 {s.stamp} host {s.stamp}",
-                  f"RAWLASER2 {head} {other} 0 {s.stamp} host {s.stamp}"]
+        lines += [
+            f"FLASER {n} {ranges} {p.x} {p.y} {p.theta} {o.x} {o.y} {o.theta} {s.stamp} host "
+            f"{s.stamp}",
+            f"RAWLASER1 {head} {ranges} 0 {s.stamp} host {s.stamp}",
+            f"RAWLASER2 {head} {other} 0 {s.stamp} host {s.stamp}",
+        ]
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -190,41 +223,64 @@ def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_p
     time, named like a bag's topic; unnamed, the front laser with its poses, and a note says so."""
     path = two_lasers(tmp_path / "two-lasers.log", intel)
     log = read_log(path)
-    assert log.topic == "FLASER" and np.allclose(log.scans[1].pose.as_array(), intel.scans[1].pose.as_array())
-    assert log.notes == [f"{path}: read FLASER (4 scans), the front laser with its poses; the log also has RAWLASER1 "
-                         "(4 scans); RAWLASER2 (4 scans): --topic (in the debugger: scan stream) reads another"]
+    assert log.topic == "FLASER" and np.allclose(
+        log.scans[1].pose.as_array(), intel.scans[1].pose.as_array()
+    )
+    assert log.notes == [
+        f"{path}: read FLASER (4 scans), the front laser with its poses; the log also has "
+        "RAWLASER1 "
+        "(4 scans); RAWLASER2 (4 scans): --topic (in the debugger: scan stream) reads another"
+    ]
     path.write_text("PARAM robot_frontlaser_offset 0.2 host 0\n" + path.read_text())
     for kind, first in (("FLASER", 0), ("RAWLASER1", 0), ("RAWLASER2", 10)):
         log = read_log(path, ReadOptions(topic=kind))
-        assert len(log) == 4 and log.topic == kind and list(log.scan_topics) == ["FLASER", "RAWLASER1", "RAWLASER2"]
+        assert (
+            len(log) == 4
+            and log.topic == kind
+            and list(log.scan_topics) == ["FLASER", "RAWLASER1", "RAWLASER2"]
+        )
         # the front laser's mount is laser 1's, not laser 2's
         assert (log.frames.mount_source == "PARAM robot_frontlaser_offset") == (kind != "RAWLASER2")
-        for a, b in zip(log.scans, intel.scans[first:first + 4]):
+        for a, b in zip(log.scans, intel.scans[first : first + 4]):
             np.testing.assert_allclose(a.points(), b.points(), atol=1e-9)
     with pytest.raises(InputError, match="no 'ROBOTLASER1' scans; the log has: FLASER"):
         read_log(path, ReadOptions(topic="ROBOTLASER1"))
     assert read_log(DATA / "laserazosSM3-40.log").topic is None  # one type: nothing to choose
     assert read_log(path, ReadOptions(topic="RAWLASER2")).notes == []  # named: nothing to say
-    # a front laser logged raw beside another laser: the front one; no front laser: nothing to prefer
+    # a front laser logged raw beside another laser: the front one; no front laser: nothing to
+    # prefer
     rear = tmp_path / "rear.log"
-    rear.write_text("".join(line + "\n" for line in path.read_text().splitlines() if not line.startswith("FLASER")))
+    rear.write_text(
+        "".join(
+            line + "\n" for line in path.read_text().splitlines() if not line.startswith("FLASER")
+        )
+    )
     assert read_log(rear).topic == "RAWLASER1"
     rear.write_text(rear.read_text().replace("RAWLASER1 ", "RAWLASER3 "))
     with pytest.raises(InputError) as e:
         read_log(rear)
     assert e.value.field == "--topic"
-    assert "2 laser message types, choose one with --topic: RAWLASER3 (4 scans); RAWLASER2 (4 scans)" in str(e.value)
+    assert (
+        "2 laser message types, choose one with --topic: RAWLASER3 (4 scans); RAWLASER2 (4 scans)"
+        in str(e.value)
+    )
 
     from mbicp_viz.views.debugger.sources import files_source
     from mbicp_viz.views.debugger.state import DebugState
 
-    state = DebugState(files_source(str(path), None, guess="identity", options=ReadOptions(topic="FLASER")))
+    state = DebugState(
+        files_source(str(path), None, guess="identity", options=ReadOptions(topic="FLASER"))
+    )
     assert state.rematch() is None and state.set_topic("RAWLASER2") is None  # the debugger's picker
-    assert state.pair == (0, 1) and np.allclose(state.ref.points(), intel.scans[10].points(), atol=1e-9)
+    assert state.pair == (0, 1) and np.allclose(
+        state.ref.points(), intel.scans[10].points(), atol=1e-9
+    )
 
 
-@pytest.mark.parametrize("n, span_deg, noted", [(361, 180.0, False), (180, 180.0, False), (401, 100.0, False),
-                                                (682, 180.0, True)])
+@pytest.mark.parametrize(
+    "n, span_deg, noted",
+    [(361, 180.0, False), (180, 180.0, False), (401, 100.0, False), (682, 180.0, True)],
+)
 def test_flaser_bearings_follow_the_beam_count_as_carmen_guesses_them(tmp_path, n, span_deg, noted):
     """FLASER stores no field of view: a SICK's counts span 180 degrees (CSM), 400-401 readings its
     100-degree mode (CARMEN's readlog.c); any other count is read over 180 degrees, and said so."""
@@ -233,5 +289,10 @@ def test_flaser_bearings_follow_the_beam_count_as_carmen_guesses_them(tmp_path, 
     path.write_text("".join(f"FLASER {n} {ranges} 0 0 0 0 0 0 {t} host {t}\n" for t in (1.0, 2.0)))
     log = read_log(path)
     b = log.scans[0].bearings
-    assert np.degrees(b[-1] - b[0]) == pytest.approx(span_deg) and np.degrees(b[0]) == pytest.approx(-span_deg / 2)
-    assert any("FLASER stores no field of view" in note and str(n) in note for note in log.notes) == noted
+    assert np.degrees(b[-1] - b[0]) == pytest.approx(span_deg) and np.degrees(
+        b[0]
+    ) == pytest.approx(-span_deg / 2)
+    assert (
+        any("FLASER stores no field of view" in note and str(n) in note for note in log.notes)
+        == noted
+    )

@@ -9,17 +9,23 @@ from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
 from mbicp_viz.evaluation.scenarios import load_scenario, recordings_dir, scenario_paths
-
-RECORDINGS = recordings_dir()
 from mbicp_viz.views.scene import OBJECT, REFERENCE
 
 from .conftest import RERUN, viewer_screenshot
+
+RECORDINGS = recordings_dir()
 
 NAMES = [p.stem for p in scenario_paths()]
 
 
 def test_the_five_curated_scenarios_exist():
-    assert set(NAMES) == {"partial-overlap", "large-rotation", "corridor", "csm-stallo2", "hokuyo-handheld"}
+    assert set(NAMES) == {
+        "partial-overlap",
+        "large-rotation",
+        "corridor",
+        "csm-stallo2",
+        "hokuyo-handheld",
+    }
     for p in scenario_paths():
         s = load_scenario(p)
         assert s.note.strip() and s.params
@@ -36,8 +42,18 @@ def regenerated(tmp_path_factory):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_regenerated_recording_equals_the_committed_one(regenerated, name):
-    res = subprocess.run([RERUN, "rrd", "compare", "--unordered", str(RECORDINGS / f"{name}.rrd"),
-                          str(regenerated / f"{name}.rrd")], capture_output=True, text=True)
+    res = subprocess.run(
+        [
+            RERUN,
+            "rrd",
+            "compare",
+            "--unordered",
+            str(RECORDINGS / f"{name}.rrd"),
+            str(regenerated / f"{name}.rrd"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
 
 
@@ -49,7 +65,8 @@ def summary(name, out_dir) -> dict[str, str]:
 def test_scenarios_show_what_their_notes_promise(tmp_path):
     partial = summary("partial-overlap", tmp_path)
     error_mm = {m: float(partial[m].split("; ")[1].split(" mm")[0]) for m in ("mbicp", "improved")}
-    assert error_mm["improved"] < 2.0 and error_mm["mbicp"] > 100.0  # improved lands, standard does not
+    # improved lands, standard does not
+    assert error_mm["improved"] < 2.0 and error_mm["mbicp"] > 100.0
     rotation = summary("large-rotation", tmp_path)
     assert "1950.0 mm, 61.248 deg from the known answer" in rotation["icp"]
     assert "; 0.0 mm, 0.001 deg from the known answer" in rotation["mbicp"]

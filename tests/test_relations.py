@@ -16,9 +16,21 @@ OFFSET = "976052857.337"
 
 def test_relations_are_matched_and_scored(tmp_path):
     out = tmp_path / "rel.json"
-    res = CliRunner().invoke(app, ["eval", "relations", str(DATA / "intel-relations.log"),
-                                   str(DATA / "intel-relations.relations"), "--offset", OFFSET, "--algo", "psm",
-                                   "--out", str(out)])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "relations",
+            str(DATA / "intel-relations.log"),
+            str(DATA / "intel-relations.relations"),
+            "--offset",
+            OFFSET,
+            "--algo",
+            "psm",
+            "--out",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "8 relations matched" in res.output and "median" in res.output
     rows = json.loads(out.read_text())
@@ -32,8 +44,15 @@ def test_relations_are_matched_and_scored(tmp_path):
 
 
 def test_without_the_offset_nothing_matches():
-    res = CliRunner().invoke(app, ["eval", "relations", str(DATA / "intel-relations.log"),
-                                   str(DATA / "intel-relations.relations")])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "relations",
+            str(DATA / "intel-relations.log"),
+            str(DATA / "intel-relations.relations"),
+        ],
+    )
     assert res.exit_code == 0 and "no relation had a scan at both ends" in res.output
 
 

@@ -19,7 +19,9 @@ pytestmark = pytest.mark.shared
 
 def overlap_blocks():
     text = DOC.read_text()
-    for m in re.finditer(r"```\n(mbicp-viz eval overlap [^\n]+)\n```\n\n(.*?)\n(?=###|What this shows)", text, re.S):
+    for m in re.finditer(
+        r"```\n(mbicp-viz eval overlap [^\n]+)\n```\n\n(.*?)\n(?=###|What this shows)", text, re.S
+    ):
         yield m.group(1), m.group(2).strip()
 
 
@@ -51,7 +53,15 @@ def run(command: str, tmp_path=None) -> str:
 def test_the_doc_lists_every_evaluation():
     assert len(list(overlap_blocks())) == 7
     kinds = {shlex.split(c)[2] for c, _ in console_commands()}
-    assert kinds == {"protocol", "sequence", "ceiling", "relations", "basin", "corridor", "covariance"}
+    assert kinds == {
+        "protocol",
+        "sequence",
+        "ceiling",
+        "relations",
+        "basin",
+        "corridor",
+        "covariance",
+    }
 
 
 @pytest.mark.parametrize("command, table", list(overlap_blocks()))

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from mbicp_viz.core import MATCHERS
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.core import MATCHERS
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.failures import failed, failure_reason, worst_first
 from mbicp_viz.readers.rows import read_rows
@@ -28,8 +28,22 @@ LOG = DATA / "intel-relations.log"
 def rows_file(tmp_path_factory):
     """A real evaluation of a real Intel piece, from the identity (so that some pairs fail)."""
     out = tmp_path_factory.mktemp("rows") / "rows.json"
-    res = CliRunner().invoke(app, ["eval", "sequence", str(LOG), "--guess", "identity", "--truth", "pose",
-                                   "--out", str(out), "--workers", "1"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(LOG),
+            "--guess",
+            "identity",
+            "--truth",
+            "pose",
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "worst failures of" in res.output and f"--rows {out}" in res.output
     return out
@@ -41,8 +55,11 @@ def test_rows_read_back_as_written(rows_file):
     assert [(r.ref, r.obj) for r in rows] == [(w["ref"], w["obj"]) for w in written]
     for r, w in zip(rows, written):
         assert r.params.as_dict() == w["params"] and r.algorithm == w["algorithm"] == "improved"
-        assert [r.guess.x, r.guess.y, r.guess.theta] == w["guess_pose"] and r.success == w["success"]
-        assert rows_file.read_text().split("\n")[r.line - 1].strip() == "{"  # the line its object starts on
+        assert [r.guess.x, r.guess.y, r.guess.theta] == w["guess_pose"] and r.success == w[
+            "success"
+        ]
+        # the line its object starts on
+        assert rows_file.read_text().split("\n")[r.line - 1].strip() == "{"
 
 
 def test_failures_worst_first_with_a_reason(rows_file):
@@ -71,9 +88,16 @@ def test_every_failure_reopens_exactly_as_it_failed(rows_file):
         assert state.open_row(row) is None
         assert state.algorithms == [row.algorithm] and state.params[row.algorithm] == row.params
         pose = state.runs[0].result.pose
-        assert math.hypot(pose.x - row.pose.x, pose.y - row.pose.y) < 1e-9 and abs(pose.theta - row.pose.theta) < 1e-9
+        assert (
+            math.hypot(pose.x - row.pose.x, pose.y - row.pose.y) < 1e-9
+            and abs(pose.theta - row.pose.theta) < 1e-9
+        )
         text = state.result_markdown()
-        assert f"line {row.line}" in text and "this run reproduces it" in text and failure_reason(row) in text
+        assert (
+            f"line {row.line}" in text
+            and "this run reproduces it" in text
+            and failure_reason(row) in text
+        )
     # change what the evaluation ran with: the page says the run no longer reproduces it
     assert state.set_params(row.algorithm, {"MaxIter": "3"}) is None
     assert "this run differs from it" in state.result_markdown()
@@ -88,20 +112,29 @@ def test_rows_from_another_log_are_refused(rows_file, tmp_path):
         files_source(str(LOG), None, rows=str(bad))
     line = read_rows(bad)[2].line
     assert e.value.line == line and e.value.field == "obj" and "another log" in e.value.message
-    res = CliRunner().invoke(app, ["serve", str(LOG), "--rows", str(bad), "--port", "0", "--for-seconds", "0"])
-    assert res.exit_code == 2 and f"other.json:{line}: obj:" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(
+        app, ["serve", str(LOG), "--rows", str(bad), "--port", "0", "--for-seconds", "0"]
+    )
+    assert (
+        res.exit_code == 2
+        and f"other.json:{line}: obj:" in res.output
+        and "Traceback" not in res.output
+    )
 
 
-@pytest.mark.parametrize("change, field", [
-    (lambda r: r.pop("guess_pose"), "guess_pose"),
-    (lambda r: r.update(params={**r["params"], "Bw": -1.0}), "params.Bw"),
-    (lambda r: r.update(params={**r["params"], "nope": 1}), "params.nope"),
-    (lambda r: r.update(algorithm="ransac"), "algorithm"),
-    (lambda r: r.update(ref=1.5), "ref"),
-    (lambda r: r.update(converged="yes"), "converged"),
-    (lambda r: r.update(guess_pose=[0, 0]), "guess_pose"),
-    (lambda r: r.update(error_xy=float("nan")), "error_xy"),
-])
+@pytest.mark.parametrize(
+    "change, field",
+    [
+        (lambda r: r.pop("guess_pose"), "guess_pose"),
+        (lambda r: r.update(params={**r["params"], "Bw": -1.0}), "params.Bw"),
+        (lambda r: r.update(params={**r["params"], "nope": 1}), "params.nope"),
+        (lambda r: r.update(algorithm="ransac"), "algorithm"),
+        (lambda r: r.update(ref=1.5), "ref"),
+        (lambda r: r.update(converged="yes"), "converged"),
+        (lambda r: r.update(guess_pose=[0, 0]), "guess_pose"),
+        (lambda r: r.update(error_xy=float("nan")), "error_xy"),
+    ],
+)
 def test_a_bad_field_names_its_line(rows_file, tmp_path, change, field):
     rows = json.loads(rows_file.read_text())
     change(rows[3])
@@ -133,22 +166,55 @@ def test_rows_remember_the_scan_stream_and_reopen_only_on_it(tmp_path, intel):
     another, the debugger refuses them instead of opening other scans under the same numbers."""
     log = two_lasers(tmp_path / "two.log", intel, 6)
     out = tmp_path / "rows.json"
-    res = CliRunner().invoke(app, ["eval", "sequence", str(log), "--topic", "RAWLASER2", "--guess", "identity",
-                                   "--out", str(out), "--workers", "1"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(log),
+            "--topic",
+            "RAWLASER2",
+            "--guess",
+            "identity",
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert {r.stream for r in read_rows(out)} == {"RAWLASER2"}
     from mbicp_viz.readers import ReadOptions
 
-    state = DebugState(files_source(str(log), None, rows=str(out), options=ReadOptions(topic="RAWLASER2")))
+    state = DebugState(
+        files_source(str(log), None, rows=str(out), options=ReadOptions(topic="RAWLASER2"))
+    )
     assert state.rematch() is None and state.source.log.topic == "RAWLASER2"
     assert np.allclose(state.ref.points(), intel.scans[10 + state.pair[0]].points(), atol=1e-9)
     with pytest.raises(InputError) as e:
         files_source(str(log), None, rows=str(out), options=ReadOptions(topic="FLASER"))
     assert e.value.field == "stream" and "--topic RAWLASER2" in e.value.message
     # unnamed: the front laser, and the command says which it read and how to read another
-    res = CliRunner().invoke(app, ["eval", "sequence", str(log), "--guess", "identity", "--out", str(out),
-                                   "--workers", "1", "--limit", "2"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(log),
+            "--guess",
+            "identity",
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+            "--limit",
+            "2",
+        ],
+    )
     assert res.exit_code == 0, res.output
-    assert "read FLASER (6 scans), the front laser with its poses; the log also has RAWLASER1 (6 scans); " \
-           "RAWLASER2 (6 scans): --topic (in the debugger: scan stream) reads another" in res.stderr
+    assert (
+        "read FLASER (6 scans), the front laser with its poses; the log also has RAWLASER1 (6 "
+        "scans); "
+        "RAWLASER2 (6 scans): --topic (in the debugger: scan stream) reads another" in res.stderr
+    )
     assert {r.stream for r in read_rows(out)} == {"FLASER"}

@@ -5,9 +5,9 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
+from mbicp_viz.core import ImprovedParams, MbicpParams, PairKind, PairStatus, Pose2, Recorder
 from rerun.chunk import RrdReader
 
-from mbicp_viz.core import ImprovedParams, MbicpParams, PairKind, PairStatus, Pose2, Recorder
 from mbicp_viz.views.rrd import Run, record
 
 from .conftest import RERUN, free_port, viewer_screenshot, wait_for
@@ -34,7 +34,12 @@ def recorded(tmp_path_factory, intel):
     path = tmp_path_factory.mktemp("rrd") / "match.rrd"
     rec = Recorder()
     ref, obj = intel.scans[11], intel.scans[12]
-    record([Run(ROOT, ref, obj, Pose2(), ImprovedParams())], str(path), teaching=True, extra_observer=rec)
+    record(
+        [Run(ROOT, ref, obj, Pose2(), ImprovedParams())],
+        str(path),
+        teaching=True,
+        extra_observer=rec,
+    )
     return path, rec
 
 
@@ -45,13 +50,19 @@ def by_iteration(values):
 def test_counts_by_kind_and_rejections_match_the_events(recorded):
     path, rec = recorded
     cols = columns(path)
-    strips = {k: by_iteration(cols[f"/{ROOT}/scene/pairs/{k}"]["LineStrips2D:strips"])
-              for k in ("point", "interpolated", "rejected")}
+    strips = {
+        k: by_iteration(cols[f"/{ROOT}/scene/pairs/{k}"]["LineStrips2D:strips"])
+        for k in ("point", "interpolated", "rejected")
+    }
     for e in rec.iterations:
         p = e.pairs
         kept = p.status == PairStatus.KEPT
-        assert len(strips["point"][e.iteration]) == np.count_nonzero(kept & (p.kind == PairKind.POINT))
-        assert len(strips["interpolated"][e.iteration]) == np.count_nonzero(kept & (p.kind == PairKind.INTERPOLATED))
+        assert len(strips["point"][e.iteration]) == np.count_nonzero(
+            kept & (p.kind == PairKind.POINT)
+        )
+        assert len(strips["interpolated"][e.iteration]) == np.count_nonzero(
+            kept & (p.kind == PairKind.INTERPOLATED)
+        )
         assert len(strips["rejected"][e.iteration]) == np.count_nonzero(~kept)
     assert any(len(v) for v in strips["interpolated"].values())
     assert any(len(v) for v in strips["rejected"].values())
@@ -97,10 +108,17 @@ def test_two_generations_compare_equal(tmp_path, intel):
     paths = []
     for k in range(2):
         p = tmp_path / f"run{k}.rrd"
-        record([Run("mbicp", intel.scans[20], intel.scans[21], Pose2(), MbicpParams()),
-                Run("improved", intel.scans[20], intel.scans[21], Pose2(), ImprovedParams())], str(p))
+        record(
+            [
+                Run("mbicp", intel.scans[20], intel.scans[21], Pose2(), MbicpParams()),
+                Run("improved", intel.scans[20], intel.scans[21], Pose2(), ImprovedParams()),
+            ],
+            str(p),
+        )
         paths.append(str(p))
-    res = subprocess.run([RERUN, "rrd", "compare", "--unordered", *paths], capture_output=True, text=True)
+    res = subprocess.run(
+        [RERUN, "rrd", "compare", "--unordered", *paths], capture_output=True, text=True
+    )
     assert res.returncode == 0, res.stderr
     assert {"/mbicp/scene/reference", "/improved/scene/reference"} <= set(columns(paths[0]))
 
@@ -113,8 +131,20 @@ def test_eval_sequence_records_the_scan_timeline(tmp_path):
     from .conftest import LASERAZOS
 
     rrd = tmp_path / "seq.rrd"
-    res = CliRunner().invoke(app, ["eval", "sequence", str(LASERAZOS), "--out", str(tmp_path / "s.json"),
-                                   "--limit", "6", "--rrd", str(rrd)])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(LASERAZOS),
+            "--out",
+            str(tmp_path / "s.json"),
+            "--limit",
+            "6",
+            "--rrd",
+            str(rrd),
+        ],
+    )
     assert res.exit_code == 0, res.output
     cols = columns(rrd)
     maps = [p for p in cols if p.startswith("/sequence/sequence/map/scan_")]
@@ -147,9 +177,22 @@ def test_serve_binds_loopback_only(tmp_path):
     from .conftest import DATA
 
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "mbicp_viz", "match", str(DATA / "datos.off"), str(DATA / "datos.off"),
-                             "--serve", "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "mbicp_viz",
+            "match",
+            str(DATA / "datos.off"),
+            str(DATA / "datos.off"),
+            "--serve",
+            "--port",
+            str(port),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
     try:
         wait_for(lambda: _listeners(port), 60.0)
         assert _listeners(port) == {"0100007F"}, _listeners(port)  # 127.0.0.1, never 0.0.0.0
@@ -172,15 +215,32 @@ def test_connect_streams_into_a_running_viewer_server(tmp_path):
 
     port = free_port()
     saved = tmp_path / "received.rrd"
-    server = subprocess.Popen([RERUN, "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    server = subprocess.Popen(
+        [RERUN, "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:
         wait_for(lambda: _listeners(port), 30.0)
-        res = subprocess.run([sys.executable, "-m", "mbicp_viz", "match", str(DATA / "datos.off"),
-                              str(DATA / "datos.off"), "--connect", f"rerun+http://127.0.0.1:{port}/proxy"],
-                             capture_output=True, text=True, timeout=60)
+        res = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "mbicp_viz",
+                "match",
+                str(DATA / "datos.off"),
+                str(DATA / "datos.off"),
+                "--connect",
+                f"rerun+http://127.0.0.1:{port}/proxy",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert res.returncode == 0, res.stderr
-        wait_for(lambda: WANTED <= _saved_paths(saved), 30.0)  # until the server has saved what the run streamed
+        # until the server has saved what the run streamed
+        wait_for(lambda: WANTED <= _saved_paths(saved), 30.0)
     finally:
         os.killpg(server.pid, signal.SIGINT)
         server.wait(timeout=30)
@@ -191,7 +251,8 @@ WANTED = {"/improved/scene/reference", "/improved/scene/pairs/point", "/improved
 
 
 def _saved_paths(path) -> set[str]:
-    """Entity paths in a file a live server is still writing (no footer yet; maybe cut mid-chunk)."""
+    """Entity paths in a file a live server is still writing (no footer yet; maybe cut "
+    "mid-chunk)."""
     import warnings
 
     try:
@@ -214,15 +275,30 @@ def test_rerun_viewer_shows_scenes_y_up_as_the_debugger(tmp_path, intel):
     pts = intel.scan(5).points()
     path, shot = tmp_path / "yup.rrd", tmp_path / "yup.png"
     stream = new_stream("mbicp-viz/y-up")
-    stream.save(str(path), default_blueprint=rrb.Blueprint(y_up_view("/run/scene", "scans"), collapse_panels=True))
+    stream.save(
+        str(path),
+        default_blueprint=rrb.Blueprint(y_up_view("/run/scene", "scans"), collapse_panels=True),
+    )
     log_y_up(stream, "run/scene")
-    log_layer(stream, "run", scene.Points("scene/left", pts[pts[:, 1] > 0.5], scene.REFERENCE, 0.15), static=True)
-    log_layer(stream, "run", scene.Points("scene/right", pts[pts[:, 1] < -0.5], scene.OBJECT, 0.15), static=True)
+    log_layer(
+        stream,
+        "run",
+        scene.Points("scene/left", pts[pts[:, 1] > 0.5], scene.REFERENCE, 0.15),
+        static=True,
+    )
+    log_layer(
+        stream,
+        "run",
+        scene.Points("scene/right", pts[pts[:, 1] < -0.5], scene.OBJECT, 0.15),
+        static=True,
+    )
     stream.flush()
     stream.disconnect()
     img = viewer_screenshot(path, shot, "900x700")
     img = img[:, : img.shape[1] // 2]  # the left half: away from the viewer's notifications
-    rows = {name: np.flatnonzero(np.abs(img - np.array(s.color)).max(axis=2).min(axis=1) < 40)
-            for name, s in (("red", scene.REFERENCE), ("blue", scene.OBJECT))}
+    rows = {
+        name: np.flatnonzero(np.abs(img - np.array(s.color)).max(axis=2).min(axis=1) < 40)
+        for name, s in (("red", scene.REFERENCE), ("blue", scene.OBJECT))
+    }
     assert len(rows["red"]) > 5 and len(rows["blue"]) > 5
     assert rows["red"].mean() < rows["blue"].mean()  # image rows grow downwards: red is drawn above

@@ -3,7 +3,6 @@
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
-
 from mbicp_viz.core import Pose2, pose_error, relative, wrap_angle
 
 coord = st.floats(-50, 50, allow_nan=False)
@@ -13,7 +12,9 @@ points = st.lists(st.tuples(coord, coord), min_size=1, max_size=10).map(np.array
 
 
 def close(a: Pose2, b: Pose2, tol=1e-9):
-    return abs(a.x - b.x) < tol and abs(a.y - b.y) < tol and abs(wrap_angle(a.theta - b.theta)) < tol
+    return (
+        abs(a.x - b.x) < tol and abs(a.y - b.y) < tol and abs(wrap_angle(a.theta - b.theta)) < tol
+    )
 
 
 @given(poses, poses, poses)
@@ -41,7 +42,9 @@ def test_apply_follows_composition(a, b, p):
 @given(poses, points)
 def test_apply_is_rigid(a, p):
     q = a.apply(p)
-    np.testing.assert_allclose(np.linalg.norm(q - q[:1], axis=1), np.linalg.norm(p - p[:1], axis=1), atol=1e-8)
+    np.testing.assert_allclose(
+        np.linalg.norm(q - q[:1], axis=1), np.linalg.norm(p - p[:1], axis=1), atol=1e-8
+    )
 
 
 def test_frame_convention_maps_child_into_parent():

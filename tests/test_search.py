@@ -6,13 +6,13 @@ import math
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from typer.testing import CliRunner
-
 from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error, relative
 from mbicp_viz.core.search import SearchParams, correlative_search, likelihood_field
+from typer.testing import CliRunner
+
 from mbicp_viz.cli import app
-from mbicp_viz.evaluation.pairs import seen_from
 from mbicp_viz.evaluation.criteria import CONSECUTIVE
+from mbicp_viz.evaluation.pairs import seen_from
 
 from .conftest import INTEL
 
@@ -22,7 +22,12 @@ def success(pose: Pose2, truth: Pose2) -> bool:
 
 
 @settings(max_examples=12, deadline=None)
-@given(x=st.floats(-1.2, 1.2), y=st.floats(-1.2, 1.2), theta_deg=st.floats(-35.0, 35.0), k=st.integers(0, 59))
+@given(
+    x=st.floats(-1.2, 1.2),
+    y=st.floats(-1.2, 1.2),
+    theta_deg=st.floats(-35.0, 35.0),
+    k=st.integers(0, 59),
+)
 def test_search_finds_a_large_known_displacement(intel, x, y, theta_deg, k):
     """A real scan seen from a pose up to 1.2 m and 35 deg away (far outside any local matcher's
     basin): the coarse pass lands within a grid step of the truth, the fine pass within a few of its
@@ -42,14 +47,18 @@ def test_search_stays_inside_its_window(intel):
     p = SearchParams(window_xy=0.3, window_theta=math.radians(5.0))
     found = correlative_search(ref, obj, guess, p)
     d = relative(guess, found.coarse)
-    assert abs(found.coarse.x - guess.x) <= 0.3 + 1e-9 and abs(found.coarse.y - guess.y) <= 0.3 + 1e-9
+    assert (
+        abs(found.coarse.x - guess.x) <= 0.3 + 1e-9 and abs(found.coarse.y - guess.y) <= 0.3 + 1e-9
+    )
     assert abs(d.theta) <= math.radians(5.0) + 1e-9
     assert len(found.angles) == 11 and found.score == found.best_per_angle.max()
     # the fine pass looks within 1.5 coarse cells (in whole fine cells) and 2 coarse angle steps of
     # the coarse best
     d = relative(found.coarse, found.pose)
     reach = round(1.5 * p.cell / p.fine_cell) * p.fine_cell + 1e-9
-    assert abs(found.pose.x - found.coarse.x) <= reach and abs(found.pose.y - found.coarse.y) <= reach
+    assert (
+        abs(found.pose.x - found.coarse.x) <= reach and abs(found.pose.y - found.coarse.y) <= reach
+    )
     assert abs(d.theta) <= math.radians(2.0) + 1e-9
 
 
@@ -67,16 +76,34 @@ def test_search_gives_improved_mbicp_the_basin_it_lacks(intel):
     succeeds on nearly every pair of the excerpt."""
     pairs = [(intel.scan(i), intel.scan(i + 1)) for i in range(len(intel.scans) - 1)]
     truths = [relative(a.pose, b.pose) for a, b in pairs]
-    from_identity = sum(success(match(a, b, Pose2(), ImprovedParams()).pose, t) for (a, b), t in zip(pairs, truths))
-    from_search = sum(success(match(a, b, correlative_search(a, b).pose, ImprovedParams()).pose, t)
-                      for (a, b), t in zip(pairs, truths))
+    from_identity = sum(
+        success(match(a, b, Pose2(), ImprovedParams()).pose, t) for (a, b), t in zip(pairs, truths)
+    )
+    from_search = sum(
+        success(match(a, b, correlative_search(a, b).pose, ImprovedParams()).pose, t)
+        for (a, b), t in zip(pairs, truths)
+    )
     assert from_search >= 0.93 * len(pairs) and from_identity <= 0.5 * len(pairs)
 
 
 def test_eval_sequence_with_a_searched_guess(tmp_path):
     out = tmp_path / "rows.json"
-    res = CliRunner().invoke(app, ["eval", "sequence", str(INTEL), "--guess", "search", "--truth", "pose",
-                                   "--limit", "6", "--out", str(out)])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(INTEL),
+            "--guess",
+            "search",
+            "--truth",
+            "pose",
+            "--limit",
+            "6",
+            "--out",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     rows = json.loads(out.read_text())
     assert len(rows) == 6 and all(r["guess"] == "search" and r["guess_ms"] > 0 for r in rows)

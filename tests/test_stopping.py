@@ -3,8 +3,15 @@
 import math
 
 import pytest
-
-from mbicp_viz.core import ImprovedParams, PmwnParams, PsmParams, Termination, match, pose_error, relative
+from mbicp_viz.core import (
+    ImprovedParams,
+    PmwnParams,
+    PsmParams,
+    Termination,
+    match,
+    pose_error,
+    relative,
+)
 
 # (params, the same with the matcher's own rule and the cycle stop out of reach, pair)
 CYCLING = {

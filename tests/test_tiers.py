@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 import pytest
-
 from mbicp_viz.core import MATCHERS, Pose2, Recorder, tiers
+
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.params_toml import load_params
 
@@ -23,9 +23,11 @@ HOKUYO = EXAMPLES / "hokuyo-125-130.npz"
 def _cases():
     """Real pairs from guesses off the answer: the Hokuyo pair, two Intel corridor pairs."""
     hokuyo, intel = read_log(HOKUYO), read_log(INTEL)
-    return [(hokuyo.scans[0], hokuyo.scans[1], Pose2(0.05, -0.02, -0.25)),
-            (intel.scans[3], intel.scans[4], Pose2(0.1, 0.05, 0.1)),
-            (intel.scans[10], intel.scans[11], Pose2(-0.1, 0.1, -0.15))]
+    return [
+        (hokuyo.scans[0], hokuyo.scans[1], Pose2(0.05, -0.02, -0.25)),
+        (intel.scans[3], intel.scans[4], Pose2(0.1, 0.05, 0.1)),
+        (intel.scans[10], intel.scans[11], Pose2(-0.1, 0.1, -0.15)),
+    ]
 
 
 @pytest.mark.parametrize("name", list(MATCHERS))
@@ -38,8 +40,13 @@ def test_interpreted_kernels_compute_what_the_compiled_ones_do(name):
         with interpreted_kernels():
             assert tiers.compiling()
             interpreted = m.run(ref, obj, guess, m.params_type(), events)
-        assert np.allclose(interpreted.pose.as_array(), compiled.pose.as_array(), rtol=0, atol=1e-12)
-        assert (interpreted.iterations, interpreted.reason) == (compiled.iterations, compiled.reason)
+        assert np.allclose(
+            interpreted.pose.as_array(), compiled.pose.as_array(), rtol=0, atol=1e-12
+        )
+        assert (interpreted.iterations, interpreted.reason) == (
+            compiled.iterations,
+            compiled.reason,
+        )
         assert len(events.iterations) == compiled.iterations
 
 
@@ -51,8 +58,13 @@ def test_interpreted_kernels_follow_the_compiled_ones_through_improved_mbicps_op
         compiled, events = MATCHERS["improved"].run(ref, obj, guess, params), Recorder()
         with interpreted_kernels():
             interpreted = MATCHERS["improved"].run(ref, obj, guess, params, events)
-        assert np.allclose(interpreted.pose.as_array(), compiled.pose.as_array(), rtol=0, atol=1e-12)
-        assert (interpreted.iterations, interpreted.reason) == (compiled.iterations, compiled.reason)
+        assert np.allclose(
+            interpreted.pose.as_array(), compiled.pose.as_array(), rtol=0, atol=1e-12
+        )
+        assert (interpreted.iterations, interpreted.reason) == (
+            compiled.iterations,
+            compiled.reason,
+        )
 
 
 def _background_pid(cache) -> int | None:
@@ -65,11 +77,25 @@ def test_a_first_match_after_an_install_answers_at_once_and_the_next_ones_run_co
     """The quick tier end to end, as after ``pip install``: an empty kernel cache, the real command.
     The first match runs interpreted (and says so) while one background process compiles every
     kernel; after it, matching real scans with every matcher compiles nothing."""
-    env = {k: v for k, v in os.environ.items() if k != "MBICP_VIZ_JIT"} | {"NUMBA_CACHE_DIR": str(tmp_path)}
-    command = [sys.executable, "-m", "mbicp_viz", "match", str(HOKUYO), "--pair", "0", "1", "--guess", "identity",
-               "--json"]
-    expected = MATCHERS["improved"].run(*[read_log(HOKUYO).scans[i] for i in (0, 1)], Pose2(),
-                                        MATCHERS["improved"].params_type())
+    env = {k: v for k, v in os.environ.items() if k != "MBICP_VIZ_JIT"} | {
+        "NUMBA_CACHE_DIR": str(tmp_path)
+    }
+    command = [
+        sys.executable,
+        "-m",
+        "mbicp_viz",
+        "match",
+        str(HOKUYO),
+        "--pair",
+        "0",
+        "1",
+        "--guess",
+        "identity",
+        "--json",
+    ]
+    expected = MATCHERS["improved"].run(
+        *[read_log(HOKUYO).scans[i] for i in (0, 1)], Pose2(), MATCHERS["improved"].params_type()
+    )
     try:
         t0 = time.monotonic()
         first = subprocess.run(command, env=env, capture_output=True, text=True, timeout=120)
@@ -77,24 +103,40 @@ def test_a_first_match_after_an_install_answers_at_once_and_the_next_ones_run_co
         assert first.returncode == 0, first.stderr
         assert "compiling the matchers' kernels in the background" in first.stderr
         row = json.loads(first.stdout)
-        assert np.allclose([row["x"], row["y"], row["theta"]], expected.pose.as_array(), rtol=0, atol=1e-12)
+        assert np.allclose(
+            [row["x"], row["y"], row["theta"]], expected.pose.as_array(), rtol=0, atol=1e-12
+        )
         assert row["iterations"] == expected.iterations and row["interpreted"] is True
         assert _background_pid(tmp_path) is not None, f"no background compile ({took:.1f} s)"
         assert wait_for(lambda: _background_pid(tmp_path) is None, timeout=300)
         second = subprocess.run(command, env=env, capture_output=True, text=True, timeout=120)
         assert second.returncode == 0 and "background" not in second.stderr
-        assert json.loads(second.stdout) == row | {"time_ms": json.loads(second.stdout)["time_ms"], "interpreted": False}
-        check = ("from numba.core import event\n"
-                 "from tests.test_tiers import _cases\n"
-                 "from mbicp_viz.core import MATCHERS, Recorder\n"
-                 "with event.install_recorder('numba:compile') as rec:\n"
-                 "    for ref, obj, guess in _cases():\n"
-                 "        for m in MATCHERS.values():\n"
-                 "            m.run(ref, obj, guess, m.params_type()); m.run(ref, obj, guess, m.params_type(), Recorder())\n"
-                 "print(len(rec.buffer))\n")
-        compiled = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True, text=True, timeout=300,
-                                  cwd=str(EXAMPLES.parent.parent))
-        assert compiled.returncode == 0 and compiled.stdout.split() == ["0"], compiled.stdout + compiled.stderr
+        assert json.loads(second.stdout) == row | {
+            "time_ms": json.loads(second.stdout)["time_ms"],
+            "interpreted": False,
+        }
+        check = (
+            "from numba.core import event\n"
+            "from tests.test_tiers import _cases\n"
+            "from mbicp_viz.core import MATCHERS, Recorder\n"
+            "with event.install_recorder('numba:compile') as rec:\n"
+            "    for ref, obj, guess in _cases():\n"
+            "        for m in MATCHERS.values():\n"
+            "            m.run(ref, obj, guess, m.params_type()); m.run(ref, obj, guess, "
+            "m.params_type(), Recorder())\n"
+            "print(len(rec.buffer))\n"
+        )
+        compiled = subprocess.run(
+            [sys.executable, "-c", check],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            cwd=str(EXAMPLES.parent.parent),
+        )
+        assert compiled.returncode == 0 and compiled.stdout.split() == ["0"], (
+            compiled.stdout + compiled.stderr
+        )
     finally:
         pid = _background_pid(tmp_path)
         if pid is not None:
@@ -106,14 +148,20 @@ def test_the_debugger_after_an_install_compiles_nothing_in_its_own_process(tmp_p
     """Its first tab draws and matches interpreted while the background process compiles: no kernel
     (the first scan's points for the camera included) compiles in the debugger's process, where a
     person would wait for it."""
-    env = {k: v for k, v in os.environ.items() if k != "MBICP_VIZ_JIT"} | {"NUMBA_CACHE_DIR": str(tmp_path)}
-    script = ("from numba.core import event\n"
-              "from mbicp_viz.views.debugger.latency import first_result_ms\n"
-              "with event.install_recorder('numba:compile') as rec:\n"
-              f"    first_result_ms({str(HOKUYO)!r})\n"
-              "print(len(rec.buffer))\n")
+    env = {k: v for k, v in os.environ.items() if k != "MBICP_VIZ_JIT"} | {
+        "NUMBA_CACHE_DIR": str(tmp_path)
+    }
+    script = (
+        "from numba.core import event\n"
+        "from mbicp_viz.views.debugger.latency import first_result_ms\n"
+        "with event.install_recorder('numba:compile') as rec:\n"
+        f"    first_result_ms({str(HOKUYO)!r})\n"
+        "print(len(rec.buffer))\n"
+    )
     try:
-        run = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+        run = subprocess.run(
+            [sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120
+        )
         assert run.returncode == 0, run.stderr
         assert run.stdout.split()[-1:] == ["0"], run.stdout + run.stderr
         assert _background_pid(tmp_path) is not None  # the compile it relies on runs elsewhere

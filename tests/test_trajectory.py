@@ -1,19 +1,21 @@
 """Sequence trajectories: accumulation, the odometry Kalman filter, TUM export, the map plot."""
 
 import numpy as np
+from mbicp_viz.core import Pose2, pose_error, relative
 from typer.testing import CliRunner
 
-from mbicp_viz.core import Pose2, pose_error, relative
 from mbicp_viz.cli import app
-from mbicp_viz.readers import read_log
 from mbicp_viz.evaluation.trajectory import accumulate, kalman
+from mbicp_viz.readers import read_log
 
 from .conftest import INTEL, LASERAZOS
 
 
 def rows_from(poses, converged=True):
-    return [{"x": d.x, "y": d.y, "theta": d.theta, "converged": converged}
-            for d in (relative(a, b) for a, b in zip(poses[:-1], poses[1:]))]
+    return [
+        {"x": d.x, "y": d.y, "theta": d.theta, "converged": converged}
+        for d in (relative(a, b) for a, b in zip(poses[:-1], poses[1:]))
+    ]
 
 
 def test_accumulated_increments_rebuild_the_log_trajectory():
@@ -31,39 +33,94 @@ def test_kalman_agrees_when_both_sources_agree_and_follows_odometry_without_matc
     fused = kalman(rows_from(truth), odo, (0.05, 0.05, 0.03), (0.02, 0.02, 0.01))
     assert max(pose_error(a, b)[0] for a, b in zip(fused, truth)) < 1e-9
     # matches that did not converge are ignored: the filter dead-reckons on odometry
-    skipped = kalman([{"x": 5.0, "y": 0.0, "theta": 1.0, "converged": False}] * 14, odo, (0.05, 0.05, 0.03),
-                     (0.02, 0.02, 0.01))
+    skipped = kalman(
+        [{"x": 5.0, "y": 0.0, "theta": 1.0, "converged": False}] * 14,
+        odo,
+        (0.05, 0.05, 0.03),
+        (0.02, 0.02, 0.01),
+    )
     assert max(pose_error(a, b)[0] for a, b in zip(skipped, truth)) < 1e-9
 
 
 def test_kalman_weighs_the_sharper_source():
     odo = [Pose2(), Pose2(1.0, 0.0, 0.0)]
-    fused = kalman([{"x": 1.2, "y": 0.0, "theta": 0.0, "converged": True}], odo, (0.2, 0.2, 0.1), (0.02, 0.02, 0.01))
+    fused = kalman(
+        [{"x": 1.2, "y": 0.0, "theta": 0.0, "converged": True}],
+        odo,
+        (0.2, 0.2, 0.1),
+        (0.02, 0.02, 0.01),
+    )
     assert 1.15 < fused[1].x < 1.2  # much closer to the matcher, whose noise is ten times smaller
 
 
 def test_sequence_writes_tum_files_and_a_map(tmp_path):
-    res = CliRunner().invoke(app, ["eval", "sequence", str(LASERAZOS), "--out", str(tmp_path / "s.json"), "--limit", "8",
-                                   "--tum", str(tmp_path / "est.tum"), "--tum-ref", str(tmp_path / "ref.tum"),
-                                   "--png", str(tmp_path / "map.png"), "--kalman"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(LASERAZOS),
+            "--out",
+            str(tmp_path / "s.json"),
+            "--limit",
+            "8",
+            "--tum",
+            str(tmp_path / "est.tum"),
+            "--tum-ref",
+            str(tmp_path / "ref.tum"),
+            "--png",
+            str(tmp_path / "map.png"),
+            "--kalman",
+        ],
+    )
     assert res.exit_code == 0, res.output
-    est = [ln.split() for ln in (tmp_path / "est.tum").read_text().splitlines() if not ln.startswith("#")]
+    est = [
+        ln.split()
+        for ln in (tmp_path / "est.tum").read_text().splitlines()
+        if not ln.startswith("#")
+    ]
     assert len(est) == 9 and all(len(r) == 8 for r in est)
     q = np.array([[float(v) for v in r[4:]] for r in est])
-    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)  # unit quaternions about z
+    # unit quaternions about z
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
     assert (tmp_path / "map.png").read_bytes()[:4] == b"\x89PNG"
-    ref = [ln.split() for ln in (tmp_path / "ref.tum").read_text().splitlines() if not ln.startswith("#")]
+    ref = [
+        ln.split()
+        for ln in (tmp_path / "ref.tum").read_text().splitlines()
+        if not ln.startswith("#")
+    ]
     assert float(ref[0][1]) == 0.0 and len(ref) == 9
 
 
 def test_kalman_without_odometry_is_a_clean_error(tmp_path):
-    res = CliRunner().invoke(app, ["eval", "sequence", str(tmp_path.parent / "x"), "--out", "o.json"])
+    res = CliRunner().invoke(
+        app, ["eval", "sequence", str(tmp_path.parent / "x"), "--out", "o.json"]
+    )
     assert res.exit_code == 2
     from .conftest import DATA
 
-    res = CliRunner().invoke(app, ["eval", "sequence", str(DATA / "stallo2.jsonl"), "--out", str(tmp_path / "o.json"),
-                                   "--kalman"])
-    assert res.exit_code == 0 and "1 pairs matched" in res.output  # stallo2 stores odometry: fused fine
-    res = CliRunner().invoke(app, ["eval", "sequence", str(DATA / "datos.off"), "--out", str(tmp_path / "o.json"),
-                                   "--kalman"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(DATA / "stallo2.jsonl"),
+            "--out",
+            str(tmp_path / "o.json"),
+            "--kalman",
+        ],
+    )
+    # stallo2 stores odometry: fused fine
+    assert res.exit_code == 0 and "1 pairs matched" in res.output
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(DATA / "datos.off"),
+            "--out",
+            str(tmp_path / "o.json"),
+            "--kalman",
+        ],
+    )
     assert res.exit_code == 2 and "needs odometry" in res.output

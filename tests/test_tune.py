@@ -6,10 +6,10 @@ import os
 import shutil
 import signal
 import sqlite3
-from contextlib import closing
 import subprocess
 import sys
 import tempfile
+from contextlib import closing
 from pathlib import Path
 
 import pytest
@@ -26,45 +26,92 @@ LOG, HOLDOUT = str(DATA / "intel-relations.log"), str(DATA / "aces-10.log.gz")
 
 
 def tune(tmp_path, *args):
-    return CliRunner().invoke(app, ["tune", LOG, "--storage", f"sqlite:///{tmp_path / 'tune.db'}", "--workers", "1",
-                                    "--out", str(tmp_path / "tuned.toml"), *args])
+    return CliRunner().invoke(
+        app,
+        [
+            "tune",
+            LOG,
+            "--storage",
+            f"sqlite:///{tmp_path / 'tune.db'}",
+            "--workers",
+            "1",
+            "--out",
+            str(tmp_path / "tuned.toml"),
+            *args,
+        ],
+    )
 
 
 def test_a_study_against_the_scan_poses_with_a_holdout(tmp_path):
-    res = tune(tmp_path, "--trials", "6", "--holdout", HOLDOUT, "--png-dir", str(tmp_path / "png"),
-               "--rows-dir", str(tmp_path / "rows"))
+    res = tune(
+        tmp_path,
+        "--trials",
+        "6",
+        "--holdout",
+        HOLDOUT,
+        "--png-dir",
+        str(tmp_path / "png"),
+        "--rows-dir",
+        str(tmp_path / "rows"),
+    )
     assert res.exit_code == 0, res.output
     lines = res.stdout.splitlines()
     train = next(ln for ln in lines if ln.startswith("training (11 pairs)"))
     held = next(ln for ln in lines if ln.startswith("holdout (9 pairs)"))
     successes = lambda ln: [int(part.split("/")[0]) for part in ln.split()[2:] if "/" in part]  # noqa: E731
-    assert len(successes(train)) == 2 and successes(train)[1] >= successes(train)[0]  # defaults are trial 0
+    # defaults are trial 0
+    assert len(successes(train)) == 2 and successes(train)[1] >= successes(train)[0]
     assert len(successes(held)) == 2
     best = load_params(tmp_path / "tuned.toml", "improved")  # the TOML reads back
     assert any(f"L {best.L:.4g}" in ln for ln in lines)
     for png in ("history.png", "importance.png"):
         assert (tmp_path / "png" / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     rows = tmp_path / "rows" / "intel-relations-rows.json"
-    assert len(read_rows(rows)) == 11 and files_source(LOG, None, rows=str(rows)).failures is not None
+    assert (
+        len(read_rows(rows)) == 11 and files_source(LOG, None, rows=str(rows)).failures is not None
+    )
     assert f"--rows {rows}" in res.stdout
 
 
 def test_a_study_resumes_by_name(tmp_path):
     assert tune(tmp_path, "--trials", "2", "--study", "s").exit_code == 0
     res = tune(tmp_path, "--trials", "3", "--study", "s")
-    assert res.exit_code == 0 and "(2 trials before)" in res.stdout and "3 trials ran now, 5 in the study" in res.stdout
+    assert (
+        res.exit_code == 0
+        and "(2 trials before)" in res.stdout
+        and "3 trials ran now, 5 in the study" in res.stdout
+    )
 
 
 def test_ctrl_c_keeps_the_finished_trials(tmp_path):
     db = tmp_path / "tune.db"
-    proc = subprocess.Popen([sys.executable, "-m", "mbicp_viz", "tune", LOG, "--trials", "100000", "--workers", "1",
-                             "--storage", f"sqlite:///{db}", "--out", str(tmp_path / "tuned.toml")],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "mbicp_viz",
+            "tune",
+            LOG,
+            "--trials",
+            "100000",
+            "--workers",
+            "1",
+            "--storage",
+            f"sqlite:///{db}",
+            "--out",
+            str(tmp_path / "tuned.toml"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
     def finished() -> int:
         try:
             with closing(sqlite3.connect(db)) as con:
-                return con.execute("select count(*) from trials where state = 'COMPLETE'").fetchall()[0][0]
+                return con.execute(
+                    "select count(*) from trials where state = 'COMPLETE'"
+                ).fetchall()[0][0]
         except sqlite3.Error:
             return 0
 
@@ -75,9 +122,16 @@ def test_ctrl_c_keeps_the_finished_trials(tmp_path):
     assert finished() >= 3 and "trials ran now" in out and (tmp_path / "tuned.toml").exists()
 
 
-@pytest.mark.parametrize("args, field", [(["--fields", "nope"], "--fields"), (["--truth", "x"], "--truth"),
-                                         (["--guess", "pose"], "--guess"), (["--perturb", "-1", "2"], "--perturb"),
-                                         (["--storage", "postgresql://127.0.0.1:1/none"], "--storage")])
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        (["--fields", "nope"], "--fields"),
+        (["--truth", "x"], "--truth"),
+        (["--guess", "pose"], "--guess"),
+        (["--perturb", "-1", "2"], "--perturb"),
+        (["--storage", "postgresql://127.0.0.1:1/none"], "--storage"),
+    ],
+)
 def test_wrong_options_are_one_line(tmp_path, args, field):
     res = tune(tmp_path, "--trials", "1", *args)
     assert res.exit_code == 2 and field in res.output and "Traceback" not in res.output
@@ -90,7 +144,9 @@ def postgres_url():
     if os.environ.get("MBICP_VIZ_POSTGRES_URL"):
         yield os.environ["MBICP_VIZ_POSTGRES_URL"]
         return
-    found = shutil.which("pg_ctl") or next(iter(sorted(glob.glob("/usr/lib/postgresql/*/bin/pg_ctl"))), None)
+    found = shutil.which("pg_ctl") or next(
+        iter(sorted(glob.glob("/usr/lib/postgresql/*/bin/pg_ctl"))), None
+    )
     assert found, "the PostgreSQL server (Debian: postgresql) is needed; .ci/run installs it"
     bindir = Path(found).resolve().parent
     as_user = ["runuser", "-u", "postgres", "--"] if os.geteuid() == 0 else []
@@ -99,16 +155,34 @@ def postgres_url():
     if as_user:
         shutil.chown(root, "postgres")
     data, port = root / "data", free_port()
-    subprocess.run(as_user + [str(bindir / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres"],
-                   check=True, capture_output=True)
-    subprocess.run(as_user + [str(bindir / "pg_ctl"), "-D", str(data), "-l", str(root / "log"), "-w", "-o",
-                              f"-p {port} -k {root} -c listen_addresses=127.0.0.1", "start"], check=True,
-                   capture_output=True)
+    subprocess.run(
+        as_user + [str(bindir / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres"],
+        check=True,
+        capture_output=True,
+    )
+    subprocess.run(
+        as_user
+        + [
+            str(bindir / "pg_ctl"),
+            "-D",
+            str(data),
+            "-l",
+            str(root / "log"),
+            "-w",
+            "-o",
+            f"-p {port} -k {root} -c listen_addresses=127.0.0.1",
+            "start",
+        ],
+        check=True,
+        capture_output=True,
+    )
     try:
         yield f"postgresql://postgres@127.0.0.1:{port}/postgres"
     finally:
-        subprocess.run(as_user + [str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "stop"],
-                       capture_output=True)
+        subprocess.run(
+            as_user + [str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "stop"],
+            capture_output=True,
+        )
         shutil.rmtree(root, ignore_errors=True)
 
 
@@ -117,14 +191,39 @@ def test_two_workers_share_one_study_on_postgresql(postgres_url, tmp_path):
     import optuna
 
     study = f"shared-{os.getpid()}"
-    cmd = [sys.executable, "-m", "mbicp_viz", "tune", LOG, "--trials", "3", "--workers", "1", "--storage",
-           postgres_url, "--study", study]
-    procs = [subprocess.Popen(cmd + ["--out", str(tmp_path / f"w{k}.toml")], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for k in range(2)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "mbicp_viz",
+        "tune",
+        LOG,
+        "--trials",
+        "3",
+        "--workers",
+        "1",
+        "--storage",
+        postgres_url,
+        "--study",
+        study,
+    ]
+    procs = [
+        subprocess.Popen(
+            cmd + ["--out", str(tmp_path / f"w{k}.toml")],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for k in range(2)
+    ]
     for p in procs:
         out, err = p.communicate(timeout=300)
         assert p.returncode == 0, err
     storage = "postgresql+psycopg://" + postgres_url.split("://", 1)[1]
     trials = optuna.load_study(study_name=study, storage=storage).trials
-    workers = {t.user_attrs["worker"] for t in trials if t.state == optuna.trial.TrialState.COMPLETE}
-    assert len([t for t in trials if t.state == optuna.trial.TrialState.COMPLETE]) >= 6 and len(workers) == 2
+    workers = {
+        t.user_attrs["worker"] for t in trials if t.state == optuna.trial.TrialState.COMPLETE
+    }
+    assert (
+        len([t for t in trials if t.state == optuna.trial.TrialState.COMPLETE]) >= 6
+        and len(workers) == 2
+    )

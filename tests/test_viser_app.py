@@ -7,9 +7,9 @@ import re
 import numpy as np
 import pytest
 import viser
+from mbicp_viz.core import MATCHERS, Pose2, field_specs, pose_error
 
 import mbicp_viz.views.debugger.state as st
-from mbicp_viz.core import MATCHERS, Pose2, field_specs, pose_error
 from mbicp_viz.choices import Guess
 from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene
@@ -60,8 +60,11 @@ def test_iteration_slider_redraws_without_rematching(session, monkeypatch):
     for k in (0, 1, 5, session.state.max_iteration()):
         session.playback.slider.value = k
         obj = session.nodes["/improved/scene/object"]
-        expected = (run.start.initial_guess.apply(run.start.obj_points[run.start.used]) if k == 0
-                    else run.iterations[k - 1].moved_points)
+        expected = (
+            run.start.initial_guess.apply(run.start.obj_points[run.start.used])
+            if k == 0
+            else run.iterations[k - 1].moved_points
+        )
         np.testing.assert_allclose(obj.points[:, :2], expected, atol=1e-5)
         assert f"iteration {k}" in session.playback.text.content
     assert calls == []
@@ -101,9 +104,15 @@ def test_layer_toggles_hide_nodes_and_the_legend_lists_what_is_shown(session):
     label = scene.PAIR_REJECTED.label
     assert label in session.h_legend.content
     session.layers.boxes[label].value = False
-    assert session.nodes["/improved/scene/pairs/rejected"].visible is False and label not in session.h_legend.content
+    assert (
+        session.nodes["/improved/scene/pairs/rejected"].visible is False
+        and label not in session.h_legend.content
+    )
     session.layers.boxes[label].value = True
-    assert session.nodes["/improved/scene/pairs/rejected"].visible is True and label in session.h_legend.content
+    assert (
+        session.nodes["/improved/scene/pairs/rejected"].visible is True
+        and label in session.h_legend.content
+    )
     assert scene.HIDDEN.label not in session.h_legend.content  # off by default
 
 
@@ -113,19 +122,33 @@ def test_typed_parameters_reach_the_matcher_exactly(session):
     p = session.state.params["improved"]
     assert p.errx_out == 1e-5 and p.MaxIter == 100 and p.Bw == pytest.approx(math.radians(12.5))
     assert session.state.runs[0].start.params is p  # the match that is shown ran with them
-    assert panel.boxes["errx_out"].handle.value == "1e-5" and panel.message.content == ""  # as typed
+    # as typed
+    assert panel.boxes["errx_out"].handle.value == "1e-5" and panel.message.content == ""
 
 
-@pytest.mark.parametrize("name, typed, why", [
-    ("MaxIter", "2.5", "whole number"), ("Br", "-1", "below the minimum"), ("Bw", "500", "outside"),
-    ("L", "nan", "finite"), ("L", "1e", "not a number"), ("resample", "yes", "true or false")])
+@pytest.mark.parametrize(
+    "name, typed, why",
+    [
+        ("MaxIter", "2.5", "whole number"),
+        ("Br", "-1", "below the minimum"),
+        ("Bw", "500", "outside"),
+        ("L", "nan", "finite"),
+        ("L", "1e", "not a number"),
+        ("resample", "yes", "true or false"),
+    ],
+)
 def test_refused_entries_say_why_and_keep_the_last_result(session, name, typed, why):
     before = (session.h_result.content, session.state.params["improved"])
     submit(session.matchers.params, **{name: typed})
-    assert why in session.matchers.params.message.content and name in session.matchers.params.message.content
+    assert (
+        why in session.matchers.params.message.content
+        and name in session.matchers.params.message.content
+    )
     assert (session.h_result.content, session.state.params["improved"]) == before
     spec = next(s for s in field_specs(MATCHERS["improved"].params_type) if s.name == name)
-    assert session.matchers.params.boxes[name].handle.value == st.shown_value(spec, getattr(before[1], name))
+    assert session.matchers.params.boxes[name].handle.value == st.shown_value(
+        spec, getattr(before[1], name)
+    )
 
 
 def test_an_exception_inside_a_match_is_shown_and_the_server_keeps_serving(session, monkeypatch):
@@ -146,8 +169,13 @@ def test_an_exception_inside_a_match_is_shown_and_the_server_keeps_serving(sessi
 def test_parameter_form_stays_in_place_and_follows_the_matcher(session):
     order = session.matchers.params.folder.order
     session.matchers.edit.value = "icp"
-    assert "Parameters: icp" in session.matchers.params.folder.label and session.matchers.params.folder.order == order
-    assert set(session.matchers.params.boxes) == {s.name for s in field_specs(MATCHERS["icp"].params_type)}
+    assert (
+        "Parameters: icp" in session.matchers.params.folder.label
+        and session.matchers.params.folder.order == order
+    )
+    assert set(session.matchers.params.boxes) == {
+        s.name for s in field_specs(MATCHERS["icp"].params_type)
+    }
 
 
 def test_compare_chosen_matchers_each_in_its_colour(session):
@@ -158,21 +186,32 @@ def test_compare_chosen_matchers_each_in_its_colour(session):
         assert scene.run_style(name).label in legend
         colors = np.asarray(session.nodes[f"/{name}/scene/object"].colors)
         assert (colors == np.array(scene.RUN_COLORS[name])).all()
-    assert "**icp**" in session.playback.text.content and "**improved**" in session.playback.text.content
+    assert (
+        "**icp**" in session.playback.text.content
+        and "**improved**" in session.playback.text.content
+    )
     session.matchers.boxes["improved"].value = False
     session.matchers.boxes["icp"].value = False  # none: refused, the last choice stays
-    assert [r.name for r in session.state.runs] == ["icp"] and "choose at least one" in session.h_status.content
+    assert [r.name for r in session.state.runs] == [
+        "icp"
+    ] and "choose at least one" in session.h_status.content
 
 
 def test_initial_guess_by_numbers_and_by_gizmo(session):
     session.guess.boxes["theta"].handle.value = "-10\n"
     session.guess.boxes["x"].handle.value = "1e-3\n"
-    assert session.state.guess.theta == pytest.approx(math.radians(-10.0)) and session.state.guess.x == 1e-3
+    assert (
+        session.state.guess.theta == pytest.approx(math.radians(-10.0))
+        and session.state.guess.x == 1e-3
+    )
     assert session.state.runs[0].start.initial_guess == session.state.guess
     session.guess.gizmo.position = (0.3, -0.2, 0.0)
     session.guess._dragged()
     assert (session.state.guess.x, session.state.guess.y) == pytest.approx((0.3, -0.2))
-    assert float(session.guess.boxes["x"].text) == pytest.approx(0.3) and "dragged" in session.guess.info.content
+    assert (
+        float(session.guess.boxes["x"].text) == pytest.approx(0.3)
+        and "dragged" in session.guess.info.content
+    )
 
 
 def test_export_writes_a_readable_rrd_and_params(session, tmp_path):
@@ -197,7 +236,9 @@ def test_log_source_picks_any_pair(server):
     s.scans.consecutive.value = False
     s.scans.ref.handle.value = "3\n"
     s.scans.obj.handle.value = "7\n"
-    assert s.state.pair == (3, 7) and s.state.runs[0].start.ref_points.shape[0] == s.state.ref.n_valid
+    assert (
+        s.state.pair == (3, 7) and s.state.runs[0].start.ref_points.shape[0] == s.state.ref.n_valid
+    )
     s.scans.obj.handle.value = "999\n"
     assert "⚠" in s.h_status.content and s.state.pair == (3, 7) and s.scans.obj.text == "7"
     s.close()
@@ -218,13 +259,15 @@ def test_clicking_a_point_shows_its_iso_distance_curves(session):
     ev = run.iterations[1]
     j = 40
     target = ev.moved_points[j]
-    chosen = session.layers.click((target[0], target[1], 10.0), (0.0, 0.0, -1.0))  # a ray straight down onto it
+    # a ray straight down onto it
+    chosen = session.layers.click((target[0], target[1], 10.0), (0.0, 0.0, -1.0))
     assert chosen == int(run.start.used[j])
     node = session.nodes["/improved/scene/teaching/metric_isocurves"]
     assert session.state.visible[scene.ISO_METRIC.label] and node.visible
     row = np.flatnonzero(ev.pairs.obj_index == chosen)[0]
     ellipse = node.points.reshape(-1, 3)[:, :2]
-    np.testing.assert_allclose(ellipse.mean(axis=0), ev.pairs.target[row], atol=0.02)  # one ellipse, on its target
+    # one ellipse, on its target
+    np.testing.assert_allclose(ellipse.mean(axis=0), ev.pairs.target[row], atol=0.02)
 
 
 def test_polar_cost_plot_follows_the_iteration(session):
@@ -242,13 +285,17 @@ def test_polar_cost_plot_follows_the_iteration(session):
 def test_search_button_finds_the_guess_a_corridor_needs(server):
     """Intel 12 -> 13: ~1 m along a corridor. From the identity improved MbICP shortens the motion;
     the search puts the guess (numbers and gizmo) near the truth and the match succeeds."""
-    s = Session(server, Source("intel", read_log(INTEL), pair=(12, 13), pick_pair=True, guess=Pose2()))
+    s = Session(
+        server, Source("intel", read_log(INTEL), pair=(12, 13), pick_pair=True, guess=Pose2())
+    )
     truth = s.state.truth()
     assert pose_error(s.state.runs[0].result.pose, truth)[0] > 0.5  # the failed match a user opens
     s.after_match(s.state.search_guess())
     found = s.state.guess
     assert pose_error(found, truth)[0] < 0.15 and "searched" in s.guess.info.content
-    assert (float(s.guess.boxes["x"].text), float(s.guess.boxes["y"].text)) == pytest.approx((found.x, found.y))
+    assert (float(s.guess.boxes["x"].text), float(s.guess.boxes["y"].text)) == pytest.approx(
+        (found.x, found.y)
+    )
     assert tuple(s.guess.gizmo.position[:2]) == pytest.approx((found.x, found.y))
     et, er = pose_error(s.state.runs[0].result.pose, truth)
     assert et < 0.05 and er < math.radians(1.0)
@@ -257,7 +304,9 @@ def test_search_button_finds_the_guess_a_corridor_needs(server):
 
 def test_picking_a_pair_puts_its_guess_in_the_fields(server):
     s = Session(server, Source("intel", read_log(INTEL), pick_pair=True))
-    s.scans.ref.handle.value = "12\n"  # consecutive: object 13; the guess comes from the stored poses
+    s.scans.ref.handle.value = (
+        "12\n"  # consecutive: object 13; the guess comes from the stored poses
+    )
     assert s.state.pair == (12, 13) and s.state.guess_source == "scan poses"
     assert float(s.guess.boxes["x"].text) == pytest.approx(s.state.guess.x)
     assert float(s.guess.boxes["theta"].text) == pytest.approx(math.degrees(s.state.guess.theta))
@@ -284,25 +333,34 @@ def test_every_layer_of_every_matcher_has_a_place_in_both_front_ends(server, nam
     assert "scene/reference" in drawn and "scene/pairs/point" in drawn
     if name == "pmwn":
         assert "scene/polar/circle_points" in drawn
-    record([Run(name, state.ref, state.obj, state.guess, state.params[name])], str(tmp_path / "all.rrd"),
-           teaching=True)
+    record(
+        [Run(name, state.ref, state.obj, state.guess, state.params[name])],
+        str(tmp_path / "all.rrd"),
+        teaching=True,
+    )
     with pytest.raises(TypeError):
-        viser_draw.in_scan_plane(scene.Points("elsewhere/points", np.zeros((1, 2)), scene.OBJECT, 0.1))
+        viser_draw.in_scan_plane(
+            scene.Points("elsewhere/points", np.zeros((1, 2)), scene.OBJECT, 0.1)
+        )
 
 
 def test_parse_entry_is_exact():
     specs = {s.name: s for s in field_specs(MATCHERS["improved"].params_type)}
     assert parse_entry(specs["errx_out"], " 1e-5 ") == 1e-5
     assert parse_entry(specs["Bw"], "45") == pytest.approx(math.radians(45.0))
-    assert parse_entry(specs["MaxIter"], "1e2") == 100 and isinstance(parse_entry(specs["MaxIter"], "1e2"), int)
+    assert parse_entry(specs["MaxIter"], "1e2") == 100 and isinstance(
+        parse_entry(specs["MaxIter"], "1e2"), int
+    )
     with pytest.raises(Exception, match="whole number"):
         parse_entry(specs["MaxIter"], "2.5")
 
 
 def test_the_camera_is_put_back_top_down():
     assert TopDownCamera.is_top_down((1.0, 2.0, 10.0), (1.0, 2.0, 0.0), (0.0, 1.0, 0.0))
-    assert not TopDownCamera.is_top_down((1.0, 5.0, 10.0), (1.0, 2.0, 0.0), (0.0, 1.0, 0.0))  # tilted
-    assert not TopDownCamera.is_top_down((1.0, 2.0, 10.0), (1.0, 2.0, 0.0), (1.0, 0.2, 0.0))  # turned
+    # tilted
+    assert not TopDownCamera.is_top_down((1.0, 5.0, 10.0), (1.0, 2.0, 0.0), (0.0, 1.0, 0.0))
+    # turned
+    assert not TopDownCamera.is_top_down((1.0, 2.0, 10.0), (1.0, 2.0, 0.0), (1.0, 0.2, 0.0))
 
 
 def test_guess_kind_of_the_source_and_where_it_came_from():
@@ -315,14 +373,16 @@ def test_a_foreign_origin_is_refused():
     """A page of another site opens the debugger's websocket: closed before any data flows."""
     import asyncio
 
+    import viser
     import websockets
     from websockets.asyncio.client import connect
 
-    import viser
-
     async def attempt(origin):
-        async with connect(f"ws://127.0.0.1:{app.port}", origin=origin,
-                           subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+        async with connect(
+            f"ws://127.0.0.1:{app.port}",
+            origin=origin,
+            subprotocols=[f"viser-v{viser.__version__}"],
+        ) as ws:
             try:
                 await asyncio.wait_for(ws.recv(), timeout=10)
                 return "data"
@@ -335,7 +395,8 @@ def test_a_foreign_origin_is_refused():
     try:
         assert asyncio.run(attempt("http://evil.example")) == 1008
         assert "http://evil.example" in app.refused.values() and not app.sessions
-        assert asyncio.run(attempt(f"http://127.0.0.1:{app.port}")) == "data"  # the debugger's own page
+        # the debugger's own page
+        assert asyncio.run(attempt(f"http://127.0.0.1:{app.port}")) == "data"
     finally:
         app.stop()
 
@@ -362,8 +423,15 @@ def test_while_the_kernels_compile_in_the_background_a_tab_matches_interpreted_a
     compiled = Session(server, source).state.runs[0].result
     with interpreted_kernels():
         s = Session(server, source)
-        assert tiers.compiling() and s.h_status.content == f"⚠ {INTERPRETED}" and "converged" in s.h_result.content
-    assert s.state.runs[0].result.pose == compiled.pose and s.state.runs[0].result.iterations == compiled.iterations
+        assert (
+            tiers.compiling()
+            and s.h_status.content == f"⚠ {INTERPRETED}"
+            and "converged" in s.h_result.content
+        )
+    assert (
+        s.state.runs[0].result.pose == compiled.pose
+        and s.state.runs[0].result.iterations == compiled.iterations
+    )
     s.compiled()  # the background compile ended
     assert s.h_status.content == ""
     s.close()
@@ -377,7 +445,10 @@ def test_lesson_mode_opens_each_step_and_refuses_a_forged_step(server):
     s = Session(server, step_source(steps[0], steps))
     assert s.lesson is not None and "Step 1 of" in s.lesson.heading.content
     s.lesson.open(5)
-    assert s.state.algorithms == list(steps[5].scenario.params) and "Step 6 of" in s.lesson.heading.content
+    assert (
+        s.state.algorithms == list(steps[5].scenario.params)
+        and "Step 6 of" in s.lesson.heading.content
+    )
     assert s.lesson.pick.value.startswith("6.")
     n = len(steps)
     s.lesson.open(n + 5)  # past the end: the last step
@@ -388,7 +459,9 @@ def test_lesson_mode_opens_each_step_and_refuses_a_forged_step(server):
     assert s.lesson.pick.value.startswith(f"{n}.")
     s.close()
     third = Session(server, step_source(steps[2], steps))  # `mbicp-viz lesson --step 3`
-    assert "Step 3 of" in third.lesson.heading.content and third.state.iteration == steps[2].iteration
+    assert (
+        "Step 3 of" in third.lesson.heading.content and third.state.iteration == steps[2].iteration
+    )
     third.close()
 
 
@@ -404,6 +477,8 @@ def test_lesson_mode_compiles_every_steps_matchers_while_the_server_starts(monke
     app = app_module.App(step_source(steps[0], steps), "127.0.0.1", 0)
     try:
         assert app.ready.wait(60)
-        assert set(warmed) == {name for s in steps for name in s.scenario.params} and len(warmed) == len(set(warmed))
+        assert set(warmed) == {name for s in steps for name in s.scenario.params} and len(
+            warmed
+        ) == len(set(warmed))
     finally:
         app.stop()

@@ -26,7 +26,9 @@ class OneLineErrors(TyperGroup):
             if not hasattr(e, "format_message"):
                 raise
             text = " ".join(e.format_message().split()).replace("Value error, ", "").rstrip(".")
-            where = f"; see: {e.ctx.command_path} --help" if getattr(e, "ctx", None) is not None else ""
+            where = (
+                f"; see: {e.ctx.command_path} --help" if getattr(e, "ctx", None) is not None else ""
+            )
             typer.echo(f"mbicp-viz: error: {text}{where}", err=True)
             code = getattr(e, "exit_code", 2)
         except typer.Abort:
@@ -37,10 +39,16 @@ class OneLineErrors(TyperGroup):
         sys.exit(code if isinstance(code, int) else 0)
 
 
-app = typer.Typer(cls=OneLineErrors, no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
-                  rich_markup_mode=None,
-                  help="Visual debugger and teaching tool for 2-D laser scan matching (ICP, PL-ICP, MbICP, improved "
-                       "MbICP, PSM, PMWN).")
+app = typer.Typer(
+    cls=OneLineErrors,
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+    help="Visual debugger and teaching tool for 2-D laser scan matching (ICP, PL-ICP, MbICP, "
+    "improved "
+    "MbICP, PSM, PMWN).",
+)
 for group in (match, serve, lesson, evaluate, bench, files, tune):
     group.register(app)
 

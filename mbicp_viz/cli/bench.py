@@ -4,26 +4,49 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
-from .options import (DEFAULT_ALGO, AlgoOpt, PairOpt, ParamsOpt, TeachOpt, TopicOpt, check_perturb, read_log_saying,
-                      read_options, user_errors)
+from .options import (
+    DEFAULT_ALGO,
+    AlgoOpt,
+    PairOpt,
+    ParamsOpt,
+    TeachOpt,
+    TopicOpt,
+    check_perturb,
+    read_log_saying,
+    read_options,
+    user_errors,
+)
 from .serve import DEMO_PAIR
 
 
-def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt = DEFAULT_ALGO,
-            params: ParamsOpt = None,
-            limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs to time")] = 50,
-            repeat: Annotated[int, typer.Option("--repeat", min=1, help="runs per pair")] = 3,
-            rrd: Annotated[bool, typer.Option("--rrd", help="also time writing each match to an .rrd")] = False,
-            teach: TeachOpt = False,
-            perturb: Annotated[Optional[tuple[float, float]], typer.Option(
-                "--perturb", metavar="XY_M THETA_DEG", help="move each stored guess uniformly within +/-XY_M in x "
-                "and y and +/-THETA_DEG (seeded)")] = None,
-            seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0, topic: TopicOpt = None):
-    """Time per match on consecutive pairs: mean, median, p90, matches per second; events off and on."""
+def matches(
+    log: Annotated[str, typer.Argument(help="scan log")],
+    algo: AlgoOpt = DEFAULT_ALGO,
+    params: ParamsOpt = None,
+    limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs to time")] = 50,
+    repeat: Annotated[int, typer.Option("--repeat", min=1, help="runs per pair")] = 3,
+    rrd: Annotated[
+        bool, typer.Option("--rrd", help="also time writing each match to an .rrd")
+    ] = False,
+    teach: TeachOpt = False,
+    perturb: Annotated[
+        tuple[float, float] | None,
+        typer.Option(
+            "--perturb",
+            metavar="XY_M THETA_DEG",
+            help="move each stored guess uniformly within +/-XY_M in x "
+            "and y and +/-THETA_DEG (seeded)",
+        ),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0,
+    topic: TopicOpt = None,
+):
+    """Time per match on consecutive pairs: mean, median, p90, matches per second; events off and "
+    "on."""
     import numpy as np
 
     from mbicp_viz.evaluation.bench import bench, machine_line, speed_probe_us
@@ -36,63 +59,113 @@ def matches(log: Annotated[str, typer.Argument(help="scan log")], algo: AlgoOpt 
     moved = None
     if perturb is not None:
         moved = check_perturb(perturb)
-        typer.echo(f"guesses: the stored ones moved within +/-{perturb[0]:g} m, +/-{perturb[1]:g} deg (seed {seed})")
+        typer.echo(
+            f"guesses: the stored ones moved within +/-{perturb[0]:g} m, +/-{perturb[1]:g} deg "
+            f"(seed {seed})"
+        )
     timings = bench(lg, p, limit, repeat, moved, seed)
     after = speed_probe_us()
     for t in timings:
         typer.echo(t.line())
-    typer.echo(f"machine speed probe    {before:.2f} us before, {after:.2f} us after (a fixed numpy workload; "
-               "lower is faster)")
-    typer.echo(f"observer overhead      {100.0 * (timings[1].median / timings[0].median - 1.0):+.0f} % (median)")
+    typer.echo(
+        f"machine speed probe    {before:.2f} us before, {after:.2f} us after (a fixed numpy "
+        "workload; "
+        "lower is faster)"
+    )
+    typer.echo(
+        f"observer overhead      {100.0 * (timings[1].median / timings[0].median - 1.0):+.0f} % "
+        "(median)"
+    )
     if rrd:
         from mbicp_viz.views.rrd import time_recordings
 
         t, sizes = time_recordings(lg, p, limit, 1, teach)
         typer.echo(t.line())
-        typer.echo(f".rrd size              median {np.median(sizes) / 1e6:.2f} MB   max {sizes.max() / 1e6:.2f} MB")
+        typer.echo(
+            f".rrd size              median {np.median(sizes) / 1e6:.2f} MB   max "
+            f"{sizes.max() / 1e6:.2f} MB"
+        )
 
 
-def originals(built: Annotated[Path, typer.Argument(help="the folder tools/originals/build.sh built the C originals "
-                                                       "in")],
-              log: Annotated[str, typer.Argument(help="scan log")],
-              limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs")] = 300,
-              repeat: Annotated[int, typer.Option("--repeat", min=1, help="runs of all the pairs; the best is "
-                                                  "kept")] = 3,
-              perturb: Annotated[tuple[float, float], typer.Option(
-                  "--perturb", metavar="XY_M THETA_DEG", help="move each stored guess uniformly within +/-XY_M in x "
-                  "and y and +/-THETA_DEG (seeded)")] = (0.3, 15.0),
-              seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0,
-              every: Annotated[int, typer.Option("--every", min=1, help="keep one beam in K (the C MbICP takes at "
-                                                 "most 361 rays: on more it is not compared)")] = 1,
-              params: Annotated[Optional[Path], typer.Option(
-                  "--params", help="improved MbICP's parameters, a TOML file or a preset (mbicp-viz params "
-                                   "--presets): a last line with them")] = None,
-              topic: TopicOpt = None):
-    """This MbICP, ICP and PL-ICP against the original C code on the same pairs (agreement, successes,
-    time per match); improved MbICP against CSM's PL-ICP."""
+def originals(
+    built: Annotated[
+        Path, typer.Argument(help="the folder tools/originals/build.sh built the C originals in")
+    ],
+    log: Annotated[str, typer.Argument(help="scan log")],
+    limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs")] = 300,
+    repeat: Annotated[
+        int, typer.Option("--repeat", min=1, help="runs of all the pairs; the best is kept")
+    ] = 3,
+    perturb: Annotated[
+        tuple[float, float],
+        typer.Option(
+            "--perturb",
+            metavar="XY_M THETA_DEG",
+            help="move each stored guess uniformly within +/-XY_M in x "
+            "and y and +/-THETA_DEG (seeded)",
+        ),
+    ] = (0.3, 15.0),
+    seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0,
+    every: Annotated[
+        int,
+        typer.Option(
+            "--every",
+            min=1,
+            help="keep one beam in K (the C MbICP takes at "
+            "most 361 rays: on more it is not compared)",
+        ),
+    ] = 1,
+    params: Annotated[
+        Path | None,
+        typer.Option(
+            "--params",
+            help="improved MbICP's parameters, a TOML file or a preset (mbicp-viz params "
+            "--presets): a last line with them",
+        ),
+    ] = None,
+    topic: TopicOpt = None,
+):
+    """This MbICP, ICP and PL-ICP against the original C code on the same pairs (agreement,
+    successes, time per match); improved MbICP against CSM's PL-ICP."""
     from mbicp_viz.evaluation.bench import machine_line, speed_probe_us
-    from mbicp_viz.evaluation.originals import (check_built, compare, every_kth_beam, improved_against_plicp,
-                                                protocol_pairs)
+    from mbicp_viz.evaluation.originals import (
+        check_built,
+        compare,
+        every_kth_beam,
+        improved_against_plicp,
+        protocol_pairs,
+    )
     from mbicp_viz.readers.params_toml import make_params
 
     check_built(built)  # a missing build or a bad file stops here, before minutes of matching
     improved = make_params("improved", params)
     lg = every_kth_beam(read_log_saying(log, read_options(topic)), every)
     pairs = protocol_pairs(lg, limit, check_perturb(perturb), seed)
-    typer.echo(f"{log}: {len(pairs)} pairs of {len(pairs[0][0].bearings)} beams, guesses within +/-{perturb[0]:g} m, "
-               f"+/-{perturb[1]:g} deg (seed {seed}); {machine_line()}")
+    typer.echo(
+        f"{log}: {len(pairs)} pairs of {len(pairs[0][0].bearings)} beams, guesses within "
+        f"+/-{perturb[0]:g} m, "
+        f"+/-{perturb[1]:g} deg (seed {seed}); {machine_line()}"
+    )
     before = speed_probe_us()
     rows = compare(built, pairs, repeat)
     for row in rows:
         typer.echo(row.line())
     plicp = next(r for r in rows if r.name == "plicp")
-    for label, p in [("as published", make_params("improved", None))] + ([(str(params), improved)] if params else []):
+    for label, p in [("as published", make_params("improved", None))] + (
+        [(str(params), improved)] if params else []
+    ):
         typer.echo(improved_against_plicp(pairs, p, label, plicp, repeat))
-    typer.echo(f"machine speed probe {before:.2f} us before, {speed_probe_us():.2f} us after (lower is faster)")
+    typer.echo(
+        f"machine speed probe {before:.2f} us before, {speed_probe_us():.2f} us after (lower is "
+        "faster)"
+    )
 
 
-def gui(scans: Annotated[Path, typer.Argument(help="scan file")] = DEMO_PAIR, pair: PairOpt = None,
-        topic: TopicOpt = None):
+def gui(
+    scans: Annotated[Path, typer.Argument(help="scan file")] = DEMO_PAIR,
+    pair: PairOpt = None,
+    topic: TopicOpt = None,
+):
     """Latency of the debugger: iteration step -> redraw, parameter change -> re-match -> redraw."""
     from mbicp_viz.evaluation.bench import machine_line
     from mbicp_viz.views.debugger.latency import gui_latency
@@ -103,8 +176,10 @@ def gui(scans: Annotated[Path, typer.Argument(help="scan file")] = DEMO_PAIR, pa
 
 
 def startup(repeat: Annotated[int, typer.Option("--repeat", min=3, help="runs of --help")] = 10):
-    """How soon the tool answers: --help, the first match with an empty kernel cache, the debugger."""
-    from mbicp_viz.evaluation.bench import machine_line, startup as startup_times
+    """How soon the tool answers: --help, the first match with an empty kernel cache, the "
+    "debugger."""
+    from mbicp_viz.evaluation.bench import machine_line
+    from mbicp_viz.evaluation.bench import startup as startup_times
 
     from . import app
 
@@ -112,8 +187,12 @@ def startup(repeat: Annotated[int, typer.Option("--repeat", min=3, help="runs of
     exe = [str(script)] if script.exists() else [sys.executable, "-m", "mbicp_viz"]
     commands = [exe + ["--help"]] + [exe + name.split() + ["--help"] for name in command_names(app)]
     match = exe + ["match", str(DEMO_PAIR), "--pair", "0", "1", "--guess", "identity", "--json"]
-    debugger = [sys.executable, "-c", "import sys; from mbicp_viz.views.debugger.latency import first_result_ms; "
-                f"print(first_result_ms({str(DEMO_PAIR)!r}))"]
+    debugger = [
+        sys.executable,
+        "-c",
+        "import sys; from mbicp_viz.views.debugger.latency import first_result_ms; "
+        f"print(first_result_ms({str(DEMO_PAIR)!r}))",
+    ]
     typer.echo(f"start-up; {machine_line()}")
     for t in startup_times(commands, match, debugger, repeat):
         typer.echo(t.line())
@@ -130,7 +209,14 @@ def command_names(app: typer.Typer) -> list[str]:
 
 
 def register(app: typer.Typer) -> None:
-    group = typer.Typer(no_args_is_help=True, help="Time the matchers, the debugger and the start-up.")
-    for name, fn in (("matches", matches), ("originals", originals), ("gui", gui), ("startup", startup)):
+    group = typer.Typer(
+        no_args_is_help=True, help="Time the matchers, the debugger and the start-up."
+    )
+    for name, fn in (
+        ("matches", matches),
+        ("originals", originals),
+        ("gui", gui),
+        ("startup", startup),
+    ):
         group.command(name)(user_errors(fn))
     app.add_typer(group, name="bench")

@@ -6,41 +6,97 @@ import json
 import math
 import time
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
-from mbicp_viz.errors import InputError
 from mbicp_viz.choices import DEFAULT_TYPESTORE, Removal, Thin
+from mbicp_viz.errors import InputError
 
-from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, FirstArg,
-                      Frame, FrameOpt, Guess, GuessOpt, MountOpt, OffsetOpt, PairOpt, ParamsOpt, PerturbOpt, Progress,
-                      RelationsOpt, RrdOpt, SEARCH, SecondArg, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt,
-                      UpsideDownOpt, WorkersOpt, cases_options, check_perturb, finite, number_list, params_for,
-                      pose_from_deg, read_log_saying, read_options, say, user_errors)
+from .options import (
+    ALL_ALGOS,
+    DEFAULT_ALGO,
+    SEARCH,
+    AlgoOpt,
+    AlgosOpt,
+    CaseGuessOpt,
+    CaseTruthOpt,
+    DeskewOpt,
+    FirstArg,
+    Frame,
+    FrameOpt,
+    Guess,
+    GuessOpt,
+    MountOpt,
+    OffsetOpt,
+    PairOpt,
+    ParamsOpt,
+    PerturbOpt,
+    Progress,
+    RelationsOpt,
+    RrdOpt,
+    SecondArg,
+    SeedOpt,
+    ToleranceOpt,
+    TopicOpt,
+    TypestoreOpt,
+    UpsideDownOpt,
+    WorkersOpt,
+    cases_options,
+    check_perturb,
+    finite,
+    number_list,
+    params_for,
+    pose_from_deg,
+    read_log_saying,
+    read_options,
+    say,
+    user_errors,
+)
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
-LimitOpt = Annotated[Optional[int], typer.Option("--limit", min=1, help="only the first N pairs")]
+LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the first N pairs")]
 
 
-def sequence(log: LogArg,
-             out: Annotated[Path, typer.Option("--out", help="JSON file: one object per consecutive pair")],
-             algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None, limit: LimitOpt = None, rrd: RrdOpt = None,
-             guess: GuessOpt = Guess.stored,
-             truth: Annotated[Optional[str], typer.Option("--truth", help="'pose': score against the log's scan poses "
-                                                                          "(corrected logs)")] = None,
-             png: Annotated[Optional[Path], typer.Option("--png", help="plot the trajectories and the map")] = None,
-             tum: Annotated[Optional[Path], typer.Option("--tum", help="write the trajectory in TUM format (for evo)")]
-             = None,
-             tum_ref: Annotated[Optional[Path], typer.Option("--tum-ref", help="write the log's scan poses in TUM "
-                                                                               "format")] = None,
-             kalman: Annotated[bool, typer.Option("--kalman", help="fuse the matches with the log's odometry (EKF, "
-                                                  "paper 003 §5.3); the TUM file and map then use the fused track")]
-             = False,
-             workers: WorkersOpt = None, frame: FrameOpt = Frame.base, topic: TopicOpt = None,
-             typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None, upside_down: UpsideDownOpt = False,
-             deskew: DeskewOpt = None):
-    """Match every consecutive pair of a log (initial guess from its poses or odometry, else identity)."""
+def sequence(
+    log: LogArg,
+    out: Annotated[Path, typer.Option("--out", help="JSON file: one object per consecutive pair")],
+    algo: AlgoOpt = DEFAULT_ALGO,
+    params: ParamsOpt = None,
+    limit: LimitOpt = None,
+    rrd: RrdOpt = None,
+    guess: GuessOpt = Guess.stored,
+    truth: Annotated[
+        str | None,
+        typer.Option("--truth", help="'pose': score against the log's scan poses (corrected logs)"),
+    ] = None,
+    png: Annotated[
+        Path | None, typer.Option("--png", help="plot the trajectories and the map")
+    ] = None,
+    tum: Annotated[
+        Path | None, typer.Option("--tum", help="write the trajectory in TUM format (for evo)")
+    ] = None,
+    tum_ref: Annotated[
+        Path | None, typer.Option("--tum-ref", help="write the log's scan poses in TUM format")
+    ] = None,
+    kalman: Annotated[
+        bool,
+        typer.Option(
+            "--kalman",
+            help="fuse the matches with the log's odometry (EKF, "
+            "paper 003 §5.3); the TUM file and map then use the fused track",
+        ),
+    ] = False,
+    workers: WorkersOpt = None,
+    frame: FrameOpt = Frame.base,
+    topic: TopicOpt = None,
+    typestore: TypestoreOpt = DEFAULT_TYPESTORE,
+    mount: MountOpt = None,
+    upside_down: UpsideDownOpt = False,
+    deskew: DeskewOpt = None,
+):
+    """Match every consecutive pair of a log (initial guess from its poses or odometry, else "
+    "identity)."""
     from mbicp_viz.evaluation.sequence import match_sequence, odometry_summary, truth_summary
     from mbicp_viz.readers.params_toml import load_search, make_params
 
@@ -50,14 +106,29 @@ def sequence(log: LogArg,
     lg = read_log_saying(log, read_options(topic, typestore, mount, upside_down, deskew))
     total = len(lg.consecutive_pairs(limit))
     with Progress(total) as bar:
-        rows = match_sequence(lg, p, limit, guess, truth, on_row=lambda _: bar.update(1), workers=workers,
-                              search=load_search(params), base=frame is Frame.base)
+        rows = match_sequence(
+            lg,
+            p,
+            limit,
+            guess,
+            truth,
+            on_row=lambda _: bar.update(1),
+            workers=workers,
+            search=load_search(params),
+            base=frame is Frame.base,
+        )
     if not rows:
         raise InputError("interrupted before the first pair was matched", log)
     out.write_text(json.dumps(rows, indent=1) + "\n")
     conv = sum(r["converged"] for r in rows)
-    cut = "" if len(rows) == total else f" (interrupted after {len(rows)} of {total}: the rows so far are kept)"
-    typer.echo(f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}{cut}")
+    cut = (
+        ""
+        if len(rows) == total
+        else f" (interrupted after {len(rows)} of {total}: the rows so far are kept)"
+    )
+    typer.echo(
+        f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}{cut}"
+    )
     if truth:
         typer.echo("\n".join(truth_summary(rows)))
     if odometry := odometry_summary(rows):
@@ -73,12 +144,20 @@ def sequence(log: LogArg,
     from mbicp_viz.evaluation.failures import failure_summary
     from mbicp_viz.readers.rows import read_rows
 
-    for line in failure_summary(read_rows(out), str(out)):  # read back: what `serve --rows` will open
+    # read back: what `serve --rows` will open
+    for line in failure_summary(read_rows(out), str(out)):
         typer.echo(line.replace("LOG", str(log)))
 
 
 def _trajectories(lg, rows, png, tum, tum_ref, fuse) -> None:
-    from mbicp_viz.evaluation.trajectory import MATCHED, STORED, plot_png, sequence_tracks, stamps, tum_text
+    from mbicp_viz.evaluation.trajectory import (
+        MATCHED,
+        STORED,
+        plot_png,
+        sequence_tracks,
+        stamps,
+        tum_text,
+    )
 
     tracks = sequence_tracks(lg, rows, fuse)
     main = list(tracks)[-1] if fuse else MATCHED
@@ -93,53 +172,105 @@ def _trajectories(lg, rows, png, tum, tum_ref, fuse) -> None:
         plot_png(lg, rows, tracks, str(png), main)
 
 
-def protocol(log: LogArg, algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None,
-             cases: Annotated[int, typer.Option("--cases", min=1, help="number of random cases")] = 200,
-             seed: SeedOpt = 24,
-             max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, callback=finite,
-                                                   help="largest |x|, |y| of the guess [m]")] = 0.2,
-             max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
-                                                          help="largest |theta| of the guess [deg]")] = 45.0,
-             topic: TopicOpt = None):
+def protocol(
+    log: LogArg,
+    algo: AlgoOpt = DEFAULT_ALGO,
+    params: ParamsOpt = None,
+    cases: Annotated[int, typer.Option("--cases", min=1, help="number of random cases")] = 200,
+    seed: SeedOpt = 24,
+    max_xy: Annotated[
+        float,
+        typer.Option(
+            "--max-xy", min=0.0, callback=finite, help="largest |x|, |y| of the guess [m]"
+        ),
+    ] = 0.2,
+    max_theta_deg: Annotated[
+        float,
+        typer.Option(
+            "--max-theta-deg", min=0.0, max=180.0, help="largest |theta| of the guess [deg]"
+        ),
+    ] = 45.0,
+    topic: TopicOpt = None,
+):
     """MbICP's own protocol: every case matches a scan against itself from a random guess."""
     from mbicp_viz.evaluation.protocols import displaced_self_matches, protocol_summary
     from mbicp_viz.readers.params_toml import make_params
 
     scans = read_log_saying(log, read_options(topic)).scans
-    res = displaced_self_matches(scans, cases, make_params(algo.value, params), seed, max_xy,
-                                 math.radians(max_theta_deg))
+    res = displaced_self_matches(
+        scans, cases, make_params(algo.value, params), seed, max_xy, math.radians(max_theta_deg)
+    )
     typer.echo(protocol_summary(algo.value, res))
 
 
-def overlap(logs: Annotated[list[str], typer.Argument(help="scan logs; scenes are picked evenly from each")],
-            scenes_per_log: Annotated[int, typer.Option("--scenes-per-log", min=1, help="scenes taken from each log")]
-            = 1,
-            scans: Annotated[Optional[str], typer.Option("--scans", help="explicit scene numbers I,J,... (one log)")]
-            = None,
-            ratios: Annotated[str, typer.Option("--ratios", help="kept fractions in %")] = "100,90,80,70,60",
-            runs: Annotated[int, typer.Option("--runs", min=1, help="random displacements per scene and ratio")] = 10,
-            removal: Annotated[Removal, typer.Option("--removal", help="one block (occlusion-like) or random points")]
-            = Removal.block,
-            thin: Annotated[Thin, typer.Option("--thin", help="the copy that loses the points: reference (its object "
-                                                              "points then lack counterparts) or object")]
-            = Thin.reference,
-            algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, seed: SeedOpt = 0,
-            max_xy: Annotated[float, typer.Option("--max-xy", min=0.0, callback=finite,
-                                                  help="largest |x|, |y| of a displacement [m]")] = 0.5,
-            max_theta_deg: Annotated[float, typer.Option("--max-theta-deg", min=0.0, max=180.0,
-                                                         help="largest |theta| of a displacement [deg]")] = 15.0,
-            csv: Annotated[Optional[Path], typer.Option("--csv", help="write every run as CSV")] = None,
-            png: Annotated[Optional[Path], typer.Option("--png", help="write a plot")] = None,
-            workers: WorkersOpt = None, topic: TopicOpt = None):
+def overlap(
+    logs: Annotated[
+        list[str], typer.Argument(help="scan logs; scenes are picked evenly from each")
+    ],
+    scenes_per_log: Annotated[
+        int, typer.Option("--scenes-per-log", min=1, help="scenes taken from each log")
+    ] = 1,
+    scans: Annotated[
+        str | None, typer.Option("--scans", help="explicit scene numbers I,J,... (one log)")
+    ] = None,
+    ratios: Annotated[
+        str, typer.Option("--ratios", help="kept fractions in %")
+    ] = "100,90,80,70,60",
+    runs: Annotated[
+        int, typer.Option("--runs", min=1, help="random displacements per scene and ratio")
+    ] = 10,
+    removal: Annotated[
+        Removal, typer.Option("--removal", help="one block (occlusion-like) or random points")
+    ] = Removal.block,
+    thin: Annotated[
+        Thin,
+        typer.Option(
+            "--thin",
+            help="the copy that loses the points: reference (its object "
+            "points then lack counterparts) or object",
+        ),
+    ] = Thin.reference,
+    algos: AlgosOpt = ALL_ALGOS,
+    params: ParamsOpt = None,
+    seed: SeedOpt = 0,
+    max_xy: Annotated[
+        float,
+        typer.Option(
+            "--max-xy", min=0.0, callback=finite, help="largest |x|, |y| of a displacement [m]"
+        ),
+    ] = 0.5,
+    max_theta_deg: Annotated[
+        float,
+        typer.Option(
+            "--max-theta-deg", min=0.0, max=180.0, help="largest |theta| of a displacement [deg]"
+        ),
+    ] = 15.0,
+    csv: Annotated[Path | None, typer.Option("--csv", help="write every run as CSV")] = None,
+    png: Annotated[Path | None, typer.Option("--png", help="write a plot")] = None,
+    workers: WorkersOpt = None,
+    topic: TopicOpt = None,
+):
     """Paper 000's partial-overlap protocol (§3.1): Tables 1-3 for each matcher, as Markdown."""
-    from mbicp_viz.evaluation.overlap import csv_text, make_cases, markdown, plot_png, run_overlap, scene_scans, tables
+    from mbicp_viz.evaluation.overlap import (
+        csv_text,
+        make_cases,
+        markdown,
+        plot_png,
+        run_overlap,
+        scene_scans,
+        tables,
+    )
 
     etas = [v / 100.0 for v in number_list(ratios, "--ratios", "100,90,80")]
     if not all(0.0 < e <= 1.0 for e in etas):
         raise InputError("each ratio must lie in (0, 100]", field="--ratios")
     ps = params_for(algos, params)
     picked = number_list(scans, "--scans", "3,10,25", int) if scans else None
-    scenes = [s for log in logs for s in scene_scans(read_log_saying(log, read_options(topic)), scenes_per_log, picked)]
+    scenes = [
+        s
+        for log in logs
+        for s in scene_scans(read_log_saying(log, read_options(topic)), scenes_per_log, picked)
+    ]
     cases = make_cases(scenes, etas, runs, removal, seed, max_xy, math.radians(max_theta_deg), thin)
     t0 = time.perf_counter()
     with Progress(len(cases)) as bar:
@@ -153,41 +284,75 @@ def overlap(logs: Annotated[list[str], typer.Argument(help="scan logs; scenes ar
         rows = run_overlap(scenes, ps, cases, workers, progress)
     tab = tables(rows)
     typer.echo(markdown(tab))
-    say(f"{len(rows)} matches ({len(rows) // max(len(ps), 1)}/{len(cases)} cases) in {time.perf_counter() - t0:.1f} s; "
-        f"{len(scenes)} scenes, removal {removal.value} from the {thin.value}, seed {seed}")
+    say(
+        f"{len(rows)} matches ({len(rows) // max(len(ps), 1)}/{len(cases)} cases) in "
+        f"{time.perf_counter() - t0:.1f} s; "
+        f"{len(scenes)} scenes, removal {removal.value} from the {thin.value}, seed {seed}"
+    )
     if csv:
         csv.write_text(csv_text(rows))
     if png:
         plot_png(tab, str(png))
 
 
-def ceiling(log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
-            algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, limit: LimitOpt = None, workers: WorkersOpt = None,
-            topic: TopicOpt = None):
-    """How well any guess could do on a log: each matcher started at the truth, and the search alone."""
-    from mbicp_viz.evaluation.sequence import ceiling as ceiling_of, ceiling_summary
+def ceiling(
+    log: Annotated[
+        str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")
+    ],
+    algos: AlgosOpt = ALL_ALGOS,
+    params: ParamsOpt = None,
+    limit: LimitOpt = None,
+    workers: WorkersOpt = None,
+    topic: TopicOpt = None,
+):
+    """How well any guess could do on a log: each matcher started at the truth, and the search "
+    "alone."""
+    from mbicp_viz.evaluation.sequence import ceiling as ceiling_of
+    from mbicp_viz.evaluation.sequence import ceiling_summary
 
     by_name = params_for(algos, params)
     lg = read_log_saying(log, read_options(topic))
     with Progress(len(lg.consecutive_pairs(limit))) as bar:
-        found, kept, doubted, n = ceiling_of(lg, list(by_name.values()), limit, workers, on_row=lambda _: bar.update(1))
+        found, kept, doubted, n = ceiling_of(
+            lg, list(by_name.values()), limit, workers, on_row=lambda _: bar.update(1)
+        )
     if n == 0:
         raise InputError("interrupted before the first pair was matched", log)
     typer.echo("\n".join(ceiling_summary(list(by_name), found, kept, doubted, n)))
 
 
-def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")],
-             algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None,
-             perturb: Annotated[tuple[float, float], typer.Option(
-                 "--perturb", metavar="XY_M THETA_DEG", help="guesses: the stored pose moved uniformly within "
-                 "+/-XY_M in x and y and +/-THETA_DEG (seeded)")] = (0.3, 15.0),
-             seed: SeedOpt = 0,
-             condition: Annotated[float, typer.Option("--condition", min=1.0, callback=finite,
-                                                      help="a pair is degenerate above this surface condition "
-                                                           "number at its true pose")] = 30.0,
-             workers: WorkersOpt = None, topic: TopicOpt = None):
-    """Successes where the scene leaves a direction free (corridors) and elsewhere, from perturbed guesses."""
-    from mbicp_viz.evaluation.corridor import corridor as corridor_of, corridor_summary
+def corridor(
+    log: Annotated[
+        str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")
+    ],
+    algos: AlgosOpt = ALL_ALGOS,
+    params: ParamsOpt = None,
+    perturb: Annotated[
+        tuple[float, float],
+        typer.Option(
+            "--perturb",
+            metavar="XY_M THETA_DEG",
+            help="guesses: the stored pose moved uniformly within "
+            "+/-XY_M in x and y and +/-THETA_DEG (seeded)",
+        ),
+    ] = (0.3, 15.0),
+    seed: SeedOpt = 0,
+    condition: Annotated[
+        float,
+        typer.Option(
+            "--condition",
+            min=1.0,
+            callback=finite,
+            help="a pair is degenerate above this surface condition number at its true pose",
+        ),
+    ] = 30.0,
+    workers: WorkersOpt = None,
+    topic: TopicOpt = None,
+):
+    """Successes where the scene leaves a direction free (corridors) and elsewhere, from perturbed "
+    "guesses."""
+    from mbicp_viz.evaluation.corridor import corridor as corridor_of
+    from mbicp_viz.evaluation.corridor import corridor_summary
 
     moved = check_perturb(perturb)
     ps = params_for(algos, params)
@@ -198,19 +363,35 @@ def corridor(log: Annotated[str, typer.Argument(help="scan log whose scan poses 
     if not rows:
         raise InputError("interrupted before the first pair was matched", log)
     typer.echo("\n".join(corridor_summary(rows, condition)))
-    say(f"{len(rows) * len(ps)} matches in {time.perf_counter() - t0:.1f} s; guesses within +/-{perturb[0]:g} m, "
-        f"+/-{perturb[1]:g} deg, seed {seed}")
+    say(
+        f"{len(rows) * len(ps)} matches in {time.perf_counter() - t0:.1f} s; guesses within "
+        f"+/-{perturb[0]:g} m, "
+        f"+/-{perturb[1]:g} deg, seed {seed}"
+    )
 
 
-def covariance(log: Annotated[str, typer.Argument(help="scan log with a truth (its scan poses, or --relations)")],
-               algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None, truth: CaseTruthOpt = "pose",
-               relations_file: RelationsOpt = None, offset: OffsetOpt = 0.0, tolerance: ToleranceOpt = 0.025,
-               guess: CaseGuessOpt = "perturb", perturb: PerturbOpt = (0.3, 15.0), seed: SeedOpt = 0,
-               limit: LimitOpt = None,
-               png: Annotated[Optional[Path], typer.Option("--png", help="the NEES distributions against chi2(3)")]
-               = None,
-               workers: WorkersOpt = None, topic: TopicOpt = None):
-    """Whether each matcher's reported covariance fits its errors against the truth (NEES, chi2 bounds)."""
+def covariance(
+    log: Annotated[
+        str, typer.Argument(help="scan log with a truth (its scan poses, or --relations)")
+    ],
+    algos: AlgosOpt = ALL_ALGOS,
+    params: ParamsOpt = None,
+    truth: CaseTruthOpt = "pose",
+    relations_file: RelationsOpt = None,
+    offset: OffsetOpt = 0.0,
+    tolerance: ToleranceOpt = 0.025,
+    guess: CaseGuessOpt = "perturb",
+    perturb: PerturbOpt = (0.3, 15.0),
+    seed: SeedOpt = 0,
+    limit: LimitOpt = None,
+    png: Annotated[
+        Path | None, typer.Option("--png", help="the NEES distributions against chi2(3)")
+    ] = None,
+    workers: WorkersOpt = None,
+    topic: TopicOpt = None,
+):
+    """Whether each matcher's reported covariance fits its errors against the truth (NEES, chi2 "
+    "bounds)."""
     from mbicp_viz.evaluation.cases import cases_for
     from mbicp_viz.evaluation.covariance import consistency_lines, covariance_consistency, nees_png
     from mbicp_viz.readers.params_toml import load_search
@@ -219,35 +400,68 @@ def covariance(log: Annotated[str, typer.Argument(help="scan log with a truth (i
     moved = cases_options(truth, relations_file, guess, perturb)
     ps = params_for(algos, params)
     lg = read_log_saying(log, read_options(topic))
-    cases = cases_for(0, lg, truth, read_relations(relations_file) if relations_file else None, offset, tolerance,
-                      guess, moved, seed, load_search(params), limit)
+    cases = cases_for(
+        0,
+        lg,
+        truth,
+        read_relations(relations_file) if relations_file else None,
+        offset,
+        tolerance,
+        guess,
+        moved,
+        seed,
+        load_search(params),
+        limit,
+    )
     results = {}
     with Progress(len(cases) * len(ps)) as bar:
         for name, p in ps.items():
-            results[name] = covariance_consistency(lg, cases, p, workers, on_row=lambda _: bar.update(1))
+            results[name] = covariance_consistency(
+                lg, cases, p, workers, on_row=lambda _: bar.update(1)
+            )
     for name, c in results.items():
         typer.echo("\n".join(consistency_lines(name, c)))
     if png:
         nees_png(results, str(png))
 
 
-def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps")],
-              relations_file: Annotated[str, typer.Argument(metavar="RELATIONS",
-                                                            help="relations file (t1 t2 x y z roll pitch yaw)")],
-              algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None,
-              offset: OffsetOpt = 0.0, tolerance: ToleranceOpt = 0.025,
-              guess: Annotated[Guess, typer.Option("--guess", help="identity, pose, odometry or search (a correlative "
-                                                   f"search within {SEARCH} of the identity)")] = Guess.identity,
-              out: Annotated[Optional[Path], typer.Option("--out", help="JSON file: one object per matched relation")]
-              = None, topic: TopicOpt = None):
+def relations(
+    log: Annotated[str, typer.Argument(help="scan log with time stamps")],
+    relations_file: Annotated[
+        str, typer.Argument(metavar="RELATIONS", help="relations file (t1 t2 x y z roll pitch yaw)")
+    ],
+    algo: AlgoOpt = DEFAULT_ALGO,
+    params: ParamsOpt = None,
+    offset: OffsetOpt = 0.0,
+    tolerance: ToleranceOpt = 0.025,
+    guess: Annotated[
+        Guess,
+        typer.Option(
+            "--guess",
+            help="identity, pose, odometry or search (a correlative "
+            f"search within {SEARCH} of the identity)",
+        ),
+    ] = Guess.identity,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="JSON file: one object per matched relation")
+    ] = None,
+    topic: TopicOpt = None,
+):
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""
     from mbicp_viz.evaluation.relations import match_relations, stored_summary, summary
     from mbicp_viz.readers.params_toml import load_search, make_params
     from mbicp_viz.readers.relations import read_relations
 
     lg = read_log_saying(log, read_options(topic))
-    rows, missing = match_relations(lg, read_relations(relations_file), make_params(algo.value, params), offset,
-                                    tolerance, guess, load_search(params))
+    rows, missing = match_relations(
+        lg,
+        read_relations(relations_file),
+        make_params(algo.value, params),
+        offset,
+        tolerance,
+        guess,
+        load_search(params),
+    )
     if out:
         out.write_text(json.dumps(rows, indent=1) + "\n")
     typer.echo(f"{algo.value}: {summary(rows)} ({missing} relations without a scan at both ends)")
@@ -255,21 +469,42 @@ def relations(log: Annotated[str, typer.Argument(help="scan log with time stamps
         typer.echo(stored)
 
 
-def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
-          truth: Annotated[Optional[tuple[float, float, float]], typer.Option(
-              "--truth", metavar="X Y THETA_DEG",
-              help="the answer X Y THETA_DEG (default: the stored poses, else each matcher's own)")] = None,
-          algos: AlgosOpt = ALL_ALGOS, params: ParamsOpt = None,
-          range_xy: Annotated[float, typer.Option("--range-xy", min=0.0, callback=finite,
-                                                  help="largest |dx|, |dy| offset [m]")] = 1.0,
-          steps: Annotated[int, typer.Option("--steps", min=2, max=201, help="grid points per axis")] = 11,
-          thetas_deg: Annotated[str, typer.Option("--thetas-deg", help="theta offsets [deg]")] = "-30,-15,0,15,30",
-          png: Annotated[Optional[Path], typer.Option("--png", help="write the atlas as a PNG")] = None,
-          rrd: RrdOpt = None, workers: WorkersOpt = None, topic: TopicOpt = None,
-          typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None, upside_down: UpsideDownOpt = False,
-          deskew: DeskewOpt = None):
+def basin(
+    first: FirstArg,
+    second: SecondArg = None,
+    pair: PairOpt = None,
+    truth: Annotated[
+        tuple[float, float, float] | None,
+        typer.Option(
+            "--truth",
+            metavar="X Y THETA_DEG",
+            help="the answer X Y THETA_DEG (default: the stored poses, else each matcher's own)",
+        ),
+    ] = None,
+    algos: AlgosOpt = ALL_ALGOS,
+    params: ParamsOpt = None,
+    range_xy: Annotated[
+        float,
+        typer.Option("--range-xy", min=0.0, callback=finite, help="largest |dx|, |dy| offset [m]"),
+    ] = 1.0,
+    steps: Annotated[
+        int, typer.Option("--steps", min=2, max=201, help="grid points per axis")
+    ] = 11,
+    thetas_deg: Annotated[
+        str, typer.Option("--thetas-deg", help="theta offsets [deg]")
+    ] = "-30,-15,0,15,30",
+    png: Annotated[Path | None, typer.Option("--png", help="write the atlas as a PNG")] = None,
+    rrd: RrdOpt = None,
+    workers: WorkersOpt = None,
+    topic: TopicOpt = None,
+    typestore: TypestoreOpt = DEFAULT_TYPESTORE,
+    mount: MountOpt = None,
+    upside_down: UpsideDownOpt = False,
+    deskew: DeskewOpt = None,
+):
     """A convergence atlas: every matcher from a grid of initial offsets, coloured by outcome."""
-    from mbicp_viz.evaluation.basin import basin as atlas_of, plot_png, summary
+    from mbicp_viz.evaluation.basin import basin as atlas_of
+    from mbicp_viz.evaluation.basin import plot_png, summary
     from mbicp_viz.evaluation.pairs import load_pair, stored_truth
 
     thetas = [math.radians(v) for v in number_list(thetas_deg, "--thetas-deg", "-15,0,15")]
@@ -290,7 +525,15 @@ def basin(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
 
 def register(app: typer.Typer) -> None:
     group = typer.Typer(no_args_is_help=True, help="Evaluate matchers on whole logs.")
-    for name, fn in (("sequence", sequence), ("protocol", protocol), ("overlap", overlap), ("ceiling", ceiling),
-                     ("relations", relations), ("basin", basin), ("corridor", corridor), ("covariance", covariance)):
+    for name, fn in (
+        ("sequence", sequence),
+        ("protocol", protocol),
+        ("overlap", overlap),
+        ("ceiling", ceiling),
+        ("relations", relations),
+        ("basin", basin),
+        ("corridor", corridor),
+        ("covariance", covariance),
+    ):
         group.command(name)(user_errors(fn))
     app.add_typer(group, name="eval")

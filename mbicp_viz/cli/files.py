@@ -3,18 +3,24 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from .options import DEFAULT_ALGO, AlgoOpt, user_errors
 
 
-def record(names: Annotated[Optional[list[str]], typer.Argument(help="scenario names (default: all)")] = None,
-           out_dir: Annotated[Optional[Path], typer.Option(
-               "--out-dir", help="write the .rrd files here (made if missing; default: the checkout's recordings/)")]
-           = None,
-           list_only: Annotated[bool, typer.Option("--list", help="list the scenarios and stop")] = False):
+def record(
+    names: Annotated[list[str] | None, typer.Argument(help="scenario names (default: all)")] = None,
+    out_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--out-dir",
+            help="write the .rrd files here (made if missing; default: the checkout's recordings/)",
+        ),
+    ] = None,
+    list_only: Annotated[bool, typer.Option("--list", help="list the scenarios and stop")] = False,
+):
     """Regenerate the curated recordings (.rrd) from the scenario files."""
     from mbicp_viz.evaluation.scenarios import load_scenario, scenario_paths
     from mbicp_viz.views.recordings import record_all
@@ -29,13 +35,26 @@ def record(names: Annotated[Optional[list[str]], typer.Argument(help="scenario n
             typer.echo(f"    {line}")
 
 
-def params(algo: AlgoOpt = DEFAULT_ALGO,
-           out: Annotated[Optional[Path], typer.Option("--out", help="write to this file")] = None,
-           presets: Annotated[bool, typer.Option("--presets", help="list the presets --params NAME reads, with "
-                                                                   "their files, and stop")] = False):
-    """Print (or write) the default parameters of a matcher and of the search, as a file for --params."""
+def params(
+    algo: AlgoOpt = DEFAULT_ALGO,
+    out: Annotated[Path | None, typer.Option("--out", help="write to this file")] = None,
+    presets: Annotated[
+        bool,
+        typer.Option(
+            "--presets", help="list the presets --params NAME reads, with their files, and stop"
+        ),
+    ] = False,
+):
+    """Print (or write) the default parameters of a matcher and of the search, as a file for "
+    "--params."""
     from mbicp_viz.core import MATCHERS, SearchParams
-    from mbicp_viz.readers.params_toml import PRESETS, make_params, params_to_toml, preset_names, presets_for
+    from mbicp_viz.readers.params_toml import (
+        PRESETS,
+        make_params,
+        params_to_toml,
+        preset_names,
+        presets_for,
+    )
 
     if presets:
         for name in preset_names():

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -13,15 +13,31 @@ from .options import user_errors
 from .serve import ForOpt, ServePortOpt, _serve
 
 
-def lesson(step: Annotated[int, typer.Option("--step", min=1, help="open at this step (1: the first)")] = 1,
-           directory: Annotated[Optional[Path], typer.Option(
-               "--dir", help="a folder of lesson steps (*.toml, in file-name order); default: the bundled lesson")] = None,
-           export: Annotated[Optional[Path], typer.Option(
-               "--export", help="write the lesson to this folder instead of serving it: lesson.md with a PNG per "
-                                "step, and lesson.rrd (a step timeline, the step's text, its layers)")] = None,
-           port: ServePortOpt = 8080, for_seconds: ForOpt = None):
-    """The guided MbICP lesson: from one laser scan to improved MbICP, step by step (next/previous), each
-    step a real scan pair whose text quotes its own run."""
+def lesson(
+    step: Annotated[
+        int, typer.Option("--step", min=1, help="open at this step (1: the first)")
+    ] = 1,
+    directory: Annotated[
+        Path | None,
+        typer.Option(
+            "--dir",
+            help="a folder of lesson steps (*.toml, in file-name order); default: the bundled "
+            "lesson",
+        ),
+    ] = None,
+    export: Annotated[
+        Path | None,
+        typer.Option(
+            "--export",
+            help="write the lesson to this folder instead of serving it: lesson.md with a PNG per "
+            "step, and lesson.rrd (a step timeline, the step's text, its layers)",
+        ),
+    ] = None,
+    port: ServePortOpt = 8080,
+    for_seconds: ForOpt = None,
+):
+    """The guided MbICP lesson: from one laser scan to improved MbICP, step by step
+    (next/previous), each step a real scan pair whose text quotes its own run."""
     from mbicp_viz.views.lesson.steps import load_lesson
 
     steps = tuple(load_lesson(directory))
@@ -36,8 +52,8 @@ def lesson(step: Annotated[int, typer.Option("--step", min=1, help="open at this
 
 
 def _export(steps, out: Path) -> None:
-    from mbicp_viz.views.lesson.steps import run_step
     from mbicp_viz.views.handout import write_handout
+    from mbicp_viz.views.lesson.steps import run_step
     from mbicp_viz.views.lesson_rrd import record_lesson
 
     if out.exists() and not out.is_dir():
@@ -48,7 +64,10 @@ def _export(steps, out: Path) -> None:
         typer.echo(f"step {s.number}: {s.title}")
     md = write_handout(runs, out)
     record_lesson(runs, str(out / "lesson.rrd"))
-    typer.echo(f"written {md}, {len(runs)} PNGs and {out / 'lesson.rrd'} (open it with: rerun {out / 'lesson.rrd'})")
+    typer.echo(
+        f"written {md}, {len(runs)} PNGs and {out / 'lesson.rrd'} (open it with: rerun "
+        f"{out / 'lesson.rrd'})"
+    )
 
 
 def register(app: typer.Typer) -> None:

@@ -10,12 +10,41 @@ import typer
 
 from mbicp_viz.choices import DEFAULT_TYPESTORE
 
-from .options import (ALL_ALGOS, AlgoOpt, AlgosOpt, ConnectOpt, DEFAULT_ALGO, DeskewOpt, FirstArg, Frame, FrameOpt,
-                      Guess, GuessOpt, InitOpt, MountOpt, PairOpt, ParamsOpt, PortOpt, RrdOpt, SearchFlag, SecondArg,
-                      ServeOpt, TeachOpt, TopicOpt, TruthOpt, TypestoreOpt, UpsideDownOpt, pose_from_deg, read_options,
-                      say, user_errors)
+from .options import (
+    ALL_ALGOS,
+    DEFAULT_ALGO,
+    AlgoOpt,
+    AlgosOpt,
+    ConnectOpt,
+    DeskewOpt,
+    FirstArg,
+    Frame,
+    FrameOpt,
+    Guess,
+    GuessOpt,
+    InitOpt,
+    MountOpt,
+    PairOpt,
+    ParamsOpt,
+    PortOpt,
+    RrdOpt,
+    SearchFlag,
+    SecondArg,
+    ServeOpt,
+    TeachOpt,
+    TopicOpt,
+    TruthOpt,
+    TypestoreOpt,
+    UpsideDownOpt,
+    pose_from_deg,
+    read_options,
+    say,
+    user_errors,
+)
 
-JsonOpt = Annotated[bool, typer.Option("--json", help="print one JSON object with the result fields")]
+JsonOpt = Annotated[
+    bool, typer.Option("--json", help="print one JSON object with the result fields")
+]
 
 
 def _pair_and_setup(first, second, pair, reading, guess, init, search, truth, params):
@@ -26,16 +55,39 @@ def _pair_and_setup(first, second, pair, reading, guess, init, search, truth, pa
     sp = load_pair(first, second, pair, reading)
     for note in sp.log.notes:
         say(note)
-    return sp, setup(sp, guess, pose_from_deg(init, "--init"), search, pose_from_deg(truth, "--truth"),
-                     load_search(params))
+    return sp, setup(
+        sp,
+        guess,
+        pose_from_deg(init, "--init"),
+        search,
+        pose_from_deg(truth, "--truth"),
+        load_search(params),
+    )
 
 
-def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, algo: AlgoOpt = DEFAULT_ALGO,
-              guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
-              params: ParamsOpt = None, as_json: JsonOpt = False, frame: FrameOpt = Frame.base, rrd: RrdOpt = None,
-              teach: TeachOpt = False, connect: ConnectOpt = None, serve: ServeOpt = False, port: PortOpt = 9090,
-              topic: TopicOpt = None, typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None,
-              upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None):
+def match_cmd(
+    first: FirstArg,
+    second: SecondArg = None,
+    pair: PairOpt = None,
+    algo: AlgoOpt = DEFAULT_ALGO,
+    guess: GuessOpt = Guess.stored,
+    init: InitOpt = None,
+    search: SearchFlag = False,
+    truth: TruthOpt = None,
+    params: ParamsOpt = None,
+    as_json: JsonOpt = False,
+    frame: FrameOpt = Frame.base,
+    rrd: RrdOpt = None,
+    teach: TeachOpt = False,
+    connect: ConnectOpt = None,
+    serve: ServeOpt = False,
+    port: PortOpt = 9090,
+    topic: TopicOpt = None,
+    typestore: TypestoreOpt = DEFAULT_TYPESTORE,
+    mount: MountOpt = None,
+    upside_down: UpsideDownOpt = False,
+    deskew: DeskewOpt = None,
+):
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from mbicp_viz.core import tiers
     from mbicp_viz.evaluation import single
@@ -44,31 +96,68 @@ def match_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, a
 
     tiers.quick_start()  # a person waits on this command: never a compile stall
     p = make_params(algo.value, params)
-    sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down, deskew), guess, init,
-                            search, truth, params)
+    sp, s = _pair_and_setup(
+        first,
+        second,
+        pair,
+        read_options(topic, typestore, mount, upside_down, deskew),
+        guess,
+        init,
+        search,
+        truth,
+        params,
+    )
     outcome = single.run(sp.ref, sp.obj, s.guess, p, record=not as_json)
     base = frame is Frame.base
     if as_json:
-        indices = (0, 0) if second else (pair or sp.log.consecutive_pairs(1)[0])  # scan numbers within each file
+        # scan numbers within each file
+        indices = (0, 0) if second else (pair or sp.log.consecutive_pairs(1)[0])
         typer.echo(json.dumps(single.row(indices, s, outcome, sp.log.frames, base)))
     else:
         frames = sp.log.frames
         truth_pose = frames.reported(s.truth, base) if s.truth is not None else None
-        typer.echo("\n".join(match_report(sp.label, s, outcome, single.reported(outcome.result, frames, base),
-                                           frames.frame_text(base), truth_pose)))
+        typer.echo(
+            "\n".join(
+                match_report(
+                    sp.label,
+                    s,
+                    outcome,
+                    single.reported(outcome.result, frames, base),
+                    frames.frame_text(base),
+                    truth_pose,
+                )
+            )
+        )
     _say_if_interpreted()
     if rrd or connect or serve:
         from mbicp_viz.views.rrd import Run
 
-        _record([Run(algo.value, sp.ref, sp.obj, s.guess, p, s.truth)], rrd, connect, serve, port, teach)
+        _record(
+            [Run(algo.value, sp.ref, sp.obj, s.guess, p, s.truth)], rrd, connect, serve, port, teach
+        )
 
 
-def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None, algos: AlgosOpt = ALL_ALGOS,
-                guess: GuessOpt = Guess.stored, init: InitOpt = None, search: SearchFlag = False, truth: TruthOpt = None,
-                params: ParamsOpt = None, rrd: RrdOpt = None, teach: TeachOpt = False, connect: ConnectOpt = None,
-                serve: ServeOpt = False, port: PortOpt = 9090, topic: TopicOpt = None,
-                typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None, upside_down: UpsideDownOpt = False,
-                deskew: DeskewOpt = None):
+def compare_cmd(
+    first: FirstArg,
+    second: SecondArg = None,
+    pair: PairOpt = None,
+    algos: AlgosOpt = ALL_ALGOS,
+    guess: GuessOpt = Guess.stored,
+    init: InitOpt = None,
+    search: SearchFlag = False,
+    truth: TruthOpt = None,
+    params: ParamsOpt = None,
+    rrd: RrdOpt = None,
+    teach: TeachOpt = False,
+    connect: ConnectOpt = None,
+    serve: ServeOpt = False,
+    port: PortOpt = 9090,
+    topic: TopicOpt = None,
+    typestore: TypestoreOpt = DEFAULT_TYPESTORE,
+    mount: MountOpt = None,
+    upside_down: UpsideDownOpt = False,
+    deskew: DeskewOpt = None,
+):
     """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
     from mbicp_viz.core import tiers
     from mbicp_viz.evaluation.compare import compare_table
@@ -78,14 +167,35 @@ def compare_cmd(first: FirstArg, second: SecondArg = None, pair: PairOpt = None,
 
     tiers.quick_start()
     ps = params_for(algos, params)
-    sp, s = _pair_and_setup(first, second, pair, read_options(topic, typestore, mount, upside_down, deskew), guess, init,
-                            search, truth, params)
-    typer.echo(f"{sp.label}\ninitial guess {s.guess} (from: {s.guess_source}); poses: the laser frame")
-    typer.echo(f"errors against: {s.truth_source or 'nothing (no known answer; give --truth X Y THETA_DEG)'}\n")
+    sp, s = _pair_and_setup(
+        first,
+        second,
+        pair,
+        read_options(topic, typestore, mount, upside_down, deskew),
+        guess,
+        init,
+        search,
+        truth,
+        params,
+    )
+    typer.echo(
+        f"{sp.label}\ninitial guess {s.guess} (from: {s.guess_source}); poses: the laser frame"
+    )
+    typer.echo(
+        "errors against: "
+        f"{s.truth_source or 'nothing (no known answer; give --truth X Y THETA_DEG)'}\n"
+    )
     typer.echo(compare_table(sp.ref, sp.obj, s.guess, ps, s.truth))
     _say_if_interpreted()
     if rrd or connect or serve:
-        _record([Run(a, sp.ref, sp.obj, s.guess, p, s.truth) for a, p in ps.items()], rrd, connect, serve, port, teach)
+        _record(
+            [Run(a, sp.ref, sp.obj, s.guess, p, s.truth) for a, p in ps.items()],
+            rrd,
+            connect,
+            serve,
+            port,
+            teach,
+        )
 
 
 def _say_if_interpreted() -> None:
@@ -97,9 +207,14 @@ def _say_if_interpreted() -> None:
 
 def _record(runs, rrd, connect, serve, port, teach) -> None:
     """Write the runs to an .rrd, stream them to a viewer, and/or serve them on 127.0.0.1."""
-    from mbicp_viz.views.rrd import record, serve as serve_rrd
+    from mbicp_viz.views.rrd import record
+    from mbicp_viz.views.rrd import serve as serve_rrd
 
-    path = str(rrd) if rrd else (tempfile.mkdtemp(prefix="mbicp-viz-") + "/match.rrd" if serve else None)
+    path = (
+        str(rrd)
+        if rrd
+        else (tempfile.mkdtemp(prefix="mbicp-viz-") + "/match.rrd" if serve else None)
+    )
     record(runs, path, connect, teach)
     if path:
         say(f"recording written to {path} (open it with: rerun {path})")

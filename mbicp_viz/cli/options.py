@@ -8,15 +8,15 @@ import functools
 import math
 import os
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
-from mbicp_viz.core.matchers import MATCHERS
+from mbicp_viz.choices import Deskew, Guess
 from mbicp_viz.core.errors import ScanError
+from mbicp_viz.core.matchers import MATCHERS
 from mbicp_viz.core.params import ParamError, SearchParams
 from mbicp_viz.errors import InputError
-from mbicp_viz.choices import Deskew, Guess
 
 Algo = enum.Enum("Algo", {name: name for name in MATCHERS}, type=str)
 
@@ -27,54 +27,136 @@ class Frame(str, enum.Enum):
     base = "base"
     laser = "laser"
 
+
 DEFAULT_ALGO = Algo["improved"]
 ALL_ALGOS = ",".join(MATCHERS)
 SEARCH = SearchParams().window_text()
 
 FirstArg = Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")]
-SecondArg = Annotated[Optional[str], typer.Argument(help="object scan file")]
+SecondArg = Annotated[str | None, typer.Argument(help="object scan file")]
 AlgoOpt = Annotated[Algo, typer.Option("--algo", help="matcher")]
 AlgosOpt = Annotated[str, typer.Option("--algos", help=f"comma-separated matchers of: {ALL_ALGOS}")]
-ParamsOpt = Annotated[Optional[Path], typer.Option(
-    "--params", help="TOML file of matcher parameters (and a [search] table for the correlative search), or the "
-                     "name of a preset shipped with the tool (mbicp-viz params --presets)")]
-PairOpt = Annotated[Optional[tuple[int, int]], typer.Option(
-    "--pair", metavar="I J", help="scan numbers I J of one log (ref obj; -1 is the last)")]
-InitOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
-    "--init", metavar="X Y THETA_DEG", help="initial guess X Y THETA_DEG: object frame in the reference frame (m, m, "
-                                            "deg); overrides --guess")]
-GuessOpt = Annotated[Guess, typer.Option(
-    "--guess", help="initial guess: stored (the log's scan poses, else its odometry, else the identity), pose, "
-                    f"odometry, identity, or search (a correlative search within {SEARCH} of the identity)")]
-TruthOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
-    "--truth", metavar="X Y THETA_DEG", help="the known answer X Y THETA_DEG (default: the log's scan poses when "
-                                             "the guess is not taken from them)")]
-TopicOpt = Annotated[Optional[str], typer.Option("--topic", help="a bag's LaserScan topic, or a CARMEN log's laser "
-                                                                 "message type (FLASER, ROBOTLASER1, RAWLASER1-4): "
-                                                                 "needed when it has several")]
-TypestoreOpt = Annotated[str, typer.Option("--typestore", help="the ROS distro whose message types decode a ROS 2 "
-                                                               "bag recorded without them (e.g. ROS2_HUMBLE, "
-                                                               "ROS2_FOXY, ROS1_NOETIC)")]
-MountOpt = Annotated[Optional[tuple[float, float, float]], typer.Option(
-    "--mount", metavar="X Y THETA_DEG",
-    help="the laser's pose on the robot X Y THETA_DEG (base frame; m, m, deg), for files without tf")]
-DeskewOpt = Annotated[Optional[Deskew], typer.Option(
-    "--deskew", help="correct each scan for the motion while it was measured (bags whose LaserScans give "
-                     "time_increment): the velocity from the log's odometry, or from matching consecutive scans")]
-UpsideDownOpt = Annotated[bool, typer.Option("--upside-down", help="the laser is mounted upside down (its z axis "
-                                                                    "points down), for files without tf")]
-FrameOpt = Annotated[Frame, typer.Option("--frame", help="report motions of the robot's base (its mount from tf, "
-                                                           "--mount or the log), or of the laser")]
-RrdOpt = Annotated[Optional[Path], typer.Option("--rrd", help="write the run to this rerun .rrd file")]
-TeachOpt = Annotated[bool, typer.Option("--teach", help="add teaching layers: iso-distance curves, distance "
-                                                        "histogram")]
-ConnectOpt = Annotated[Optional[str], typer.Option(
-    "--connect", help="stream into a running rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")]
-ServeOpt = Annotated[bool, typer.Option("--serve", help="serve rerun's web viewer on 127.0.0.1 with the run")]
-PortOpt = Annotated[int, typer.Option("--port", min=1, max=65534, help="web viewer port for --serve (data: PORT+1)")]
-WorkersOpt = Annotated[Optional[int], typer.Option("--workers", min=1, help="processes (default: all cores)")]
-SearchFlag = Annotated[bool, typer.Option("--search", help=f"first search the pose within {SEARCH} of the guess "
-                                                           "(correlative search), then match from the best")]
+ParamsOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--params",
+        help="TOML file of matcher parameters (and a [search] table for the correlative search), "
+        "or the "
+        "name of a preset shipped with the tool (mbicp-viz params --presets)",
+    ),
+]
+PairOpt = Annotated[
+    tuple[int, int] | None,
+    typer.Option(
+        "--pair", metavar="I J", help="scan numbers I J of one log (ref obj; -1 is the last)"
+    ),
+]
+InitOpt = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--init",
+        metavar="X Y THETA_DEG",
+        help="initial guess X Y THETA_DEG: object frame in the reference frame (m, m, "
+        "deg); overrides --guess",
+    ),
+]
+GuessOpt = Annotated[
+    Guess,
+    typer.Option(
+        "--guess",
+        help="initial guess: stored (the log's scan poses, else its odometry, else the identity), "
+        "pose, "
+        f"odometry, identity, or search (a correlative search within {SEARCH} of the identity)",
+    ),
+]
+TruthOpt = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--truth",
+        metavar="X Y THETA_DEG",
+        help="the known answer X Y THETA_DEG (default: the log's scan poses when "
+        "the guess is not taken from them)",
+    ),
+]
+TopicOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--topic",
+        help="a bag's LaserScan topic, or a CARMEN log's laser "
+        "message type (FLASER, ROBOTLASER1, RAWLASER1-4): "
+        "needed when it has several",
+    ),
+]
+TypestoreOpt = Annotated[
+    str,
+    typer.Option(
+        "--typestore",
+        help="the ROS distro whose message types decode a ROS 2 "
+        "bag recorded without them (e.g. ROS2_HUMBLE, "
+        "ROS2_FOXY, ROS1_NOETIC)",
+    ),
+]
+MountOpt = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--mount",
+        metavar="X Y THETA_DEG",
+        help="the laser's pose on the robot X Y THETA_DEG (base frame; m, m, deg), for files "
+        "without tf",
+    ),
+]
+DeskewOpt = Annotated[
+    Deskew | None,
+    typer.Option(
+        "--deskew",
+        help="correct each scan for the motion while it was measured (bags whose LaserScans give "
+        "time_increment): the velocity from the log's odometry, or from matching consecutive scans",
+    ),
+]
+UpsideDownOpt = Annotated[
+    bool,
+    typer.Option(
+        "--upside-down",
+        help="the laser is mounted upside down (its z axis points down), for files without tf",
+    ),
+]
+FrameOpt = Annotated[
+    Frame,
+    typer.Option(
+        "--frame",
+        help="report motions of the robot's base (its mount from tf, "
+        "--mount or the log), or of the laser",
+    ),
+]
+RrdOpt = Annotated[Path | None, typer.Option("--rrd", help="write the run to this rerun .rrd file")]
+TeachOpt = Annotated[
+    bool,
+    typer.Option("--teach", help="add teaching layers: iso-distance curves, distance histogram"),
+]
+ConnectOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--connect",
+        help="stream into a running rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy",
+    ),
+]
+ServeOpt = Annotated[
+    bool, typer.Option("--serve", help="serve rerun's web viewer on 127.0.0.1 with the run")
+]
+PortOpt = Annotated[
+    int, typer.Option("--port", min=1, max=65534, help="web viewer port for --serve (data: PORT+1)")
+]
+WorkersOpt = Annotated[
+    int | None, typer.Option("--workers", min=1, help="processes (default: all cores)")
+]
+SearchFlag = Annotated[
+    bool,
+    typer.Option(
+        "--search",
+        help=f"first search the pose within {SEARCH} of the guess "
+        "(correlative search), then match from the best",
+    ),
+]
 
 
 def finite(value: float) -> float:
@@ -85,38 +167,75 @@ def finite(value: float) -> float:
 
 
 # The cases an evaluation scores (tune, eval covariance; evaluation/cases.py)
-CaseTruthOpt = Annotated[str, typer.Option("--truth", help="'pose': the logs' scan poses (corrected logs); "
-                                                        "'relations': Kümmerle's (--relations)")]
-RelationsOpt = Annotated[Optional[str], typer.Option("--relations", help="relations file of the (one) log "
-                                                                         "(--truth relations)")]
-CaseGuessOpt = Annotated[str, typer.Option("--guess", help="'perturb': the truth moved within --perturb (seeded); or "
-                                                        "identity, odometry, search")]
-PerturbOpt = Annotated[tuple[float, float], typer.Option("--perturb", metavar="XY_M THETA_DEG",
-                                                         help="bounds of the perturbed guesses")]
-SeedOpt = Annotated[int, typer.Option("--seed", min=0, help="random seed (of perturbed guesses, displacements, "
-                                                               "removals)")]
-OffsetOpt = Annotated[float, typer.Option("--offset", callback=finite, help="seconds added to the log's stamps to "
-                                          "meet the relations' (Intel corrected: 976052857.337)")]
-ToleranceOpt = Annotated[float, typer.Option("--tolerance", min=0.0, callback=finite,
-                                             help="largest stamp mismatch [s]")]
+CaseTruthOpt = Annotated[
+    str,
+    typer.Option(
+        "--truth",
+        help="'pose': the logs' scan poses (corrected logs); 'relations': Kümmerle's (--relations)",
+    ),
+]
+RelationsOpt = Annotated[
+    str | None,
+    typer.Option("--relations", help="relations file of the (one) log (--truth relations)"),
+]
+CaseGuessOpt = Annotated[
+    str,
+    typer.Option(
+        "--guess",
+        help="'perturb': the truth moved within --perturb (seeded); or identity, odometry, search",
+    ),
+]
+PerturbOpt = Annotated[
+    tuple[float, float],
+    typer.Option("--perturb", metavar="XY_M THETA_DEG", help="bounds of the perturbed guesses"),
+]
+SeedOpt = Annotated[
+    int,
+    typer.Option(
+        "--seed", min=0, help="random seed (of perturbed guesses, displacements, removals)"
+    ),
+]
+OffsetOpt = Annotated[
+    float,
+    typer.Option(
+        "--offset",
+        callback=finite,
+        help="seconds added to the log's stamps to "
+        "meet the relations' (Intel corrected: 976052857.337)",
+    ),
+]
+ToleranceOpt = Annotated[
+    float, typer.Option("--tolerance", min=0.0, callback=finite, help="largest stamp mismatch [s]")
+]
 
 
-def cases_options(truth: str, relations: str | None, guess: str, perturb: tuple[float, float], logs: int = 1):
+def cases_options(
+    truth: str, relations: str | None, guess: str, perturb: tuple[float, float], logs: int = 1
+):
     """The checked case options: the perturbation in metres and radians."""
     from mbicp_viz.evaluation.cases import GUESSES
 
-    if truth not in ("pose", "relations") or (truth == "relations") != (relations is not None) or \
-            (truth == "relations" and logs != 1):
-        raise InputError("expected pose, or relations with one log and its --relations FILE", field="--truth")
+    if (
+        truth not in ("pose", "relations")
+        or (truth == "relations") != (relations is not None)
+        or (truth == "relations" and logs != 1)
+    ):
+        raise InputError(
+            "expected pose, or relations with one log and its --relations FILE", field="--truth"
+        )
     if guess not in GUESSES:
-        raise InputError(f"expected one of {', '.join(GUESSES)} (the truth cannot be the guess)", field="--guess")
+        raise InputError(
+            f"expected one of {', '.join(GUESSES)} (the truth cannot be the guess)", field="--guess"
+        )
     return check_perturb(perturb)
 
 
 def check_perturb(perturb: tuple[float, float]) -> tuple[float, float]:
     """--perturb XY_M THETA_DEG as (metres, radians), refused unless finite and >= 0."""
     if not all(math.isfinite(v) and v >= 0 for v in perturb):
-        raise InputError(f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb")
+        raise InputError(
+            f"expected two finite numbers >= 0, got {perturb[0]} {perturb[1]}", field="--perturb"
+        )
     return perturb[0], math.radians(perturb[1])
 
 
@@ -141,11 +260,14 @@ def check_outputs(options: dict) -> None:
         try:
             options["out_dir"].mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise InputError(f"cannot make folder {options['out_dir']}: {e.strerror}", field="--out-dir") from None
+            raise InputError(
+                f"cannot make folder {options['out_dir']}: {e.strerror}", field="--out-dir"
+            ) from None
 
 
 def user_errors(fn):
     """Bad input ends in one readable line on stderr and exit code 2, never a traceback."""
+
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
@@ -205,7 +327,11 @@ class Progress:
         import sys
 
         self.total, self.label, self.done, self.shown = total, label, 0, 0
-        self.bar = typer.progressbar(length=total, label=label, file=sys.stderr) if sys.stderr.isatty() else None
+        self.bar = (
+            typer.progressbar(length=total, label=label, file=sys.stderr)
+            if sys.stderr.isatty()
+            else None
+        )
 
     def __enter__(self):
         if self.bar is not None:
@@ -216,7 +342,11 @@ class Progress:
         self.done += n
         if self.bar is not None:
             self.bar.update(n)
-        elif self.done == 1 or self.done >= self.shown + max(1, self.total // 10) or self.done == self.total:
+        elif (
+            self.done == 1
+            or self.done >= self.shown + max(1, self.total // 10)
+            or self.done == self.total
+        ):
             self.shown = self.done
             say(f"{self.label}: {self.done}/{self.total}")
 
@@ -237,11 +367,22 @@ def read_log_saying(log: str, reading=None):
     return lg
 
 
-def read_options(topic: str | None, typestore: str | None = None, mount=None, upside_down: bool = False,
-                 deskew=None):
-    """How to read the files a command names (``--topic``, ``--typestore``, ``--mount``, ``--upside-down``,
-    ``--deskew``; a command without ``--typestore`` reads with ``ReadOptions``' own)."""
+def read_options(
+    topic: str | None,
+    typestore: str | None = None,
+    mount=None,
+    upside_down: bool = False,
+    deskew=None,
+):
+    """How to read the files a command names (``--topic``, ``--typestore``, ``--mount``,
+    ``--upside-down``, ``--deskew``; a command without ``--typestore`` reads with ``ReadOptions``'
+    own)."""
     from mbicp_viz.readers import ReadOptions
 
-    return ReadOptions(topic, typestore or ReadOptions.typestore, pose_from_deg(mount, "--mount"), upside_down,
-                       None if deskew is None else deskew.value)
+    return ReadOptions(
+        topic,
+        typestore or ReadOptions.typestore,
+        pose_from_deg(mount, "--mount"),
+        upside_down,
+        None if deskew is None else deskew.value,
+    )

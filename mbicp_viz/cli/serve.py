@@ -4,58 +4,110 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from mbicp_viz.choices import DEFAULT_TYPESTORE
 from mbicp_viz.errors import InputError
 
-from .options import (DeskewOpt, Guess, GuessOpt, MountOpt, PairOpt, TopicOpt, TypestoreOpt, UpsideDownOpt,
-                      read_options, user_errors)
+from .options import (
+    DeskewOpt,
+    Guess,
+    GuessOpt,
+    MountOpt,
+    PairOpt,
+    TopicOpt,
+    TypestoreOpt,
+    UpsideDownOpt,
+    read_options,
+    user_errors,
+)
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 DEMO_PAIR = EXAMPLES / "hokuyo-125-130.npz"
-HostOpt = Annotated[str, typer.Option("--host", help="address to bind; anything but 127.0.0.1 exposes the app")]
-ServePortOpt = Annotated[int, typer.Option("--port", min=0, max=65535, help="port (0: any free port)")]
-ForOpt = Annotated[Optional[float], typer.Option("--for-seconds", min=0.0, help="stop after this long")]
-OriginOpt = Annotated[Optional[list[str]], typer.Option(
-    "--allow-origin", help="also accept websockets from this page origin, e.g. http://myhost:8080 (by default only "
-                           "the debugger's own page)")]
+HostOpt = Annotated[
+    str, typer.Option("--host", help="address to bind; anything but 127.0.0.1 exposes the app")
+]
+ServePortOpt = Annotated[
+    int, typer.Option("--port", min=0, max=65535, help="port (0: any free port)")
+]
+ForOpt = Annotated[
+    float | None, typer.Option("--for-seconds", min=0.0, help="stop after this long")
+]
+OriginOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--allow-origin",
+        help="also accept websockets from this page origin, e.g. http://myhost:8080 (by default "
+        "only "
+        "the debugger's own page)",
+    ),
+]
 
 
-def serve(first: Annotated[Optional[str], typer.Argument(help="a scan log, or the reference scan file")] = None,
-          second: Annotated[Optional[str], typer.Argument(help="the object scan file")] = None,
-          scenario: Annotated[Optional[str], typer.Option("--scenario", help="a curated scenario (see `mbicp-viz "
-                                                                             "record --list`)")] = None,
-          pair: PairOpt = None, guess: GuessOpt = Guess.stored, host: HostOpt = "127.0.0.1",
-          port: ServePortOpt = 8080, allow_origin: OriginOpt = None, for_seconds: ForOpt = None,
-          topic: TopicOpt = None, typestore: TypestoreOpt = DEFAULT_TYPESTORE, mount: MountOpt = None,
-          upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None,
-          rows: Annotated[Optional[str], typer.Option("--rows", help="an evaluation's rows (`eval sequence --out`): "
-                                                      "its failures listed worst first, each opened as it ran")] = None):
+def serve(
+    first: Annotated[
+        str | None, typer.Argument(help="a scan log, or the reference scan file")
+    ] = None,
+    second: Annotated[str | None, typer.Argument(help="the object scan file")] = None,
+    scenario: Annotated[
+        str | None,
+        typer.Option("--scenario", help="a curated scenario (see `mbicp-viz record --list`)"),
+    ] = None,
+    pair: PairOpt = None,
+    guess: GuessOpt = Guess.stored,
+    host: HostOpt = "127.0.0.1",
+    port: ServePortOpt = 8080,
+    allow_origin: OriginOpt = None,
+    for_seconds: ForOpt = None,
+    topic: TopicOpt = None,
+    typestore: TypestoreOpt = DEFAULT_TYPESTORE,
+    mount: MountOpt = None,
+    upside_down: UpsideDownOpt = False,
+    deskew: DeskewOpt = None,
+    rows: Annotated[
+        str | None,
+        typer.Option(
+            "--rows",
+            help="an evaluation's rows (`eval sequence --out`): "
+            "its failures listed worst first, each opened as it ran",
+        ),
+    ] = None,
+):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
     from mbicp_viz.views.debugger.sources import files_source, scenario_source
 
     if scenario is not None and (first is not None or rows is not None):
-        raise InputError("a scenario brings its own scans: give --scenario alone", field="--scenario")
+        raise InputError(
+            "a scenario brings its own scans: give --scenario alone", field="--scenario"
+        )
     reading = read_options(topic, typestore, mount, upside_down, deskew)
-    source = scenario_source(scenario) if scenario is not None else files_source(first, second, pair, guess, reading, rows)
+    source = (
+        scenario_source(scenario)
+        if scenario is not None
+        else files_source(first, second, pair, guess, reading, rows)
+    )
     _serve(source, host, port, tuple(allow_origin or ()), for_seconds)
 
 
 def demo(port: ServePortOpt = 8080, for_seconds: ForOpt = None):
-    """The debugger on a bundled real pair: a hand-held Hokuyo turning 17 degrees, from the identity."""
+    """The debugger on a bundled real pair: a hand-held Hokuyo turning 17 degrees, from the "
+    "identity."""
     from mbicp_viz.views.debugger.sources import demo_source
 
     _serve(demo_source(str(DEMO_PAIR)), "127.0.0.1", port, (), for_seconds)
 
 
-def _serve(source, host: str, port: int, origins: tuple[str, ...], for_seconds: float | None) -> None:
+def _serve(
+    source, host: str, port: int, origins: tuple[str, ...], for_seconds: float | None
+) -> None:
     from mbicp_viz.views.debugger.app import App
 
     if host != "127.0.0.1":
-        typer.echo(f"warning: binding {host}: anyone who can reach this machine can use the app", err=True)
+        typer.echo(
+            f"warning: binding {host}: anyone who can reach this machine can use the app", err=True
+        )
     application = App(source, host, port, origins)
     shown = "127.0.0.1" if host in ("127.0.0.1", "0.0.0.0") else host
     typer.echo(f"mbicp-viz: open http://{shown}:{application.port} in a browser (Ctrl-C stops)")

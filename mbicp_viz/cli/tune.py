@@ -1,44 +1,110 @@
-"""``tune``: search a matcher's parameters against ground truth (Optuna), check them on a held-out log."""
+"""``tune``: search a matcher's parameters against ground truth (Optuna), check them on a held-out "
+"log."""
 
 from __future__ import annotations
 
 import json
 import math
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from mbicp_viz.choices import DEFAULT_TYPESTORE
 from mbicp_viz.errors import InputError
 
-from .options import (AlgoOpt, CaseGuessOpt, CaseTruthOpt, DEFAULT_ALGO, DeskewOpt, MountOpt, OffsetOpt, ParamsOpt,
-                      PerturbOpt, Progress, RelationsOpt, SeedOpt, ToleranceOpt, TopicOpt, TypestoreOpt, UpsideDownOpt,
-                      WorkersOpt, cases_options, read_log_saying, read_options, say, user_errors)
+from .options import (
+    DEFAULT_ALGO,
+    AlgoOpt,
+    CaseGuessOpt,
+    CaseTruthOpt,
+    DeskewOpt,
+    MountOpt,
+    OffsetOpt,
+    ParamsOpt,
+    PerturbOpt,
+    Progress,
+    RelationsOpt,
+    SeedOpt,
+    ToleranceOpt,
+    TopicOpt,
+    TypestoreOpt,
+    UpsideDownOpt,
+    WorkersOpt,
+    cases_options,
+    read_log_saying,
+    read_options,
+    say,
+    user_errors,
+)
 
 
-def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="training logs with a truth")],
-         algo: AlgoOpt = DEFAULT_ALGO, params: ParamsOpt = None, truth: CaseTruthOpt = "pose",
-         relations: RelationsOpt = None, offset: OffsetOpt = 0.0, tolerance: ToleranceOpt = 0.025,
-         guess: CaseGuessOpt = "perturb", perturb: PerturbOpt = (0.3, 15.0), seed: SeedOpt = 0,
-         limit: Annotated[Optional[int], typer.Option("--limit", min=1, help="the first N pairs of each log")] = None,
-         trials: Annotated[int, typer.Option("--trials", min=1, help="trials to run now")] = 100,
-         holdout: Annotated[Optional[str], typer.Option("--holdout", help="a log kept out of the search: the honest "
-                                                        "figure")] = None,
-         fields: Annotated[Optional[str], typer.Option("--fields", help="comma-separated parameters to search "
-                                                       "(default: those with a tuning range)")] = None,
-         storage: Annotated[str, typer.Option("--storage", help="Optuna storage: a SQLite file (default) or a "
-                                              "postgresql:// URL shared by several machines")] = "sqlite:///tune.db",
-         study: Annotated[Optional[str], typer.Option("--study", help="study name (default: ALGO-FIRSTLOG); an "
-                                                      "existing study resumes")] = None,
-         out: Annotated[Path, typer.Option("--out", help="the best parameters as a --params TOML")] = Path("tuned.toml"),
-         png_dir: Annotated[Optional[Path], typer.Option("--png-dir", help="optimisation history and parameter "
-                                                         "importance as PNGs here")] = None,
-         rows_dir: Annotated[Optional[Path], typer.Option("--rows-dir", help="each training log's pairs under the "
-                                                          "best parameters as a rows file (serve LOG --rows)")] = None,
-         workers: WorkersOpt = None, topic: TopicOpt = None, typestore: TypestoreOpt = DEFAULT_TYPESTORE,
-         mount: MountOpt = None, upside_down: UpsideDownOpt = False, deskew: DeskewOpt = None):
-    """Search a matcher's parameters on training logs against their truth; defaults and best side by side."""
+def tune(
+    logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="training logs with a truth")],
+    algo: AlgoOpt = DEFAULT_ALGO,
+    params: ParamsOpt = None,
+    truth: CaseTruthOpt = "pose",
+    relations: RelationsOpt = None,
+    offset: OffsetOpt = 0.0,
+    tolerance: ToleranceOpt = 0.025,
+    guess: CaseGuessOpt = "perturb",
+    perturb: PerturbOpt = (0.3, 15.0),
+    seed: SeedOpt = 0,
+    limit: Annotated[
+        int | None, typer.Option("--limit", min=1, help="the first N pairs of each log")
+    ] = None,
+    trials: Annotated[int, typer.Option("--trials", min=1, help="trials to run now")] = 100,
+    holdout: Annotated[
+        str | None,
+        typer.Option("--holdout", help="a log kept out of the search: the honest figure"),
+    ] = None,
+    fields: Annotated[
+        str | None,
+        typer.Option(
+            "--fields",
+            help="comma-separated parameters to search (default: those with a tuning range)",
+        ),
+    ] = None,
+    storage: Annotated[
+        str,
+        typer.Option(
+            "--storage",
+            help="Optuna storage: a SQLite file (default) or a "
+            "postgresql:// URL shared by several machines",
+        ),
+    ] = "sqlite:///tune.db",
+    study: Annotated[
+        str | None,
+        typer.Option(
+            "--study", help="study name (default: ALGO-FIRSTLOG); an existing study resumes"
+        ),
+    ] = None,
+    out: Annotated[
+        Path, typer.Option("--out", help="the best parameters as a --params TOML")
+    ] = Path("tuned.toml"),
+    png_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--png-dir", help="optimisation history and parameter importance as PNGs here"
+        ),
+    ] = None,
+    rows_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--rows-dir",
+            help="each training log's pairs under the "
+            "best parameters as a rows file (serve LOG --rows)",
+        ),
+    ] = None,
+    workers: WorkersOpt = None,
+    topic: TopicOpt = None,
+    typestore: TypestoreOpt = DEFAULT_TYPESTORE,
+    mount: MountOpt = None,
+    upside_down: UpsideDownOpt = False,
+    deskew: DeskewOpt = None,
+):
+    """Search a matcher's parameters on training logs against their truth; defaults and best side "
+    "by side."""
     from mbicp_viz.evaluation import tune as t
     from mbicp_viz.evaluation.cases import cases_for
     from mbicp_viz.readers.params_toml import load_search, make_params, params_to_toml
@@ -48,27 +114,51 @@ def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="train
     base = make_params(algo.value, params)
     space = t.search_space(type(base), [f.strip() for f in fields.split(",")] if fields else None)
     if not space:
-        raise InputError(f"{algo.value} has no parameter with a tuning range: name some", field="--fields")
+        raise InputError(
+            f"{algo.value} has no parameter with a tuning range: name some", field="--fields"
+        )
     reading = read_options(topic, typestore, mount, upside_down, deskew)
     search = load_search(params)
     rels = read_relations(relations) if relations else None
 
     def cases_of(paths: list[str]):
-        return [c for k, path in enumerate(paths) for c in cases_for(k, read_log_saying(path, reading), truth, rels,
-                                                                      offset, tolerance, guess, moved, seed, search,
-                                                                      limit)]
+        return [
+            c
+            for k, path in enumerate(paths)
+            for c in cases_for(
+                k,
+                read_log_saying(path, reading),
+                truth,
+                rels,
+                offset,
+                tolerance,
+                guess,
+                moved,
+                seed,
+                search,
+                limit,
+            )
+        ]
 
     cases = cases_of(logs)
     name = study or f"{algo.value}-{Path(logs[0]).name.split('.')[0]}"
     st = t.open_study(storage, name)
     before = len(st.trials)
-    guesses = (f"the stored pose moved within +/-{perturb[0]:g} m, +/-{perturb[1]:g} deg (seed {seed})"
-               if guess == "perturb" else guess)
-    typer.echo(f"tuning {algo.value} on {len(logs)} log(s), {len(cases)} pairs; truth: "
-               f"{'scan poses' if truth == 'pose' else 'relations'}; guesses: {guesses}")
-    typer.echo(f"searching {', '.join(d.spec.name for d in space)}; study {name!r} in {storage} "
-               f"({before} trials before)")
-    if before == 0:  # the defaults are the first trial: the best is never worse on the training pairs
+    guesses = (
+        f"the stored pose moved within +/-{perturb[0]:g} m, +/-{perturb[1]:g} deg (seed {seed})"
+        if guess == "perturb"
+        else guess
+    )
+    typer.echo(
+        f"tuning {algo.value} on {len(logs)} log(s), {len(cases)} pairs; truth: "
+        f"{'scan poses' if truth == 'pose' else 'relations'}; guesses: {guesses}"
+    )
+    typer.echo(
+        f"searching {', '.join(d.spec.name for d in space)}; study {name!r} in {storage} "
+        f"({before} trials before)"
+    )
+    # the defaults are the first trial: the best is never worse on the training pairs
+    if before == 0:
         st.enqueue_trial({d.spec.name: getattr(base, d.spec.name) for d in space})
     scorer = t.Scorer(logs, reading, cases, workers)
     try:
@@ -77,21 +167,39 @@ def tune(logs: Annotated[list[str], typer.Argument(metavar="LOG...", help="train
         if not any(tr.value is not None for tr in st.trials):
             raise InputError("interrupted before the first trial finished", field="--trials")
         best = t.best_params(st, base, space)
-        rows = [("training", len(cases), t.Score.of(scorer.errors(base)), t.Score.of(scorer.errors(best)))]
+        rows = [
+            (
+                "training",
+                len(cases),
+                t.Score.of(scorer.errors(base)),
+                t.Score.of(scorer.errors(best)),
+            )
+        ]
     finally:
         scorer.close()
     if holdout:
         held = cases_of([holdout])
         check = t.Scorer([holdout], reading, held, workers)
         try:
-            rows.append(("holdout", len(held), t.Score.of(check.errors(base)), t.Score.of(check.errors(best))))
+            rows.append(
+                (
+                    "holdout",
+                    len(held),
+                    t.Score.of(check.errors(base)),
+                    t.Score.of(check.errors(best)),
+                )
+            )
         finally:
             check.close()
-    typer.echo(f"{ran} trials ran now, {len(st.trials)} in the study; best: trial {st.best_trial.number}")
+    typer.echo(
+        f"{ran} trials ran now, {len(st.trials)} in the study; best: trial {st.best_trial.number}"
+    )
     typer.echo(f"{'':<22}{'defaults':<46}best")
     for label, n, a, b in rows:
         typer.echo(f"{label + f' ({n} pairs)':<22}{a.text():<46}{b.text()}")
-    typer.echo("best parameters: " + ", ".join(_shown(d.spec, getattr(best, d.spec.name)) for d in space))
+    typer.echo(
+        "best parameters: " + ", ".join(_shown(d.spec, getattr(best, d.spec.name)) for d in space)
+    )
     out.write_text(params_to_toml(best, search))
     typer.echo(f"written to {out} (read it back with --params {out})")
     shares = t.importance(st)
@@ -125,13 +233,30 @@ def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
     for k, path in enumerate(logs):
         lg = read_log(path, reading)
         records = lg.record_numbers()
-        rows = [pair_row(records[c.i], records[c.j], lg.scans[c.i], lg.scans[c.j], best, c.guess, "tune's guess",
-                         c.truth, lg.frames, False, lg.topic) for c in cases if c.log == k]
+        rows = [
+            pair_row(
+                records[c.i],
+                records[c.j],
+                lg.scans[c.i],
+                lg.scans[c.j],
+                best,
+                c.guess,
+                "tune's guess",
+                c.truth,
+                lg.frames,
+                False,
+                lg.topic,
+            )
+            for c in cases
+            if c.log == k
+        ]
         target = rows_dir / f"{Path(path).name.split('.')[0]}-rows.json"
         target.write_text(json.dumps(rows, indent=1) + "\n")
         bad = worst_first(read_rows(target))
-        typer.echo(f"{len(bad)} failures of {len(rows)} pairs in {target}: open them with "
-                   f"mbicp-viz serve {path} --rows {target}")
+        typer.echo(
+            f"{len(bad)} failures of {len(rows)} pairs in {target}: open them with "
+            f"mbicp-viz serve {path} --rows {target}"
+        )
 
 
 def register(app: typer.Typer) -> None:

@@ -1,9 +1,9 @@
 """``eval basin``: a convergence atlas — which initial guesses lead each matcher to the answer.
 
 A grid of initial offsets (x, y, theta) around the reference answer; every grid point is matched
-by every chosen matcher and coloured by outcome: correct (within ``CONSECUTIVE``'s tolerances of the answer),
-converged wrong, or not converged. The reference answer is ``--truth`` when given, else the
-relative pose of the scans' stored poses, else each matcher's own answer from the zero offset.
+by every chosen matcher and coloured by outcome: correct (within ``CONSECUTIVE``'s tolerances of
+the answer), converged wrong, or not converged. The reference answer is ``--truth`` when given, else
+the relative pose of the scans' stored poses, else each matcher's own answer from the zero offset.
 """
 
 from __future__ import annotations
@@ -42,32 +42,54 @@ def _run(args):
     return out
 
 
-def basin(ref: Scan, obj: Scan, params: dict[str, Params], truth: Pose2 | None, range_xy: float, steps: int,
-          thetas_rad: list[float], workers: int | None = None) -> Atlas:
+def basin(
+    ref: Scan,
+    obj: Scan,
+    params: dict[str, Params],
+    truth: Pose2 | None,
+    range_xy: float,
+    steps: int,
+    thetas_rad: list[float],
+    workers: int | None = None,
+) -> Atlas:
     xy = np.linspace(-range_xy, range_xy, steps)
     answers = {}
     for name, p in params.items():
         answers[name] = truth if truth is not None else match(ref, obj, Pose2(), p).pose
-    jobs = [(ref, obj, [Pose2(a.x + dx, a.y + dy, a.theta + th) for dx in xy], p, a)
-            for name, p in params.items() for a in [answers[name]] for th in thetas_rad for dy in xy]
+    jobs = [
+        (ref, obj, [Pose2(a.x + dx, a.y + dy, a.theta + th) for dx in xy], p, a)
+        for name, p in params.items()
+        for a in [answers[name]]
+        for th in thetas_rad
+        for dy in xy
+    ]
     rows = ordered_map(_run, jobs, workers)
     if len(rows) < len(jobs):
-        raise InputError(f"interrupted after {len(rows)} of {len(jobs)} rows of the atlas; nothing was written")
+        raise InputError(
+            f"interrupted after {len(rows)} of {len(jobs)} rows of the atlas; nothing was written"
+        )
     per = len(thetas_rad) * steps
-    outcome = {name: np.array(rows[k * per:(k + 1) * per], dtype=np.int8).reshape(len(thetas_rad), steps, steps)
-               for k, name in enumerate(params)}
+    outcome = {
+        name: np.array(rows[k * per : (k + 1) * per], dtype=np.int8).reshape(
+            len(thetas_rad), steps, steps
+        )
+        for k, name in enumerate(params)
+    }
     return Atlas(xy, np.array(thetas_rad), answers, outcome)
 
 
 def plot_png(atlas: Atlas, path: str) -> None:
-    from mbicp_viz.pyplot import pyplot
     from matplotlib.colors import ListedColormap
+
+    from mbicp_viz.pyplot import pyplot
 
     plt = pyplot()
 
     names = list(atlas.outcome)
     T = len(atlas.thetas)
-    fig, axes = plt.subplots(len(names), T, figsize=(2.4 * T + 1, 2.4 * len(names) + 0.6), squeeze=False)
+    fig, axes = plt.subplots(
+        len(names), T, figsize=(2.4 * T + 1, 2.4 * len(names) + 0.6), squeeze=False
+    )
     cmap = ListedColormap(np.array(OUTCOME_COLORS) / 255.0)
     ext = [atlas.offsets_xy[0], atlas.offsets_xy[-1]] * 2
     for i, name in enumerate(names):
@@ -88,7 +110,12 @@ def plot_png(atlas: Atlas, path: str) -> None:
 def summary(atlas: Atlas) -> str:
     lines = []
     for n, o in atlas.outcome.items():
-        parts = [f"{math.degrees(th):+.0f} deg: {np.mean(o[t] == CORRECT) * 100:.0f} %"
-                 for t, th in enumerate(atlas.thetas)]
-        lines.append(f"{n:<9} correct from {np.mean(o == CORRECT) * 100:5.1f} % of the grid ({', '.join(parts)})")
+        parts = [
+            f"{math.degrees(th):+.0f} deg: {np.mean(o[t] == CORRECT) * 100:.0f} %"
+            for t, th in enumerate(atlas.thetas)
+        ]
+        lines.append(
+            f"{n:<9} correct from {np.mean(o == CORRECT) * 100:5.1f} % of the grid "
+            f"({', '.join(parts)})"
+        )
     return "\n".join(lines)

@@ -1,4 +1,5 @@
-"""``bench``: time per match on consecutive pairs of a log, events off and with a recording observer."""
+"""``bench``: time per match on consecutive pairs of a log, events off and with a recording "
+"observer."""
 
 from __future__ import annotations
 
@@ -29,13 +30,18 @@ class Timing:
         return float(np.percentile(self.times_ms, 90))
 
     def line(self) -> str:
-        return (f"{self.label:<24} mean {np.mean(self.times_ms):7.2f} ms   median {self.median:7.2f} ms   "
-                f"p90 {self.p90:7.2f} ms   "
-                f"p95 {np.percentile(self.times_ms, 95):7.2f} ms   "
-                f"{1000.0 / self.median:8.1f} {self.what}/s   ({len(self.times_ms)} {self.what})")
+        return (
+            f"{self.label:<24} mean {np.mean(self.times_ms):7.2f} ms   median {self.median:7.2f} "
+            "ms   "
+            f"p90 {self.p90:7.2f} ms   "
+            f"p95 {np.percentile(self.times_ms, 95):7.2f} ms   "
+            f"{1000.0 / self.median:8.1f} {self.what}/s   ({len(self.times_ms)} {self.what})"
+        )
 
 
-def bench_guesses(log: ScanLog, pairs, perturb: tuple[float, float] | None, seed: int) -> list[Pose2]:
+def bench_guesses(
+    log: ScanLog, pairs, perturb: tuple[float, float] | None, seed: int
+) -> list[Pose2]:
     """The guess of each pair: the stored one, or moved uniformly within +/-perturb (metres in x
     and y, radians in theta) as the issues' comparisons with the original implementations do."""
     rng = np.random.default_rng(seed)
@@ -49,7 +55,9 @@ def bench_guesses(log: ScanLog, pairs, perturb: tuple[float, float] | None, seed
     return out
 
 
-def time_matches(log: ScanLog, params: Params, pairs, guesses, observe: bool, repeat: int) -> np.ndarray:
+def time_matches(
+    log: ScanLog, params: Params, pairs, guesses, observe: bool, repeat: int
+) -> np.ndarray:
     out = []
     for (i, j), guess in zip(pairs, guesses):
         ref, obj = log.scan(i), log.scan(j)
@@ -61,19 +69,30 @@ def time_matches(log: ScanLog, params: Params, pairs, guesses, observe: bool, re
     return np.array(out)
 
 
-def bench(log: ScanLog, params: Params, limit: int | None, repeat: int, perturb: tuple[float, float] | None = None,
-          seed: int = 0) -> list[Timing]:
+def bench(
+    log: ScanLog,
+    params: Params,
+    limit: int | None,
+    repeat: int,
+    perturb: tuple[float, float] | None = None,
+    seed: int = 0,
+) -> list[Timing]:
     pairs = log.consecutive_pairs(limit)
     guesses = bench_guesses(log, pairs, perturb, seed)
     time_matches(log, params, pairs[:3], guesses[:3], False, 1)  # warm caches and imports
-    return [Timing("events off", time_matches(log, params, pairs, guesses, False, repeat)),
-            Timing("recording observer", time_matches(log, params, pairs, guesses, True, repeat))]
+    return [
+        Timing("events off", time_matches(log, params, pairs, guesses, False, repeat)),
+        Timing("recording observer", time_matches(log, params, pairs, guesses, True, repeat)),
+    ]
 
 
 def machine_line() -> str:
     import os
 
-    return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    return (
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}"
+    )
 
 
 def speed_probe_us() -> float:
@@ -83,7 +102,11 @@ def speed_probe_us() -> float:
     import timeit
 
     a = np.random.default_rng(0).normal(size=300)
-    return 1e6 * min(timeit.repeat(lambda: np.sort(a) + np.arctan2(a, a), number=2000, repeat=5)) / 2000
+    return (
+        1e6
+        * min(timeit.repeat(lambda: np.sort(a) + np.arctan2(a, a), number=2000, repeat=5))
+        / 2000
+    )
 
 
 def _run_seconds(args: list[str], env: dict | None = None) -> float:
@@ -108,11 +131,14 @@ def _wait_background_compile(cache: str) -> None:
         tiers.wait_unlocked(lock)
 
 
-def startup(commands: list[list[str]], match: list[str], debugger: list[str], repeat: int) -> list[Timing]:
-    """How soon the tool answers: ``--help`` of every command (``repeat`` runs each), the first match
-    with numba's kernel cache empty (as after a fresh install: it runs interpreted while a background
-    process compiles, core/tiers.py), how long that compile takes, the first match once cached, and
-    the debugger's first result with an empty cache (server start, the first tab's match)."""
+def startup(
+    commands: list[list[str]], match: list[str], debugger: list[str], repeat: int
+) -> list[Timing]:
+    """How soon the tool answers: ``--help`` of every command (``repeat`` runs each), the first
+    match with numba's kernel cache empty (as after a fresh install: it runs interpreted while a
+    background process compiles, core/tiers.py), how long that compile takes, the first match once
+    cached, and the debugger's first result with an empty cache (server start, the first tab's
+    match)."""
     import os
     import tempfile
 
@@ -131,9 +157,11 @@ def startup(commands: list[list[str]], match: list[str], debugger: list[str], re
             first_result.append(_run_seconds(debugger, env | {"NUMBA_CACHE_DIR": cache}))
             _wait_background_compile(cache)
     to_ms = lambda v: 1000.0 * np.array(v)  # noqa: E731
-    return [Timing("mbicp-viz --help", to_ms(helps), "runs"),
-            Timing("each command's --help", to_ms(each), "commands"),
-            Timing("first match, empty cache", to_ms(cold), "runs"),
-            Timing("background compile", to_ms(compiled), "runs"),
-            Timing("first match, cached", to_ms(warm), "runs"),
-            Timing("debugger first result", to_ms(first_result), "runs")]
+    return [
+        Timing("mbicp-viz --help", to_ms(helps), "runs"),
+        Timing("each command's --help", to_ms(each), "commands"),
+        Timing("first match, empty cache", to_ms(cold), "runs"),
+        Timing("background compile", to_ms(compiled), "runs"),
+        Timing("first match, cached", to_ms(warm), "runs"),
+        Timing("debugger first result", to_ms(first_result), "runs"),
+    ]

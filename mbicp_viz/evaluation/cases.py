@@ -32,10 +32,18 @@ class Case:
     truth: Pose2
 
 
-def pose_cases(k: int, log: ScanLog, guesses: str, perturb: tuple[float, float] | None, seed: int,
-               search: SearchParams | None, limit: int | None) -> list[Case]:
+def pose_cases(
+    k: int,
+    log: ScanLog,
+    guesses: str,
+    perturb: tuple[float, float] | None,
+    seed: int,
+    search: SearchParams | None,
+    limit: int | None,
+) -> list[Case]:
     """The consecutive pairs of a corrected log, scored against its scan poses. ``guesses``: a
-    ``Guess`` kind (not the poses themselves), or "perturb": the stored pose moved within ``perturb``."""
+    ``Guess`` kind (not the poses themselves), or "perturb": the stored pose moved within
+    ``perturb``."""
     pairs = log.consecutive_pairs(limit)
     scans = {r: n for n, r in enumerate(log.record_numbers())}
     out = []
@@ -44,23 +52,38 @@ def pose_cases(k: int, log: ScanLog, guesses: str, perturb: tuple[float, float] 
         ref, obj = log.scan(i), log.scan(j)
         truth = stored_truth(ref, obj)
         if truth is None:
-            raise InputError(f"scan {i} or {j} has no pose: --truth pose needs a corrected log", log.path,
-                             field="--truth")
+            raise InputError(
+                f"scan {i} or {j} has no pose: --truth pose needs a corrected log",
+                log.path,
+                field="--truth",
+            )
         g = moved[n] if moved is not None else pair_guess(ref, obj, guesses, search)[0]
         out.append(Case(k, scans[i], scans[j], g, truth))
     return out
 
 
-def relation_cases(k: int, log: ScanLog, relations, offset: float, tolerance: float, guesses: str,
-                   perturb: tuple[float, float] | None, seed: int, search: SearchParams | None) -> list[Case]:
+def relation_cases(
+    k: int,
+    log: ScanLog,
+    relations,
+    offset: float,
+    tolerance: float,
+    guesses: str,
+    perturb: tuple[float, float] | None,
+    seed: int,
+    search: SearchParams | None,
+) -> list[Case]:
     """The relations whose two ends have a scan (Kümmerle et al. 2009), from a ``Guess`` kind or,
     with "perturb", from the relation moved within ``perturb``."""
     from .relations import relation_pairs
 
     found, _ = relation_pairs(log, relations, offset, tolerance)
     if not found:
-        raise InputError("no relation has a scan at both ends: check --offset and --tolerance", log.path,
-                         field="--relations")
+        raise InputError(
+            "no relation has a scan at both ends: check --offset and --tolerance",
+            log.path,
+            field="--relations",
+        )
     rng = np.random.default_rng(seed)
     out = []
     for i, j, rel in found:
@@ -73,8 +96,19 @@ def relation_cases(k: int, log: ScanLog, relations, offset: float, tolerance: fl
     return out
 
 
-def cases_for(k: int, log: ScanLog, truth: str, relations, offset: float, tolerance: float, guesses: str,
-              perturb: tuple[float, float], seed: int, search: SearchParams | None, limit: int | None) -> list[Case]:
+def cases_for(
+    k: int,
+    log: ScanLog,
+    truth: str,
+    relations,
+    offset: float,
+    tolerance: float,
+    guesses: str,
+    perturb: tuple[float, float],
+    seed: int,
+    search: SearchParams | None,
+    limit: int | None,
+) -> list[Case]:
     """The cases of log number ``k``: its consecutive pairs against its scan poses (``truth``
     "pose"), or its ``relations``."""
     if truth == "pose":

@@ -1,4 +1,5 @@
-"""``eval corridor``: how the matchers fare where the scene leaves a direction free (paper 000 §3.3).
+"""``eval corridor``: how the matchers fare where the scene leaves a direction free (paper 000
+§3.3).
 
 A pair is degenerate when, at its true pose, the surfaces the object points land on constrain
 one direction of motion far less than the others: the condition number of their point-to-line
@@ -56,8 +57,14 @@ def _row(job) -> CorridorRow:
     return CorridorRow((i, j), surface_condition(ref, obj, truth), out)
 
 
-def corridor(log: ScanLog, params: dict[str, Params], perturb: tuple[float, float], seed: int = 0,
-             workers: int | None = None, on_row=None) -> list[CorridorRow]:
+def corridor(
+    log: ScanLog,
+    params: dict[str, Params],
+    perturb: tuple[float, float],
+    seed: int = 0,
+    workers: int | None = None,
+    on_row=None,
+) -> list[CorridorRow]:
     """One row per consecutive pair with stored poses, its matches from a perturbed guess."""
     pairs = log.consecutive_pairs(None)
     guesses = bench_guesses(log, pairs, perturb, seed)
@@ -66,20 +73,29 @@ def corridor(log: ScanLog, params: dict[str, Params], perturb: tuple[float, floa
         ref, obj = log.scan(i), log.scan(j)
         truth = stored_truth(ref, obj)
         if truth is None:
-            raise InputError(f"scan {i} or {j} has no pose: eval corridor needs a corrected log", log.path)
+            raise InputError(
+                f"scan {i} or {j} has no pose: eval corridor needs a corrected log", log.path
+            )
         jobs.append((i, j, ref, obj, truth, g, params))
     return ordered_map(_row, jobs, workers, on_row)
 
 
 def corridor_summary(rows: list[CorridorRow], limit: float) -> list[str]:
-    """Per matcher: successes on the degenerate pairs (condition above ``limit``) and on the rest."""
+    """Per matcher: successes on the degenerate pairs (condition above ``limit``) and on the "
+    "rest."""
     degenerate = [r for r in rows if r.condition > limit]
     others = [r for r in rows if r.condition <= limit]
-    lines = [f"{len(degenerate)} of {len(rows)} pairs degenerate at the truth (surface condition number above "
-             f"{limit:g})"]
+    lines = [
+        f"{len(degenerate)} of {len(rows)} pairs degenerate at the truth (surface condition number "
+        "above "
+        f"{limit:g})"
+    ]
     for name in rows[0].success if rows else []:
         d = sum(r.success[name] for r in degenerate)
         o = sum(r.success[name] for r in others)
-        lines.append(f"{name:<10} degenerate pairs {d}/{len(degenerate)} ({100 * d / max(len(degenerate), 1):.1f} %), "
-                     f"the others {o}/{len(others)} ({100 * o / max(len(others), 1):.1f} %)")
+        lines.append(
+            f"{name:<10} degenerate pairs {d}/{len(degenerate)} "
+            f"({100 * d / max(len(degenerate), 1):.1f} %), "
+            f"the others {o}/{len(others)} ({100 * o / max(len(others), 1):.1f} %)"
+        )
     return lines

@@ -25,7 +25,6 @@ from .criteria import CONSECUTIVE
 from .pool import ordered_map
 from .tune import Case
 
-
 CHI2_3_MEDIAN = 2.365973884375338  # the median of chi^2(3)
 
 
@@ -63,12 +62,19 @@ def _pair(job) -> tuple[bool, Nees | None]:
     """Whether the match is right, and its NEES when it is and reports a covariance."""
     ref, obj, guess, truth, params = job
     r = match(ref, obj, guess, params)
-    e = np.array([r.pose.x - truth.x, r.pose.y - truth.y,
-                  (r.pose.theta - truth.theta + math.pi) % (2 * math.pi) - math.pi])
+    e = np.array(
+        [
+            r.pose.x - truth.x,
+            r.pose.y - truth.y,
+            (r.pose.theta - truth.theta + math.pi) % (2 * math.pi) - math.pi,
+        ]
+    )
     right = CONSECUTIVE.judge(r.pose, truth)
     if not right or r.covariance is None or r.degeneracy is None:
         return right, None
-    return right, nees(e, np.asarray(r.covariance), np.asarray(r.degeneracy.weakest_direction), r.degeneracy.length)
+    return right, nees(
+        e, np.asarray(r.covariance), np.asarray(r.degeneracy.weakest_direction), r.degeneracy.length
+    )
 
 
 @dataclass(frozen=True)
@@ -81,8 +87,9 @@ class Consistency:
         return float(np.mean([getattr(n, part) for n in self.weighed]))
 
 
-def covariance_consistency(log: ScanLog, cases: list[Case], params: Params, workers: int | None = None,
-                           on_row=None) -> Consistency:
+def covariance_consistency(
+    log: ScanLog, cases: list[Case], params: Params, workers: int | None = None, on_row=None
+) -> Consistency:
     jobs = [(log.scans[c.i], log.scans[c.j], c.guess, c.truth, params) for c in cases]
     out = ordered_map(_pair, jobs, workers, on_row)
     return Consistency(len(out), sum(r for r, _ in out), [n for _, n in out if n is not None])
@@ -94,23 +101,34 @@ def consistency_lines(name: str, c: Consistency) -> list[str]:
         return [f"{name}: no covariance reported ({c.right}/{c.pairs} pairs right)"]
     n = len(c.weighed)
     lines = [f"{name}: {c.right}/{c.pairs} pairs right, {n} weighed"]
-    for part, dof, label in (("total", 3, "NEES"), ("along", 1, "along the weakest direction"),
-                             ("across", 2, "across it")):
+    for part, dof, label in (
+        ("total", 3, "NEES"),
+        ("along", 1, "along the weakest direction"),
+        ("across", 2, "across it"),
+    ):
         lo, hi = chi2_mean_bounds(dof, n)
         m = c.mean(part)
-        verdict = "consistent" if lo <= m <= hi else ("overconfident" if m > hi else "underconfident")
-        lines.append(f"  {label:<28} mean {m:9.2f}   chi2({dof}) 95 % bounds for the mean [{lo:.2f}, {hi:.2f}]: "
-                     f"{verdict}")
+        verdict = (
+            "consistent" if lo <= m <= hi else ("overconfident" if m > hi else "underconfident")
+        )
+        lines.append(
+            f"  {label:<28} mean {m:9.2f}   chi2({dof}) 95 % bounds for the mean [{lo:.2f}, "
+            f"{hi:.2f}]: "
+            f"{verdict}"
+        )
     med = float(np.median([w.total for w in c.weighed]))
-    lines.append(f"  scale the covariance by {c.mean('total') / 3.0:.3g} to make the mean NEES 3 (by "
-                 f"{med / CHI2_3_MEDIAN:.3g} for the median: a few large errors weigh on the mean)")
+    lines.append(
+        f"  scale the covariance by {c.mean('total') / 3.0:.3g} to make the mean NEES 3 (by "
+        f"{med / CHI2_3_MEDIAN:.3g} for the median: a few large errors weigh on the mean)"
+    )
     return lines
 
 
 def nees_png(results: dict[str, Consistency], path: str) -> None:
     """Each matcher's NEES distribution against chi^2(3)."""
-    from mbicp_viz.pyplot import pyplot
     from scipy.stats import chi2
+
+    from mbicp_viz.pyplot import pyplot
 
     plt = pyplot()
 
@@ -119,9 +137,11 @@ def nees_png(results: dict[str, Consistency], path: str) -> None:
     edges = np.linspace(-2, 5, 71)  # in log10(NEES): densities per decade, true on a log axis
     for name, c in shown.items():
         h, _ = np.histogram(np.log10([n.total for n in c.weighed]), bins=edges, density=True)
-        ax.stairs(h, 10 ** edges, lw=1.5, label=f"{name} (mean {c.mean('total'):.3g})")
+        ax.stairs(h, 10**edges, lw=1.5, label=f"{name} (mean {c.mean('total'):.3g})")
     x = np.logspace(-2, 5, 400)
-    ax.plot(x, chi2.pdf(x, 3) * x * np.log(10), "k--", lw=1.2, label="chi²(3): a consistent covariance")
+    ax.plot(
+        x, chi2.pdf(x, 3) * x * np.log(10), "k--", lw=1.2, label="chi²(3): a consistent covariance"
+    )
     ax.set_xscale("log")
     ax.set_xlabel("NEES = eᵀ Σ⁻¹ e (pose error weighed by the reported covariance)")
     ax.set_ylabel("density per decade")

@@ -25,7 +25,11 @@ class Criteria:
 
     def text(self) -> str:
         """How users read it: ``0.1 m and 3 deg``."""
-        m = f"{self.max_error_m * 100:g} cm" if self.max_error_m < 0.1 else f"{self.max_error_m:g} m"
+        m = (
+            f"{self.max_error_m * 100:g} cm"
+            if self.max_error_m < 0.1
+            else f"{self.max_error_m:g} m"
+        )
         return f"{m} and {math.degrees(self.max_error_rad):g} deg"
 
 

@@ -30,7 +30,10 @@ def failure_reason(row: EvalRow) -> str:
     if not row.converged:
         return f"stopped early ({row.reason})"
     if row.inliers_truth is not None and row.inliers_truth < LOW_OVERLAP:
-        return f"low overlap ({100 * row.inliers_truth:.0f} % of the object points on the reference at the stored pose)"
+        return (
+            f"low overlap ({100 * row.inliers_truth:.0f} % of the object points on the "
+            "reference at the stored pose)"
+        )
     if row.condition_number is not None and row.condition_number > DEGENERATE_CONDITION:
         return f"degenerate direction (condition number {row.condition_number:.0f})"
     return "wrong basin (converged elsewhere)"
@@ -38,13 +41,19 @@ def failure_reason(row: EvalRow) -> str:
 
 def worst_first(rows: list[EvalRow]) -> list[EvalRow]:
     """The failed rows: the largest translation error first, then rotation error, then order."""
-    return sorted((r for r in rows if failed(r)),
-                  key=lambda r: (-(r.error_xy or 0.0), -(r.error_theta or 0.0), r.line))
+    return sorted(
+        (r for r in rows if failed(r)),
+        key=lambda r: (-(r.error_xy or 0.0), -(r.error_theta or 0.0), r.line),
+    )
 
 
 def failure_label(rank: int, row: EvalRow) -> str:
     """One line per failure, as the debugger's list shows it."""
-    error = "" if row.error_xy is None else f"{row.error_xy:.3f} m, {math.degrees(row.error_theta):.2f} deg: "
+    error = (
+        ""
+        if row.error_xy is None
+        else f"{row.error_xy:.3f} m, {math.degrees(row.error_theta):.2f} deg: "
+    )
     return f"{rank}. scans {row.ref} -> {row.obj}: {error}{failure_reason(row)}"
 
 
@@ -53,5 +62,8 @@ def failure_summary(rows: list[EvalRow], path: str, shown: int = 3) -> list[str]
     bad = worst_first(rows)
     if not bad:
         return []
-    lines = [f"worst failures of {len(bad)}:", *(f"  {failure_label(k + 1, r)}" for k, r in enumerate(bad[:shown]))]
+    lines = [
+        f"worst failures of {len(bad)}:",
+        *(f"  {failure_label(k + 1, r)}" for k, r in enumerate(bad[:shown])),
+    ]
     return lines + [f"open them as they failed: mbicp-viz serve LOG --rows {path}"]

@@ -55,16 +55,19 @@ class Comparison:
     name: str
     pairs: int
     agree: int  # poses within 1 mm and 0.01 deg of the original's
-    successes_original: int | None  # within paper 000's 0.1 m and 3.14 deg of the stored poses (None: no poses)
+    # within paper 000's 0.1 m and 3.14 deg of the stored poses (None: no poses)
+    successes_original: int | None
     successes_ours: int | None
     ms_original: float  # mean time per match, best of the runs
     ms_ours: float
 
     def line(self) -> str:
-        return (f"{self.name:6s} agree within 1 mm / 0.01 deg: {self.agree}/{self.pairs} "
-                f"({100 * self.agree / self.pairs:.1f} %); {self.successes()}; "
-                f"mean time per match original {self.ms_original:.3f} ms, ours "
-                f"{self.ms_ours:.3f} ms (ratio {self.ms_ours / self.ms_original:.2f})")
+        return (
+            f"{self.name:6s} agree within 1 mm / 0.01 deg: {self.agree}/{self.pairs} "
+            f"({100 * self.agree / self.pairs:.1f} %); {self.successes()}; "
+            f"mean time per match original {self.ms_original:.3f} ms, ours "
+            f"{self.ms_ours:.3f} ms (ratio {self.ms_ours / self.ms_original:.2f})"
+        )
 
     def successes(self) -> str:
         if self.successes_ours is None:
@@ -87,8 +90,16 @@ def every_kth_beam(log: ScanLog, k: int) -> ScanLog:
     """The log with every k-th beam of each scan (copies: the kernels take contiguous arrays)."""
     if k == 1:
         return log
-    scans = [dataclasses.replace(s, ranges=s.ranges[::k].copy(), bearings=s.bearings[::k].copy(),
-                                 valid=s.valid[::k].copy(), beam_times=None) for s in log.scans]
+    scans = [
+        dataclasses.replace(
+            s,
+            ranges=s.ranges[::k].copy(),
+            bearings=s.bearings[::k].copy(),
+            valid=s.valid[::k].copy(),
+            beam_times=None,
+        )
+        for s in log.scans
+    ]
     return dataclasses.replace(log, scans=scans)
 
 
@@ -103,41 +114,68 @@ def check_built(built: Path) -> None:
     """Refuse a folder without the drivers build.sh makes."""
     for original in ORIGINALS:
         if not (built / original.driver).is_file():
-            raise InputError(f"no original built here: run tools/originals/build.sh {built}",
-                             path=str(built / original.driver))
+            raise InputError(
+                f"no original built here: run tools/originals/build.sh {built}",
+                path=str(built / original.driver),
+            )
 
 
 def compare(built: Path, pairs: list[Pair], repeat: int) -> list[Comparison | Skipped]:
-    """Each original against this project's matcher of the same name, with both defaults (or why not)."""
+    """Each original against this project's matcher of the same name, with both defaults (or why "
+    "not)."""
     out = []
     rays = max(len(a.bearings) for a, _, _ in pairs)
     for original in ORIGINALS:
         if original.max_rays is not None and rays > original.max_rays:
             k = math.ceil(rays / original.max_rays)
-            out.append(Skipped(original.name, f"the original takes at most {original.max_rays} rays and these scans "
-                                              f"have {rays}: --every {k} keeps one beam in {k}"))
+            out.append(
+                Skipped(
+                    original.name,
+                    f"the original takes at most {original.max_rays} rays and these scans "
+                    f"have {rays}: --every {k} keeps one beam in {k}",
+                )
+            )
             continue
         text = original.input(pairs)
-        runs = [run_driver(built / original.driver, original.args, text, len(pairs)) for _ in range(repeat)]
+        runs = [
+            run_driver(built / original.driver, original.args, text, len(pairs))
+            for _ in range(repeat)
+        ]
         params = MATCHERS[original.name].params_type()
         mine = [time_ours(pairs, params) for _ in range(repeat)]
         theirs, ours = runs[0][0], mine[0][0]
         agree = sum(AGREE.judge(x, y) for x, y in zip(ours, theirs))
-        out.append(Comparison(original.name, len(pairs), agree, successes(pairs, theirs), successes(pairs, ours),
-                              min(r[1] for r in runs), min(m[1] for m in mine)))
+        out.append(
+            Comparison(
+                original.name,
+                len(pairs),
+                agree,
+                successes(pairs, theirs),
+                successes(pairs, ours),
+                min(r[1] for r in runs),
+                min(m[1] for m in mine),
+            )
+        )
     return out
 
 
-def improved_against_plicp(pairs: list[Pair], params: Params, label: str, plicp: Comparison, repeat: int) -> str:
-    """Improved MbICP's time per match against CSM's PL-ICP's on the same pairs (issue 21's ratio)."""
+def improved_against_plicp(
+    pairs: list[Pair], params: Params, label: str, plicp: Comparison, repeat: int
+) -> str:
+    """Improved MbICP's time per match against CSM's PL-ICP's on the same pairs (issue 21's "
+    "ratio)."""
     runs = [time_ours(pairs, params) for _ in range(repeat)]
     ms, ok = min(r[1] for r in runs), successes(pairs, runs[0][0])
-    return (f"improved MbICP ({label}) {ms:.3f} ms against CSM's PL-ICP {plicp.ms_original:.3f} ms per match "
-            f"(ratio {ms / plicp.ms_original:.2f}); {NO_POSES if ok is None else f'successes {ok}'}")
+    return (
+        f"improved MbICP ({label}) {ms:.3f} ms against CSM's PL-ICP {plicp.ms_original:.3f} ms per "
+        "match "
+        f"(ratio {ms / plicp.ms_original:.2f}); {NO_POSES if ok is None else f'successes {ok}'}"
+    )
 
 
 def successes(pairs: list[Pair], poses: list[Pose2]) -> int | None:
-    """Poses within paper 000's success bounds of the log's stored relative poses (None without them)."""
+    """Poses within paper 000's success bounds of the log's stored relative poses (None without "
+    "them)."""
     truths = [stored_truth(a, b) for a, b, _ in pairs]
     if all(t is None for t in truths):
         return None
@@ -145,7 +183,8 @@ def successes(pairs: list[Pair], poses: list[Pose2]) -> int | None:
 
 
 def time_ours(pairs: list[Pair], params: Params) -> tuple[list[Pose2], float]:
-    """This project's poses and its mean time per match [ms], every call timed as a user makes it."""
+    """This project's poses and its mean time per match [ms], every call timed as a user makes "
+    "it."""
     for a, b, g in pairs[:3]:  # compiled kernels loaded
         match(a, b, g, params)
     t0 = time.perf_counter()
@@ -154,18 +193,26 @@ def time_ours(pairs: list[Pair], params: Params) -> tuple[list[Pose2], float]:
 
 
 def run_driver(exe: Path, args: tuple[str, ...], text: str, n: int) -> tuple[list[Pose2], float]:
-    """The original's poses and its mean time per match [ms] (timed by the driver around its call)."""
+    """The original's poses and its mean time per match [ms] (timed by the driver around its "
+    "call)."""
     try:
-        out = subprocess.run([str(exe), *args], input=text, capture_output=True, text=True, timeout=DRIVER_TIMEOUT_S)
+        out = subprocess.run(
+            [str(exe), *args], input=text, capture_output=True, text=True, timeout=DRIVER_TIMEOUT_S
+        )
     except OSError as e:
         raise InputError(f"cannot run it: {e.strerror}", path=str(exe)) from None
     except subprocess.TimeoutExpired:
-        raise InputError(f"no answer within {DRIVER_TIMEOUT_S} s for {n} pairs", path=str(exe)) from None
+        raise InputError(
+            f"no answer within {DRIVER_TIMEOUT_S} s for {n} pairs", path=str(exe)
+        ) from None
     lines = [line.split() for line in out.stdout.splitlines() if line.strip()]
     times = out.stderr.split()[-2:]
     if out.returncode != 0 or len(lines) != n or len(times) != 2:
-        raise InputError(f"exit code {out.returncode}, {len(lines)} poses for {n} pairs; expected one pose per "
-                         "pair and 'seconds count' on stderr (a driver of tools/originals)", path=str(exe))
+        raise InputError(
+            f"exit code {out.returncode}, {len(lines)} poses for {n} pairs; expected one pose per "
+            "pair and 'seconds count' on stderr (a driver of tools/originals)",
+            path=str(exe),
+        )
     try:
         poses = [Pose2(*(float(v) for v in fields[1:4])) for fields in lines]
         return poses, 1000.0 * float(times[0]) / int(times[1])
@@ -174,15 +221,36 @@ def run_driver(exe: Path, args: tuple[str, ...], text: str, n: int) -> tuple[lis
 
 
 def _mbicp_input(pairs: list[Pair], p: MbicpParams) -> str:
-    """mbicp_pairs.c's stdin: the parameters, then per pair the ray count, both scans (no-return rays
-    beyond range) and the guess."""
-    head = [p.max_range, p.Bw, p.Br, p.L, p.laserStep, p.MaxDistInter, p.filter, int(p.ProjectionFilter),
-            p.AsocError, p.MaxIter, p.errorRatio, p.errx_out, p.erry_out, p.errt_out, p.IterSmoothConv]
+    """mbicp_pairs.c's stdin: the parameters, then per pair the ray count, both scans (no-return
+    rays beyond range) and the guess."""
+    head = [
+        p.max_range,
+        p.Bw,
+        p.Br,
+        p.L,
+        p.laserStep,
+        p.MaxDistInter,
+        p.filter,
+        int(p.ProjectionFilter),
+        p.AsocError,
+        p.MaxIter,
+        p.errorRatio,
+        p.errx_out,
+        p.erry_out,
+        p.errt_out,
+        p.IterSmoothConv,
+    ]
     lines = [" ".join(str(v) for v in head)]
     for a, b, g in pairs:
         lines.append(str(len(a.bearings)))
-        for s in (a, b):  # the C code reads the reference's bearings from the object scan: the same grid
-            lines += [f"{r if v else 1e6:.6f} {t:.9f}" for r, t, v in zip(s.ranges, s.bearings, s.valid)]
+        # the C code reads the reference's bearings from the object scan: the same grid
+        for s in (
+            a,
+            b,
+        ):
+            lines += [
+                f"{r if v else 1e6:.6f} {t:.9f}" for r, t, v in zip(s.ranges, s.bearings, s.valid)
+            ]
         lines.append(f"{float(g.x)!r} {float(g.y)!r} {float(g.theta)!r}")
     return "\n".join(lines) + "\n"
 
@@ -193,10 +261,18 @@ def _csm_input(pairs: list[Pair]) -> str:
     for a, b, g in pairs:
         lines.append(str(len(a.bearings)))
         for s in (a, b):
-            lines += [f"{r if v else 0.0:.6f} {t:.9f} {int(v)}" for r, t, v in zip(s.ranges, s.bearings, s.valid)]
+            lines += [
+                f"{r if v else 0.0:.6f} {t:.9f} {int(v)}"
+                for r, t, v in zip(s.ranges, s.bearings, s.valid)
+            ]
         lines.append(f"{float(g.x)!r} {float(g.y)!r} {float(g.theta)!r}")
     return "\n".join(lines) + "\n"
 
 
-ORIGINALS = (Original("mbicp", "mbicp_pairs", (), lambda pairs: _mbicp_input(pairs, MbicpParams()), MAX_RAYS),
-             Original("icp", "csm_pairs", ("0",), _csm_input), Original("plicp", "csm_pairs", ("1",), _csm_input))
+ORIGINALS = (
+    Original(
+        "mbicp", "mbicp_pairs", (), lambda pairs: _mbicp_input(pairs, MbicpParams()), MAX_RAYS
+    ),
+    Original("icp", "csm_pairs", ("0",), _csm_input),
+    Original("plicp", "csm_pairs", ("1",), _csm_input),
+)

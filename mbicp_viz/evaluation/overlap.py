@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mbicp_viz.choices import Removal, Thin
 from mbicp_viz.core import Params, Pose2, Scan, match, pose_error
 
 from .criteria import PAPER_000
-from mbicp_viz.choices import Removal, Thin
 from .pairs import block_mask, displaced_pair
 from .pool import ordered_map
 
@@ -59,8 +59,16 @@ class OverlapRow:
     cls: str
 
 
-def make_cases(scenes: list[Scan], ratios, runs: int, removal: Removal | str, seed: int, max_xy: float,
-               max_theta: float, thin: Thin | str = Thin.reference) -> list[OverlapCase]:
+def make_cases(
+    scenes: list[Scan],
+    ratios,
+    runs: int,
+    removal: Removal | str,
+    seed: int,
+    max_xy: float,
+    max_theta: float,
+    thin: Thin | str = Thin.reference,
+) -> list[OverlapCase]:
     removal, thin = Removal(removal).value, Thin(thin).value
     rng = np.random.default_rng(seed)
     cases = []
@@ -68,7 +76,9 @@ def make_cases(scenes: list[Scan], ratios, runs: int, removal: Removal | str, se
         n = scan.n_valid
         for ratio in ratios:
             for r in range(runs):
-                truth = Pose2(*rng.uniform([-max_xy, -max_xy, -max_theta], [max_xy, max_xy, max_theta]))
+                truth = Pose2(
+                    *rng.uniform([-max_xy, -max_xy, -max_theta], [max_xy, max_xy, max_theta])
+                )
                 drop = int(round((1.0 - ratio) * n))
                 if removal == "block":
                     a = int(rng.integers(0, n - drop + 1))
@@ -81,7 +91,8 @@ def make_cases(scenes: list[Scan], ratios, runs: int, removal: Removal | str, se
 
 
 def scene_scans(log, per_log: int, picked: list[int] | None = None) -> list[Scan]:
-    """The scenes of one log: the scans numbered ``picked``, else ``per_log`` scans picked evenly."""
+    """The scenes of one log: the scans numbered ``picked``, else ``per_log`` scans picked "
+    "evenly."""
     if picked:
         return [log.scan(i) for i in picked]
     return [log.scans[int(round(k))] for k in np.linspace(0, len(log.scans) - 1, per_log + 2)[1:-1]]
@@ -103,16 +114,36 @@ def run_case(args) -> list[OverlapRow]:
     for name, p in params.items():
         r = match(ref, obj, Pose2(), p)
         et, er = pose_error(r.pose, case.truth)
-        rows.append(OverlapRow(name, case.scene, case.ratio, case.run, case.removal, case.thin, et, math.degrees(er),
-                               r.converged, r.iterations, classify(r.converged, PAPER_000.correct(et, er))))
+        rows.append(
+            OverlapRow(
+                name,
+                case.scene,
+                case.ratio,
+                case.run,
+                case.removal,
+                case.thin,
+                et,
+                math.degrees(er),
+                r.converged,
+                r.iterations,
+                classify(r.converged, PAPER_000.correct(et, er)),
+            )
+        )
     return rows
 
 
-def run_overlap(scenes: list[Scan], params: dict[str, Params], cases: list[OverlapCase], workers: int | None = None,
-                on_done=None) -> list[OverlapRow]:
-    """Every case with every matcher, spread over the machine's cores (standard library process pool).
+def run_overlap(
+    scenes: list[Scan],
+    params: dict[str, Params],
+    cases: list[OverlapCase],
+    workers: int | None = None,
+    on_done=None,
+) -> list[OverlapRow]:
+    """Every case with every matcher, spread over the machine's cores (standard library process
+    pool).
 
-    ``on_done(rows)`` is called as each case finishes (progress); interrupting keeps the rows so far.
+    ``on_done(rows)`` is called as each case finishes (progress); interrupting keeps the rows so
+    far.
     """
     rows: list[OverlapRow] = []
 
@@ -135,7 +166,9 @@ def tables(rows: list[OverlapRow]) -> dict[str, list[dict]]:
             tp = [r for r in sel if r.cls == "TP"]
             line = {"ratio": ratio, "n": len(sel)}
             line |= {c: 100.0 * sum(r.cls == c for r in sel) / len(sel) for c in CLASSES}
-            line["trans_mm"] = 1000.0 * float(np.mean([r.error_m for r in tp])) if tp else float("nan")
+            line["trans_mm"] = (
+                1000.0 * float(np.mean([r.error_m for r in tp])) if tp else float("nan")
+            )
             line["rot_deg"] = float(np.mean([r.error_deg for r in tp])) if tp else float("nan")
             line["iterations"] = float(np.mean([r.iterations for r in sel]))
             lines.append(line)
@@ -144,13 +177,20 @@ def tables(rows: list[OverlapRow]) -> dict[str, list[dict]]:
 
 
 def markdown(tab: dict[str, list[dict]]) -> str:
-    head = "| overlap % | n | TP % | FP % | TN % | FN % | TP translation mm | TP rotation deg | iterations |"
+    head = (
+        "| overlap % | n | TP % | FP % | TN % | FN % | TP translation mm | TP rotation deg | "
+        "iterations |"
+    )
     parts = []
     for m, lines in tab.items():
         parts += [f"**{m}**", "", head, "|" + "---|" * 9]
         for ln in lines:
-            parts.append(f"| {100 * ln['ratio']:.0f} | {ln['n']} | {ln['TP']:.1f} | {ln['FP']:.1f} | {ln['TN']:.1f} | "
-                         f"{ln['FN']:.1f} | {ln['trans_mm']:.3f} | {ln['rot_deg']:.3f} | {ln['iterations']:.1f} |")
+            parts.append(
+                f"| {100 * ln['ratio']:.0f} | {ln['n']} | {ln['TP']:.1f} | {ln['FP']:.1f} | "
+                f"{ln['TN']:.1f} | "
+                f"{ln['FN']:.1f} | {ln['trans_mm']:.3f} | {ln['rot_deg']:.3f} | "
+                f"{ln['iterations']:.1f} |"
+            )
         parts.append("")
     return "\n".join(parts)
 
@@ -159,7 +199,12 @@ def csv_text(rows: list[OverlapRow]) -> str:
     fields = list(OverlapRow.__dataclass_fields__)
     out = [",".join(fields)]
     for r in rows:
-        out.append(",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in (getattr(r, f) for f in fields)))
+        out.append(
+            ",".join(
+                f"{v:.6g}" if isinstance(v, float) else str(v)
+                for v in (getattr(r, f) for f in fields)
+            )
+        )
     return "\n".join(out) + "\n"
 
 
@@ -174,7 +219,9 @@ def plot_png(tab: dict[str, list[dict]], path: str) -> None:
         axes[0].plot(x, [ln["TP"] for ln in lines], "o-", label=m)
         axes[1].plot(x, [ln["trans_mm"] for ln in lines], "o-", label=m)
         axes[2].plot(x, [ln["rot_deg"] for ln in lines], "o-", label=m)
-    for ax, title in zip(axes, ("true positives [%]", "TP translation error [mm]", "TP rotation error [deg]")):
+    for ax, title in zip(
+        axes, ("true positives [%]", "TP translation error [mm]", "TP rotation error [deg]")
+    ):
         ax.set_title(title)
         ax.set_xlabel("overlap [%]")
         ax.invert_xaxis()
@@ -183,4 +230,3 @@ def plot_png(tab: dict[str, list[dict]], path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-

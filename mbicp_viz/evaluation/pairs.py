@@ -10,11 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from mbicp_viz.choices import Guess, Thin
 from mbicp_viz.core import Pose2, Scan, ScanSource, SearchParams, make_scan, relative
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
-
-from mbicp_viz.choices import Guess, Thin
 
 
 @dataclass(frozen=True)
@@ -25,21 +24,28 @@ class ScanPair:
     log: ScanLog  # the file the reference came from: its frames
 
 
-def load_pair(first: str, second: str | None, pair: tuple[int, int] | None,
-              options: ReadOptions | None = None) -> ScanPair:
-    """``REF OBJ`` (the first scan of each file) or ``LOG --pair I J``; the log of the reference holds
-    the frames (mount, base frame)."""
+def load_pair(
+    first: str, second: str | None, pair: tuple[int, int] | None, options: ReadOptions | None = None
+) -> ScanPair:
+    """``REF OBJ`` (the first scan of each file) or ``LOG --pair I J``; the log of the reference
+    holds the frames (mount, base frame)."""
     if second is not None and pair is not None:
-        raise InputError("give either two files or one log with --pair I J, not both", field="--pair")
+        raise InputError(
+            "give either two files or one log with --pair I J, not both", field="--pair"
+        )
     if second is not None:
         if second.lower() in ("true", "false") and not Path(second).exists():
-            raise InputError(f"{second!r} is no file: flags take no value (write --json, not --json {second})",
-                             field="SECOND")
+            raise InputError(
+                f"{second!r} is no file: flags take no value (write --json, not --json {second})",
+                field="SECOND",
+            )
         log = read_log(first, options)
         return ScanPair(log.scan(0), read_log(second, options).scan(0), f"{first} -> {second}", log)
     log = read_log(first, options)
     i, j = pair if pair is not None else log.consecutive_pairs(1)[0]
-    return ScanPair(log.scan(i), log.scan(j), f"{first} scans {i % log.records} -> {j % log.records}", log)
+    return ScanPair(
+        log.scan(i), log.scan(j), f"{first} scans {i % log.records} -> {j % log.records}", log
+    )
 
 
 def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:
@@ -51,7 +57,9 @@ def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:
     return Pose2(), "identity"
 
 
-def pair_guess(ref: Scan, obj: Scan, kind: Guess | str, search: SearchParams | None = None) -> tuple[Pose2, str]:
+def pair_guess(
+    ref: Scan, obj: Scan, kind: Guess | str, search: SearchParams | None = None
+) -> tuple[Pose2, str]:
     """The initial guess of a pair and where it came from: ``stored`` (poses, else odometry, else
     identity), one stored source explicitly, the identity, or the correlative search around it."""
     kind = Guess(kind)
@@ -65,8 +73,11 @@ def pair_guess(ref: Scan, obj: Scan, kind: Guess | str, search: SearchParams | N
         return correlative_search(ref, obj, Pose2(), search).pose, "search"
     a, b = (ref.pose, obj.pose) if kind is Guess.pose else (ref.odometry, obj.odometry)
     if a is None or b is None:
-        raise InputError(f"the log stores no {kind.value} for scans {ref.source.index} and {obj.source.index}",
-                         ref.source.path, field="--guess")
+        raise InputError(
+            f"the log stores no {kind.value} for scans {ref.source.index} and {obj.source.index}",
+            ref.source.path,
+            field="--guess",
+        )
     return relative(a, b), kind.value
 
 
@@ -77,10 +88,15 @@ def stored_truth(ref: Scan, obj: Scan) -> Pose2 | None:
 
 def stored_odometry(ref: Scan, obj: Scan) -> Pose2 | None:
     """The laser's motion by the log's odometry (wheels, or a bag's /odom or /tf), or None."""
-    return relative(ref.odometry, obj.odometry) if ref.odometry is not None and obj.odometry is not None else None
+    return (
+        relative(ref.odometry, obj.odometry)
+        if ref.odometry is not None and obj.odometry is not None
+        else None
+    )
 
 
 # One scan made into a pair with a known answer (paper 000 §3.1's protocol, curated scenarios).
+
 
 def seen_from(scan: Scan, T: Pose2, keep: np.ndarray | None = None) -> Scan:
     """The points of ``scan`` as a sensor at pose T (in the scan's frame) sees them."""
@@ -90,21 +106,27 @@ def seen_from(scan: Scan, T: Pose2, keep: np.ndarray | None = None) -> Scan:
     order = np.argsort(b, kind="stable")
     b = b[order]
     unique = np.concatenate(([True], np.diff(b) > 0))
-    return make_scan(np.hypot(*p[order].T)[unique], b[unique],
-                     source=ScanSource(f"{scan.source.path} (displaced)", scan.source.index))
+    return make_scan(
+        np.hypot(*p[order].T)[unique],
+        b[unique],
+        source=ScanSource(f"{scan.source.path} (displaced)", scan.source.index),
+    )
 
 
 def thinned(scan: Scan, keep: np.ndarray) -> Scan:
     """``scan`` with the valid readings where ``keep`` is False marked invalid.
 
-    The beams stay (uniform bearings, as PSM's reference needs); ``keep`` runs over the valid readings.
+    The beams stay (uniform bearings, as PSM's reference needs); ``keep`` runs over the valid
+    readings.
     """
     valid = scan.valid.copy()
     valid[scan.valid_indices()[~keep]] = False
     return make_scan(scan.ranges, scan.bearings, valid=valid, source=scan.source)
 
 
-def displaced_pair(scan: Scan, truth: Pose2, keep: np.ndarray | None, thin: Thin | str) -> tuple[Scan, Scan]:
+def displaced_pair(
+    scan: Scan, truth: Pose2, keep: np.ndarray | None, thin: Thin | str
+) -> tuple[Scan, Scan]:
     """(reference, object) from one scan: the object is the scan seen from ``truth``; ``keep``
     (over the valid readings) thins the reference or the object, as ``thin`` says."""
     if keep is None or Thin(thin) is Thin.object:
@@ -113,7 +135,8 @@ def displaced_pair(scan: Scan, truth: Pose2, keep: np.ndarray | None, thin: Thin
 
 
 def block_mask(n: int, a: float, b: float) -> np.ndarray:
-    """Keep all of ``n`` readings but those from fraction ``a`` to ``b`` (an occlusion-like block)."""
+    """Keep all of ``n`` readings but those from fraction ``a`` to ``b`` (an occlusion-like "
+    "block)."""
     keep = np.ones(n, dtype=bool)
-    keep[int(round(a * n)):int(round(b * n))] = False
+    keep[int(round(a * n)) : int(round(b * n))] = False
     return keep

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import os
 import signal
+from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
-from typing import Callable, Iterable
 
 
 def ignore_interrupts() -> None:
@@ -13,7 +13,9 @@ def ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def ordered_map(fn: Callable, jobs: list, workers: int | None = None, on_result: Callable | None = None) -> list:
+def ordered_map(
+    fn: Callable, jobs: list, workers: int | None = None, on_result: Callable | None = None
+) -> list:
     """``[fn(job) for job in jobs]``, in order, over ``workers`` processes (default: every core).
 
     ``on_result`` sees each result as it arrives (progress). Ctrl-C stops the run and returns the

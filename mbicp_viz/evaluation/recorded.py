@@ -5,7 +5,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from mbicp_viz.core import IterationEvent, MatchResult, Params, Pose2, Recorder, Scan, StartEvent, match
+from mbicp_viz.core import (
+    IterationEvent,
+    MatchResult,
+    Params,
+    Pose2,
+    Recorder,
+    Scan,
+    StartEvent,
+    match,
+)
 
 
 @dataclass

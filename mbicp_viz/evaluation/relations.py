@@ -24,8 +24,9 @@ def nearest_scan(stamps: np.ndarray, t: float, tolerance: float) -> int | None:
     return k if abs(stamps[k] - t) <= tolerance else None
 
 
-def relation_pairs(log: ScanLog, relations: list[Relation], offset: float,
-                   tolerance: float) -> tuple[list[tuple[int, int, Relation]], int]:
+def relation_pairs(
+    log: ScanLog, relations: list[Relation], offset: float, tolerance: float
+) -> tuple[list[tuple[int, int, Relation]], int]:
     """(i, j, relation) for the relations whose both ends have a scan (indices into ``log.scans``),
     and how many relations had none."""
     stamps = np.array([s.stamp if s.stamp is not None else np.nan for s in log.scans]) + offset
@@ -39,8 +40,15 @@ def relation_pairs(log: ScanLog, relations: list[Relation], offset: float,
     return out, len(relations) - len(out)
 
 
-def match_relations(log: ScanLog, relations: list[Relation], params: Params, offset: float, tolerance: float,
-                    guess: Guess | str = Guess.identity, search: SearchParams | None = None) -> tuple[list[dict], int]:
+def match_relations(
+    log: ScanLog,
+    relations: list[Relation],
+    params: Params,
+    offset: float,
+    tolerance: float,
+    guess: Guess | str = Guess.identity,
+    search: SearchParams | None = None,
+) -> tuple[list[dict], int]:
     """Rows for the relations whose both ends have a scan; and how many relations had none.
     ``ref`` and ``obj`` of a row are scan record numbers."""
     records = log.record_numbers()
@@ -52,12 +60,24 @@ def match_relations(log: ScanLog, relations: list[Relation], params: Params, off
         t0 = time.perf_counter()
         r = match(ref, obj, g, params)
         et, er = pose_error(r.pose, rel.pose)
-        row = {"ref": records[i], "obj": records[j], "t1": rel.t1, "t2": rel.t2, "x": r.pose.x, "y": r.pose.y,
-               "theta": r.pose.theta, "error_xy": et, "error_theta": er, "converged": r.converged,
-               "iterations": r.iterations, "time_ms": 1000.0 * (time.perf_counter() - t0)}
+        row = {
+            "ref": records[i],
+            "obj": records[j],
+            "t1": rel.t1,
+            "t2": rel.t2,
+            "x": r.pose.x,
+            "y": r.pose.y,
+            "theta": r.pose.theta,
+            "error_xy": et,
+            "error_theta": er,
+            "converged": r.converged,
+            "iterations": r.iterations,
+            "time_ms": 1000.0 * (time.perf_counter() - t0),
+        }
         stored = stored_truth(ref, obj)
         if stored is not None:
-            # the log's own poses judged by the same relation: how good a truth they are for --truth pose
+            # the log's own poses judged by the same relation: how good a truth they are for --truth
+            # pose
             st, sr = pose_error(stored, rel.pose)
             row |= {"stored_error_xy": st, "stored_error_theta": sr}
         rows.append(row)
@@ -80,6 +100,10 @@ def stored_summary(rows: list[dict]) -> str | None:
 def error_summary(rows: list[dict], key: str) -> str:
     et = np.array([r[f"{key}_xy"] for r in rows])
     er = np.degrees([r[f"{key}_theta"] for r in rows])
-    return (f"translation error mean {et.mean() * 1000:.1f} mm, median {np.median(et) * 1000:.1f} mm, max "
-            f"{et.max() * 1000:.1f} mm; rotation error mean {er.mean():.3f} deg, median {np.median(er):.3f} deg, "
-            f"max {er.max():.3f} deg")
+    return (
+        f"translation error mean {et.mean() * 1000:.1f} mm, median {np.median(et) * 1000:.1f} mm, "
+        "max "
+        f"{et.max() * 1000:.1f} mm; rotation error mean {er.mean():.3f} deg, median "
+        f"{np.median(er):.3f} deg, "
+        f"max {er.max():.3f} deg"
+    )

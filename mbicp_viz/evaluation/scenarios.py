@@ -1,4 +1,5 @@
-"""Curated real-data scenarios (``recordings/scenarios/*.toml``): inputs, parameters, what to look at.
+"""Curated real-data scenarios (``recordings/scenarios/*.toml``): inputs, parameters, what to look
+at.
 
 A scenario names a real scan pair (or one scan and a known displacement), the initial guess, the
 matchers to run and their parameters. Everything is deterministic, so the ``.rrd`` files made from
@@ -44,7 +45,8 @@ def recordings_dir() -> Path:
 
 
 def is_checkout(directory: Path) -> bool:
-    """Whether ``directory`` is a checkout's ``recordings/`` (writable sources), not installed data."""
+    """Whether ``directory`` is a checkout's ``recordings/`` (writable sources), not installed "
+    "data."""
     return (directory.parent / "pyproject.toml").is_file()
 
 
@@ -62,8 +64,11 @@ class Scenario:
 
 
 def _pose_deg(v, path, field) -> Pose2:
-    if not (isinstance(v, list) and len(v) == 3 and all(isinstance(c, (int, float)) and math.isfinite(c)
-                                                        for c in v)):
+    if not (
+        isinstance(v, list)
+        and len(v) == 3
+        and all(isinstance(c, (int, float)) and math.isfinite(c) for c in v)
+    ):
         raise InputError("expected [x_m, y_m, theta_deg]", path, field=field)
     return Pose2(float(v[0]), float(v[1]), math.radians(v[2]))
 
@@ -77,7 +82,9 @@ def _pair(spec: dict, path: Path) -> tuple[Scan, Scan, Pose2 | None]:
         obj = log.scan(j)
         return ref, obj, stored_truth(ref, obj)
     if i != j:
-        raise InputError("a displacement needs the same scan twice: pair = [I, I]", str(path), field="pair")
+        raise InputError(
+            "a displacement needs the same scan twice: pair = [I, I]", str(path), field="pair"
+        )
     truth = _pose_deg(spec["displacement_deg"], str(path), "displacement_deg")
     keep = block_mask(ref.n_valid, *spec["remove_block"]) if "remove_block" in spec else None
     thin = spec.get("thin", Thin.reference.value)
@@ -90,17 +97,31 @@ def load_scenario(path: Path) -> Scenario:
     spec = read_toml(path)
     ref, obj, truth = _pair(spec, path)
     g = spec.get("guess_deg")
-    guess = stored_guess(ref, obj)[0] if spec.get("guess") == "log" else (
-        _pose_deg(g, str(path), "guess_deg") if g is not None else Pose2())
+    guess = (
+        stored_guess(ref, obj)[0]
+        if spec.get("guess") == "log"
+        else (_pose_deg(g, str(path), "guess_deg") if g is not None else Pose2())
+    )
     algos = spec.get("algorithms", list(MATCHERS))
     unknown = [a for a in algos if a not in MATCHERS]
     if unknown:
         raise InputError(f"unknown algorithm {unknown[0]!r}", str(path), field="algorithms")
     tables = spec.get("params", {})
-    params = {a: params_from_mapping(MATCHERS[a].params_type, tables.get(a, {}), str(path), f"params.{a}")
-              for a in algos}
-    return Scenario(path.stem, spec.get("title", path.stem), spec.get("note", ""), ref, obj, guess, truth, params,
-                    bool(spec.get("teaching", False)))
+    params = {
+        a: params_from_mapping(MATCHERS[a].params_type, tables.get(a, {}), str(path), f"params.{a}")
+        for a in algos
+    }
+    return Scenario(
+        path.stem,
+        spec.get("title", path.stem),
+        spec.get("note", ""),
+        ref,
+        obj,
+        guess,
+        truth,
+        params,
+        bool(spec.get("teaching", False)),
+    )
 
 
 def scenario_paths(directory: Path | None = None) -> list[Path]:
@@ -111,5 +132,8 @@ def find_scenario(name: str, directory: Path | None = None) -> Scenario:
     """The scenario called ``name`` (its file's stem), or an error listing the known ones."""
     known = {p.stem: p for p in scenario_paths(directory)}
     if name not in known:
-        raise InputError(f"unknown scenario {name!r}; known: {', '.join(known) or 'none found'}", field="--scenario")
+        raise InputError(
+            f"unknown scenario {name!r}; known: {', '.join(known) or 'none found'}",
+            field="--scenario",
+        )
     return load_scenario(known[name])

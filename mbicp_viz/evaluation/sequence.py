@@ -1,4 +1,5 @@
-"""``eval sequence``: match every consecutive pair of a log; ``eval ceiling``: what its truth allows."""
+"""``eval sequence``: match every consecutive pair of a log; ``eval ceiling``: what its truth "
+"allows."""
 
 from __future__ import annotations
 
@@ -30,7 +31,10 @@ def scored(ref: Scan, obj: Scan, pose, truth) -> dict:
     et, er = pose_error(pose, truth)
     row = {"error_xy": et, "error_theta": er, "success": CONSECUTIVE.correct(et, er)}
     if not row["success"]:  # is the matcher wrong, or the stored pose? Ask the points.
-        row |= {"inliers_match": inlier_fraction(ref, obj, pose), "inliers_truth": inlier_fraction(ref, obj, truth)}
+        row |= {
+            "inliers_match": inlier_fraction(ref, obj, pose),
+            "inliers_truth": inlier_fraction(ref, obj, truth),
+        }
     return row
 
 
@@ -40,14 +44,26 @@ def truth_summary(rows: list[dict]) -> list[str]:
 
     ok = sum(r["success"] for r in rows)
     doubted = sum(truth_doubted(r) for r in rows)
-    return [f"against the scan poses: {ok}/{len(rows)} within {CONSECUTIVE.text()} ({100.0 * ok / len(rows):.1f} %)",
-            f"failures where more object points lie within {100 * INLIER_RADIUS_M:.0f} cm of the reference at the "
-            f"matched pose than at the scan poses: {doubted} of {len(rows) - ok}"]
+    return [
+        f"against the scan poses: {ok}/{len(rows)} within {CONSECUTIVE.text()} "
+        f"({100.0 * ok / len(rows):.1f} %)",
+        f"failures where more object points lie within {100 * INLIER_RADIUS_M:.0f} cm of the "
+        "reference at the "
+        f"matched pose than at the scan poses: {doubted} of {len(rows) - ok}",
+    ]
 
 
-def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess: Guess | str = Guess.stored,
-                   truth: str | None = None, on_row=None, workers: int | None = None,
-                   search: SearchParams | None = None, base: bool = True) -> list[dict]:
+def match_sequence(
+    log: ScanLog,
+    params: Params,
+    limit: int | None = None,
+    guess: Guess | str = Guess.stored,
+    truth: str | None = None,
+    on_row=None,
+    workers: int | None = None,
+    search: SearchParams | None = None,
+    base: bool = True,
+) -> list[dict]:
     """One row per consecutive pair of usable scans, in order: the match's motion (of the robot's
     base when ``base`` and the log knows the laser's mount), how well it lays the scans on each
     other, its distance from the log's odometry when the log has some, and with ``truth="pose"``
@@ -55,10 +71,28 @@ def match_sequence(log: ScanLog, params: Params, limit: int | None = None, guess
     every core); ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
     guess = Guess(guess)
     if truth == "pose" and guess in (Guess.pose, Guess.stored):
-        raise InputError("the scan poses cannot be both the truth and the guess: use --guess identity or odometry",
-                         field="--truth")
-    jobs = [(log.path, i, j, log.scan(i), log.scan(j), params, guess, truth, search, log.frames, base, log.topic)
-            for i, j in log.consecutive_pairs(limit)]
+        raise InputError(
+            "the scan poses cannot be both the truth and the guess: use --guess identity or "
+            "odometry",
+            field="--truth",
+        )
+    jobs = [
+        (
+            log.path,
+            i,
+            j,
+            log.scan(i),
+            log.scan(j),
+            params,
+            guess,
+            truth,
+            search,
+            log.frames,
+            base,
+            log.topic,
+        )
+        for i, j in log.consecutive_pairs(limit)
+    ]
     return ordered_map(_match_row, jobs, workers, on_row)
 
 
@@ -78,19 +112,40 @@ def _match_row(job) -> dict:
     return row
 
 
-def pair_row(i: int, j: int, ref: Scan, obj: Scan, params: Params, guess: Pose2, source: str, truth: Pose2 | None,
-             frames, base: bool, stream: str | None) -> dict:
-    """The row of one pair (``eval sequence``, ``tune``'s worst pairs): the match from ``guess`` (laser
-    frame; ``source`` says where it came from) reported in the frame ``base`` chooses, its distance
-    from the log's odometry when it has some, and with ``truth`` (laser frame) its error. The guess,
-    every parameter and the scan stream read (``ScanLog.topic``) are kept: the pair reopens exactly
-    as it ran (``serve LOG --rows``)."""
+def pair_row(
+    i: int,
+    j: int,
+    ref: Scan,
+    obj: Scan,
+    params: Params,
+    guess: Pose2,
+    source: str,
+    truth: Pose2 | None,
+    frames,
+    base: bool,
+    stream: str | None,
+) -> dict:
+    """The row of one pair (``eval sequence``, ``tune``'s worst pairs): the match from ``guess``
+    (laser frame; ``source`` says where it came from) reported in the frame ``base`` chooses, its
+    distance from the log's odometry when it has some, and with ``truth`` (laser frame) its error.
+    The guess, every parameter and the scan stream read (``ScanLog.topic``) are kept: the pair
+    reopens exactly as it ran (``serve LOG --rows``)."""
     o = run(ref, obj, guess, params)
     r = reported(o.result, frames, base)
-    row = result_row(i, j, r, o.time_ms) | r.as_dict() | {
-        "guess": source, "guess_pose": [guess.x, guess.y, guess.theta], "on_ref": o.on_ref,
-        "frame": frames.frame_name(base), "stream": stream, "params": params.as_dict()}
-    if ref.odometry is not None and obj.odometry is not None:  # how far the match is from the odometry
+    row = (
+        result_row(i, j, r, o.time_ms)
+        | r.as_dict()
+        | {
+            "guess": source,
+            "guess_pose": [guess.x, guess.y, guess.theta],
+            "on_ref": o.on_ref,
+            "frame": frames.frame_name(base),
+            "stream": stream,
+            "params": params.as_dict(),
+        }
+    )
+    # how far the match is from the odometry
+    if ref.odometry is not None and obj.odometry is not None:
         et, er = pose_error(r.pose, frames.reported(relative(ref.odometry, obj.odometry), base))
         row |= {"odometry_xy": et, "odometry_theta": er}
     if truth is not None:
@@ -110,8 +165,11 @@ def odometry_summary(rows: list[dict]) -> str | None:
     ok = sum(ODOMETRY_AGREEMENT.correct(r["odometry_xy"], r["odometry_theta"]) for r in near)
     med_xy = float(np.median([r["odometry_xy"] for r in near]))
     med_th = math.degrees(float(np.median([r["odometry_theta"] for r in near])))
-    return (f"against the odometry: {ok}/{len(near)} within {ODOMETRY_AGREEMENT.text()} "
-            f"({100.0 * ok / len(near):.1f} %); median difference {1000 * med_xy:.1f} mm, {med_th:.3f} deg")
+    return (
+        f"against the odometry: {ok}/{len(near)} within {ODOMETRY_AGREEMENT.text()} "
+        f"({100.0 * ok / len(near):.1f} %); median difference {1000 * med_xy:.1f} mm, {med_th:.3f} "
+        "deg"
+    )
 
 
 def _ceiling_row(job) -> tuple[bool, list[tuple[bool, bool]]]:
@@ -124,31 +182,51 @@ def _ceiling_row(job) -> tuple[bool, list[tuple[bool, bool]]]:
     return found, [(r["success"], truth_doubted(r)) for r in rows]
 
 
-def ceiling_summary(names: list[str], found: int, kept: list[int], doubted: list[int], n: int) -> list[str]:
+def ceiling_summary(
+    names: list[str], found: int, kept: list[int], doubted: list[int], n: int
+) -> list[str]:
     """``ceiling``'s figures in words: the search alone, then each matcher started at the truth."""
     from mbicp_viz.core.agreement import INLIER_RADIUS_M
 
     within = CONSECUTIVE.text()
     lines = [f"correlative search alone: {found}/{n} within {within} ({100 * found / n:.1f} %)"]
     for name, k, d in zip(names, kept, doubted):
-        lines.append(f"{name} started at the scan poses: {k}/{n} stay within {within} ({100 * k / n:.1f} %); of the "
-                     f"{n - k} it leaves, {d} lay more object points within {100 * INLIER_RADIUS_M:.0f} cm of the "
-                     "reference")
+        lines.append(
+            f"{name} started at the scan poses: {k}/{n} stay within {within} ({100 * k / n:.1f} "
+            "%); of the "
+            f"{n - k} it leaves, {d} lay more object points within {100 * INLIER_RADIUS_M:.0f} cm "
+            "of the "
+            "reference"
+        )
     return lines
 
 
-def ceiling(log: ScanLog, params: list[Params], limit: int | None = None, workers: int | None = None,
-            on_row=None) -> tuple[int, list[int], list[int], int]:
+def ceiling(
+    log: ScanLog,
+    params: list[Params],
+    limit: int | None = None,
+    workers: int | None = None,
+    on_row=None,
+) -> tuple[int, list[int], list[int], int]:
     """What a log allows on its consecutive pairs, against its scan poses: how many pairs the
     correlative search alone finds, and how many each matcher keeps when started at the truth itself
-    (its fixed point: no guess can do better). Of the pairs a matcher leaves, those where more object
-    points lie on the reference at its pose than at the stored one are counted as doubting the truth
-    (see ``truth_doubted``). Returns (search hits, hits per matcher, doubts per matcher, pairs)."""
+    (its fixed point: no guess can do better). Of the pairs a matcher leaves, those where more
+    object points lie on the reference at its pose than at the stored one are counted as doubting
+    the truth (see ``truth_doubted``). Returns (search hits, hits per matcher, doubts per matcher,
+    pairs)."""
     pairs = log.consecutive_pairs(limit)
     for i, j in pairs:
         if stored_truth(log.scan(i), log.scan(j)) is None:
-            raise InputError(f"scan {i} or {j} has no pose to score against", log.path, field="poses")
-    rows = ordered_map(_ceiling_row, [(log.scan(i), log.scan(j), params) for i, j in pairs], workers, on_row)
+            raise InputError(
+                f"scan {i} or {j} has no pose to score against", log.path, field="poses"
+            )
+    rows = ordered_map(
+        _ceiling_row, [(log.scan(i), log.scan(j), params) for i, j in pairs], workers, on_row
+    )
     per_matcher = [[r[1][k] for r in rows] for k in range(len(params))]
-    return (sum(r[0] for r in rows), [sum(ok for ok, _ in m) for m in per_matcher],
-            [sum(doubt for _, doubt in m) for m in per_matcher], len(rows))
+    return (
+        sum(r[0] for r in rows),
+        [sum(ok for ok, _ in m) for m in per_matcher],
+        [sum(doubt for _, doubt in m) for m in per_matcher],
+        len(rows),
+    )

@@ -1,4 +1,5 @@
-"""Trajectories from consecutive matches: accumulation, a Kalman filter with odometry, TUM files, plots.
+"""Trajectories from consecutive matches: accumulation, a Kalman filter with odometry, TUM files,
+plots.
 
 The world frame is the first scan's sensor frame. Paper 003 §5.3 builds its maps with a Kalman
 filter fusing the matcher with odometry; ``kalman`` does that on SE(2): odometry increments
@@ -45,8 +46,9 @@ def log_poses(log: ScanLog, rows: list[dict]) -> list[Pose2] | None:
 
 
 def sequence_tracks(log: ScanLog, rows: list[dict], fuse: bool) -> dict[str, list[Pose2]]:
-    """The trajectories of a sequence: the matches composed, the log's poses when it stores them, and
-    with ``fuse`` the EKF of the matches with the log's odometry (last; the one a map is drawn on)."""
+    """The trajectories of a sequence: the matches composed, the log's poses when it stores them,
+    and with ``fuse`` the EKF of the matches with the log's odometry (last; the one a map is drawn
+    on)."""
     out = {MATCHED: accumulate(rows)}
     stored = log_poses(log, rows)
     if stored is not None:
@@ -54,15 +56,21 @@ def sequence_tracks(log: ScanLog, rows: list[dict], fuse: bool) -> dict[str, lis
     if fuse:
         odo = [log.scan(i).odometry for i in scan_indices(rows)]
         if any(o is None for o in odo):
-            raise InputError("--kalman needs odometry for every scan; this log has none", log.path, field="--kalman")
+            raise InputError(
+                "--kalman needs odometry for every scan; this log has none",
+                log.path,
+                field="--kalman",
+            )
         out[FUSED] = kalman(rows, odo, ODOMETRY_SIGMA, MATCH_SIGMA)
     return out
 
 
 def stamps(log: ScanLog, rows: list[dict]) -> list[float]:
     """Each visited scan's time stamp (its record number when it has none)."""
-    return [s.stamp if s.stamp is not None else float(i) for i, s in
-            ((i, log.scan(i)) for i in scan_indices(rows))]
+    return [
+        s.stamp if s.stamp is not None else float(i)
+        for i, s in ((i, log.scan(i)) for i in scan_indices(rows))
+    ]
 
 
 def _jacobians(x: Pose2, u: Pose2):
@@ -73,8 +81,12 @@ def _jacobians(x: Pose2, u: Pose2):
     return Jx, Ju
 
 
-def kalman(rows: list[dict], odometry: list[Pose2], q_sigma: tuple[float, float, float],
-           r_sigma: tuple[float, float, float]) -> list[Pose2]:
+def kalman(
+    rows: list[dict],
+    odometry: list[Pose2],
+    q_sigma: tuple[float, float, float],
+    r_sigma: tuple[float, float, float],
+) -> list[Pose2]:
     """EKF over the scan poses: predict with the odometry increment (noise ``q_sigma`` per axis:
     m, m, rad), update with the matcher's increment composed on the previous estimate (noise
     ``r_sigma``). A match that did not converge is skipped (prediction only)."""
@@ -90,7 +102,13 @@ def kalman(rows: list[dict], odometry: list[Pose2], q_sigma: tuple[float, float,
             Jx_m, Ju_m = _jacobians(x, m)
             z = x @ m
             Rz = Ju_m @ R @ Ju_m.T
-            innov = np.array([z.x - prior.x, z.y - prior.y, (z.theta - prior.theta + math.pi) % (2 * math.pi) - math.pi])
+            innov = np.array(
+                [
+                    z.x - prior.x,
+                    z.y - prior.y,
+                    (z.theta - prior.theta + math.pi) % (2 * math.pi) - math.pi,
+                ]
+            )
             K = Pp @ np.linalg.inv(Pp + Rz)
             prior = Pose2.from_array(prior.as_array() + K @ innov)
             Pp = (np.eye(3) - K) @ Pp
@@ -103,12 +121,16 @@ def tum_text(poses: list[Pose2], stamps: list[float]) -> str:
     """TUM trajectory format (``timestamp tx ty tz qx qy qz qw``), which evo reads."""
     lines = ["# timestamp tx ty tz qx qy qz qw  (mbicp-viz; world = first scan's sensor frame)"]
     for t, p in zip(stamps, poses):
-        lines.append(f"{t:.6f} {p.x:.6f} {p.y:.6f} 0.000000 0.000000 0.000000 "
-                     f"{math.sin(p.theta / 2):.9f} {math.cos(p.theta / 2):.9f}")
+        lines.append(
+            f"{t:.6f} {p.x:.6f} {p.y:.6f} 0.000000 0.000000 0.000000 "
+            f"{math.sin(p.theta / 2):.9f} {math.cos(p.theta / 2):.9f}"
+        )
     return "\n".join(lines) + "\n"
 
 
-def plot_png(log: ScanLog, rows: list[dict], tracks: dict[str, list[Pose2]], path: str, map_track: str) -> None:
+def plot_png(
+    log: ScanLog, rows: list[dict], tracks: dict[str, list[Pose2]], path: str, map_track: str
+) -> None:
     """Trajectories, and the map: every scan drawn at its pose on ``map_track``."""
     from mbicp_viz.pyplot import pyplot
 

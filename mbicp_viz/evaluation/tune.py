@@ -43,9 +43,11 @@ class Score:
     median_theta: float  # [rad]
 
     @staticmethod
-    def of(errors: np.ndarray) -> "Score":
+    def of(errors: np.ndarray) -> Score:
         ok = sum(CONSECUTIVE.correct(e, r) for e, r in errors)
-        return Score(int(ok), len(errors), float(np.median(errors[:, 0])), float(np.median(errors[:, 1])))
+        return Score(
+            int(ok), len(errors), float(np.median(errors[:, 0])), float(np.median(errors[:, 1]))
+        )
 
     @property
     def value(self) -> float:
@@ -53,8 +55,11 @@ class Score:
         return self.successes + 0.5 * (1.0 - min(self.median_xy / CONSECUTIVE.max_error_m, 1.0))
 
     def text(self) -> str:
-        return (f"{self.successes}/{self.n} ({100 * self.successes / self.n:.1f} %), median {1000 * self.median_xy:.1f} mm, "
-                f"{math.degrees(self.median_theta):.2f} deg")
+        return (
+            f"{self.successes}/{self.n} ({100 * self.successes / self.n:.1f} %), median "
+            f"{1000 * self.median_xy:.1f} mm, "
+            f"{math.degrees(self.median_theta):.2f} deg"
+        )
 
 
 STUDY_ATTEMPTS = 10  # opening a study that other workers are creating at the same moment
@@ -76,7 +81,8 @@ def _start_worker(paths: list[str], options: ReadOptions | None, cases: list[Cas
 
 
 def _errors(job) -> np.ndarray:
-    """(translation, rotation) error of each case in [start, stop); a failed match counts as far off."""
+    """(translation, rotation) error of each case in [start, stop); a failed match counts as far "
+    "off."""
     params, start, stop = job
     out = np.empty((stop - start, 2))
     for n, c in enumerate(_CASES[start:stop]):
@@ -84,8 +90,14 @@ def _errors(job) -> np.ndarray:
             raise KeyboardInterrupt
         log = _LOGS[c.log]
         try:
-            out[n] = pose_error(match(log.scans[c.i], log.scans[c.j], c.guess, params).pose, c.truth)
-        except (ValueError, FloatingPointError):  # a scan error or a parameter set the matcher refuses
+            out[n] = pose_error(
+                match(log.scans[c.i], log.scans[c.j], c.guess, params).pose, c.truth
+            )
+        # a scan error or a parameter set the matcher refuses
+        except (
+            ValueError,
+            FloatingPointError,
+        ):
             out[n] = (math.inf, math.inf)
     return out
 
@@ -93,11 +105,15 @@ def _errors(job) -> np.ndarray:
 class Scorer:
     """Scores parameter sets on the cases over ``workers`` processes that read the logs once."""
 
-    def __init__(self, paths: list[str], options: ReadOptions | None, cases: list[Case], workers: int | None):
+    def __init__(
+        self, paths: list[str], options: ReadOptions | None, cases: list[Case], workers: int | None
+    ):
         self.n, self.workers = len(cases), workers or os.cpu_count() or 1
         self.pool = None
         if self.workers > 1:
-            self.pool = ProcessPoolExecutor(self.workers, initializer=_start_worker, initargs=(paths, options, cases))
+            self.pool = ProcessPoolExecutor(
+                self.workers, initializer=_start_worker, initargs=(paths, options, cases)
+            )
         else:
             _load(paths, options, cases)
 
@@ -135,7 +151,9 @@ def search_space(params_type: type, fields: list[str] | None) -> list[Dimension]
     for name in names:
         spec = specs.get(name)
         if spec is None:
-            raise InputError(f"unknown parameter {name!r}; known: {', '.join(specs)}", field="--fields")
+            raise InputError(
+                f"unknown parameter {name!r}; known: {', '.join(specs)}", field="--fields"
+            )
         if spec.type is bool:
             out.append(Dimension(spec, 0.0, 1.0, False))
             continue
@@ -167,7 +185,6 @@ RACED = {"42710", "42P07"}
 def open_study(storage: str, name: str):
     """The study ``name`` in ``storage`` (an Optuna RDB URL), created if new, resumed if not."""
     import optuna
-
     import sqlalchemy.exc
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -177,23 +194,42 @@ def open_study(storage: str, name: str):
         try:
             # SQLite: a writer waits up to SQLITE_WAIT_S for a reader (another worker, a progress
             # query) to let go of the file instead of failing at once with "database is locked"
-            engine = {"connect_args": {"timeout": SQLITE_WAIT_S}} if storage.startswith("sqlite") else {}
+            engine = (
+                {"connect_args": {"timeout": SQLITE_WAIT_S}} if storage.startswith("sqlite") else {}
+            )
             rdb = optuna.storages.RDBStorage(storage, engine_kwargs=engine)
-            return optuna.create_study(storage=rdb, study_name=name, direction="maximize", load_if_exists=True)
+            return optuna.create_study(
+                storage=rdb, study_name=name, direction="maximize", load_if_exists=True
+            )
         except (sqlalchemy.exc.IntegrityError, sqlalchemy.exc.ProgrammingError) as e:
             # workers started together race to create the tables (PostgreSQL: also their enum types)
             # or the study: the loser tries again; any other programming error is the user's URL
-            if isinstance(e, sqlalchemy.exc.ProgrammingError) and getattr(e.orig, "sqlstate", None) not in RACED:
-                raise InputError(f"cannot open the study {name!r} there: {type(e).__name__}: "
-                                 f"{str(e).splitlines()[0][:200]}", field="--storage") from None
+            if (
+                isinstance(e, sqlalchemy.exc.ProgrammingError)
+                and getattr(e.orig, "sqlstate", None) not in RACED
+            ):
+                raise InputError(
+                    f"cannot open the study {name!r} there: {type(e).__name__}: "
+                    f"{str(e).splitlines()[0][:200]}",
+                    field="--storage",
+                ) from None
             time.sleep(0.2 * (attempt + 1))
-        except Exception as e:  # a URL nothing answers at, a driver missing, a file that is no database
-            raise InputError(f"cannot open the study {name!r} there: {type(e).__name__}: "
-                             f"{str(e).splitlines()[0][:200]}", field="--storage") from None
-    raise InputError(f"cannot open the study {name!r} there: other workers kept creating it", field="--storage")
+        except (
+            Exception
+        ) as e:  # a URL nothing answers at, a driver missing, a file that is no database
+            raise InputError(
+                f"cannot open the study {name!r} there: {type(e).__name__}: "
+                f"{str(e).splitlines()[0][:200]}",
+                field="--storage",
+            ) from None
+    raise InputError(
+        f"cannot open the study {name!r} there: other workers kept creating it", field="--storage"
+    )
 
 
-def optimise(study, scorer: Scorer, base: Params, space: list[Dimension], trials: int, on_trial=None) -> int:
+def optimise(
+    study, scorer: Scorer, base: Params, space: list[Dimension], trials: int, on_trial=None
+) -> int:
     """Run ``trials`` more trials; Ctrl-C stops after the running one is dropped (the finished
     ones are stored). Returns how many finished here."""
     import optuna
@@ -219,8 +255,11 @@ def optimise(study, scorer: Scorer, base: Params, space: list[Dimension], trials
     # Ctrl-C only sets a flag, read between two matches: a KeyboardInterrupt raised inside a
     # compiled loop would surface as a SystemError and fail the trial instead of stopping
     _STOP.clear()
-    previous = signal.signal(signal.SIGINT, lambda *_: _STOP.set()) \
-        if threading.current_thread() is threading.main_thread() else None
+    previous = (
+        signal.signal(signal.SIGINT, lambda *_: _STOP.set())
+        if threading.current_thread() is threading.main_thread()
+        else None
+    )
     try:
         study.optimize(objective, n_trials=trials, callbacks=[finished], catch=(ParamError,))
     except KeyboardInterrupt:

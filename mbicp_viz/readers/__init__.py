@@ -24,11 +24,16 @@ from mbicp_viz.errors import InputError
 from .log import ScanLog, mirrored
 
 _READERS = {
-    ".log": "carmen:read_carmen", ".clf": "carmen:read_carmen",
+    ".log": "carmen:read_carmen",
+    ".clf": "carmen:read_carmen",
     ".off": "off:read_off",
-    ".json": "csm_json:read_csm_json", ".jsonl": "csm_json:read_csm_json",
-    ".bag": "rosbag:read_rosbag", ".db3": "rosbag:read_rosbag", ".mcap": "rosbag:read_rosbag",
-    ".scans": "plain:read_plain_text", ".txt": "plain:read_plain_text",
+    ".json": "csm_json:read_csm_json",
+    ".jsonl": "csm_json:read_csm_json",
+    ".bag": "rosbag:read_rosbag",
+    ".db3": "rosbag:read_rosbag",
+    ".mcap": "rosbag:read_rosbag",
+    ".scans": "plain:read_plain_text",
+    ".txt": "plain:read_plain_text",
     ".npz": "plain:read_npz",
 }
 COMPRESSED = (".gz", ".bz2", ".xz")
@@ -48,10 +53,11 @@ def format_suffix(path: Path) -> str:
 
 @dataclass(frozen=True)
 class ReadOptions:
-    """How to read a file beyond its name: its scan stream (a bag's topic, a CARMEN log's laser message
-    type), a bag's ROS distro, and the laser's mount for files that do not store it (T_base_laser;
-    ``upside_down``: the laser's z axis points down, its bearings run clockwise seen from above);
-    ``deskew``: correct each scan for the motion during it (``deskew.py``: "odometry" or "velocity")."""
+    """How to read a file beyond its name: its scan stream (a bag's topic, a CARMEN log's laser
+    message type), a bag's ROS distro, and the laser's mount for files that do not store it
+    (T_base_laser; ``upside_down``: the laser's z axis points down, its bearings run clockwise seen
+    from above); ``deskew``: correct each scan for the motion during it (``deskew.py``: "odometry"
+    or "velocity")."""
 
     topic: str | None = None
     typestore: str = DEFAULT_TYPESTORE
@@ -73,10 +79,17 @@ def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
         raise InputError(f"unknown file type {''.join(p.suffixes)[-20:]!r}; known: {known}", str(p))
     module, name = reader.split(":")
     fn = getattr(importlib.import_module(f".{module}", __name__), name)
-    streams = {"rosbag": (o.topic, o.typestore), "carmen": (o.topic,)}  # the readers whose files hold several
+    # the readers whose files hold several
+    streams = {
+        "rosbag": (o.topic, o.typestore),
+        "carmen": (o.topic,),
+    }
     if o.topic is not None and module not in streams:
-        raise InputError("only ROS bags (topics) and CARMEN logs (laser message types) have streams to choose",
-                         str(p), field="--topic")
+        raise InputError(
+            "only ROS bags (topics) and CARMEN logs (laser message types) have streams to choose",
+            str(p),
+            field="--topic",
+        )
     log = fn(str(p), *streams.get(module, ()))
     if o.mount is not None:
         log.frames = replace(log.frames, mount=o.mount, mount_source="--mount")
@@ -84,8 +97,13 @@ def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
         log = mirrored(log)
     if not log.scans:
         first = log.unusable[min(log.unusable)]
-        raise InputError(f"no usable scan: all {log.records} are unusable (scan {min(log.unusable)}: {first.reason})",
-                         str(p), first.source.line, "ranges")
+        raise InputError(
+            f"no usable scan: all {log.records} are unusable (scan {min(log.unusable)}: "
+            f"{first.reason})",
+            str(p),
+            first.source.line,
+            "ranges",
+        )
     if o.deskew is not None:
         from .deskew import deskew_log
 

@@ -37,14 +37,25 @@ _MESSAGE = re.compile(r"^[A-Z][A-Z0-9_]*$")
 _RAWLASER = re.compile(r"RAWLASER[1-4]")
 LASER_MESSAGES = "FLASER, RAWLASER1-4 or ROBOTLASER1"
 TRAILER = 3  # ipc_timestamp ipc_hostname logger_timestamp
-SICK_180_DEG = (180, 181, 360, 361)  # FLASER readings of a SICK over 180 degrees (1 or 0.5 degree steps)
+# FLASER readings of a SICK over 180 degrees (1 or 0.5 degree steps)
+SICK_180_DEG = (
+    180,
+    181,
+    360,
+    361,
+)
 SICK_100_DEG = (400, 401)  # ... and over 100 degrees at 0.25 degrees (CARMEN's readlog.c)
-FRONT_LASER = ("ROBOTLASER1", "FLASER", "RAWLASER1")  # CARMEN's laser 1, the front one, in the order read unnamed
+# CARMEN's laser 1, the front one, in the order read unnamed
+FRONT_LASER = (
+    "ROBOTLASER1",
+    "FLASER",
+    "RAWLASER1",
+)
 
 
 def read_carmen(path: str, message: str | None = None) -> ScanLog:
-    """The scans of laser message type ``message`` (None: the log's only one, else its front laser's,
-    with a note; see ``_stream``)."""
+    """The scans of laser message type ``message`` (None: the log's only one, else its front
+    laser's, with a note; see ``_stream``)."""
     log = ScanLog(str(path), [])  # odometry, frames and the messages read past
     streams: dict[str, ScanLog] = {}
     laser_offset = 0.0
@@ -75,20 +86,28 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
             log.skipped[kind] = log.skipped.get(kind, 0) + 1
     if not streams:
         seen = ", ".join(f"{k} ({n})" for k, n in sorted(log.skipped.items())) or "none"
-        raise InputError(f"no laser scans ({LASER_MESSAGES} lines); message types seen: {seen}", path)
+        raise InputError(
+            f"no laser scans ({LASER_MESSAGES} lines); message types seen: {seen}", path
+        )
     kind = _stream(streams, message, path)
     if message is None and len(streams) > 1:
         others = "; ".join(f"{k} ({v.records} scans)" for k, v in streams.items() if k != kind)
-        log.notes.append(f"{path}: read {kind} ({streams[kind].records} scans), the front laser"
-                         f"{' with its poses' if kind != 'RAWLASER1' else ''}; the log also has {others}: --topic (in the "
-                         "debugger: scan stream) reads another")
+        log.notes.append(
+            f"{path}: read {kind} ({streams[kind].records} scans), the front laser"
+            f"{' with its poses' if kind != 'RAWLASER1' else ''}; the log also has {others}: "
+            "--topic (in the "
+            "debugger: scan stream) reads another"
+        )
     log.scans, log.unusable = streams[kind].scans, streams[kind].unusable
     if kind not in FRONT_LASER:  # robot_frontlaser_offset is not this laser's mount
         log.frames = Frames()
     beams = {len(s.ranges) for s in log.scans}
     if kind == "FLASER" and not beams <= set(SICK_180_DEG + SICK_100_DEG):
-        log.notes.append(f"{path}: FLASER stores no field of view, and {', '.join(map(str, sorted(beams)))} readings "
-                         "are not a SICK's: read over 180 degrees from -90, as CARMEN and CSM do")
+        log.notes.append(
+            f"{path}: FLASER stores no field of view, and {', '.join(map(str, sorted(beams)))} "
+            "readings "
+            "are not a SICK's: read over 180 degrees from -90, as CARMEN and CSM do"
+        )
     if len(streams) > 1:
         log.topic, log.scan_topics = kind, {k: f"{v.records} scans" for k, v in streams.items()}
     return log
@@ -104,8 +123,11 @@ def _stream(streams: dict[str, ScanLog], message: str | None, path: str) -> str:
         return message
     front = [k for k in FRONT_LASER if k in streams]
     if len(streams) > 1 and not front:
-        raise InputError(f"{len(streams)} laser message types, choose one with --topic: {listing}", path,
-                         field="--topic")
+        raise InputError(
+            f"{len(streams)} laser message types, choose one with --topic: {listing}",
+            path,
+            field="--topic",
+        )
     return front[0] if front else next(iter(streams))
 
 
@@ -122,8 +144,16 @@ def _trailer(fields: Fields, layout: str) -> float:
 
 
 def _make(fields: Fields, index: int, ranges, bearings, **kw):
-    return scan_or_reason(ranges, bearings, fields.path, fields.line, "ranges", invalid_values=NO_RETURN_CODES_M,
-                          source=ScanSource(str(fields.path), index, fields.line), **kw)
+    return scan_or_reason(
+        ranges,
+        bearings,
+        fields.path,
+        fields.line,
+        "ranges",
+        invalid_values=NO_RETURN_CODES_M,
+        source=ScanSource(str(fields.path), index, fields.line),
+        **kw,
+    )
 
 
 def _flaser(fields: Fields, index: int, laser_offset: float):
@@ -131,7 +161,9 @@ def _flaser(fields: Fields, index: int, laser_offset: float):
     ranges = fields.take_floats(n, "range", "num_readings")
     pose = _pose(fields, "laser_pose")
     odom = _pose(fields, "odom")
-    stamp = _trailer(fields, "FLASER num_readings range[num_readings] x y theta odom_x odom_y odom_theta")
+    stamp = _trailer(
+        fields, "FLASER num_readings range[num_readings] x y theta odom_x odom_y odom_theta"
+    )
     if laser_offset:
         pose = pose @ Pose2(laser_offset, 0.0, 0.0)
         odom = odom @ Pose2(laser_offset, 0.0, 0.0)
@@ -156,10 +188,14 @@ def _rawlaser(fields: Fields, index: int, kind: str):
     if not res > 0:
         raise fields.error(f"must be positive, got {res}", "angular_resolution")
     if fov > 0 and abs((n - 1) * res - fov) > res + 1e-6 and abs(n * res - fov) > res + 1e-6:
-        raise fields.error(f"{n} readings at {res} rad do not cover the field of view {fov} rad", "num_readings")
+        raise fields.error(
+            f"{n} readings at {res} rad do not cover the field of view {fov} rad", "num_readings"
+        )
     pose = odom = None
-    layout = f"{kind} laser_type start_angle field_of_view angular_resolution maximum_range accuracy " \
-             "remission_mode num_readings range[num_readings] num_remissions remission[num_remissions]"
+    layout = (
+        f"{kind} laser_type start_angle field_of_view angular_resolution maximum_range accuracy "
+        "remission_mode num_readings range[num_readings] num_remissions remission[num_remissions]"
+    )
     if robot:
         pose = _pose(fields, "laser_pose")
         odom = _pose(fields, "robot_pose")
@@ -168,5 +204,13 @@ def _rawlaser(fields: Fields, index: int, kind: str):
         layout += " laser_pose robot_pose tv rv forward_safety_dist side_safety_dist turn_axis"
     stamp = _trailer(fields, layout)
     bearings = uniform_bearings(n, start, res)
-    return _make(fields, index, ranges, bearings, range_max=max_range if max_range > 0 else math.inf,
-                 pose=pose, odometry=odom, stamp=stamp)
+    return _make(
+        fields,
+        index,
+        ranges,
+        bearings,
+        range_max=max_range if max_range > 0 else math.inf,
+        pose=pose,
+        odometry=odom,
+        stamp=stamp,
+    )

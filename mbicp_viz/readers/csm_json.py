@@ -1,4 +1,5 @@
-"""CSM's JSON ``laser_data``: one object per line (``nrays``, ``theta``, ``readings``, ``valid``, poses)."""
+"""CSM's JSON ``laser_data``: one object per line (``nrays``, ``theta``, ``readings``, ``valid``, "
+"poses)."""
 
 from __future__ import annotations
 
@@ -31,7 +32,9 @@ def _pose(obj, key, path, line_no):
         return None
     values = [_number(c) for c in v] if isinstance(v, list) else []
     if len(values) != 3 or not all(c is not None and math.isfinite(c) for c in values):
-        raise InputError(f"expected [x, y, theta] of finite numbers, got {str(v)[:60]}", path, line_no, key)
+        raise InputError(
+            f"expected [x, y, theta] of finite numbers, got {str(v)[:60]}", path, line_no, key
+        )
     return Pose2(*values)
 
 
@@ -44,7 +47,9 @@ def _array(obj, key, n, path, line_no, allow_null=False):
     for k, c in enumerate(v):
         x = np.nan if c is None and allow_null else _number(c)
         if x is None:
-            raise InputError(f"entry {k} is {str(c)[:40]}, not a number a float can hold", path, line_no, key)
+            raise InputError(
+                f"entry {k} is {str(c)[:40]}, not a number a float can hold", path, line_no, key
+            )
         out[k] = x
     return out
 
@@ -66,7 +71,9 @@ def _theta(obj, n, path, line_no) -> np.ndarray:
         return _array(obj, "theta", n, path, line_no)
     lo, hi = _number(obj.get("min_theta")), _number(obj.get("max_theta"))
     if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
-        raise InputError("needs 'theta' or finite 'min_theta' and 'max_theta'", path, line_no, "theta")
+        raise InputError(
+            "needs 'theta' or finite 'min_theta' and 'max_theta'", path, line_no, "theta"
+        )
     return np.linspace(lo, hi, n)
 
 
@@ -79,14 +86,31 @@ def read_csm_json(path: str) -> ScanLog:
             obj = _object(line.text, path, line.number)
             n = obj.get("nrays")
             if not isinstance(n, int) or isinstance(n, bool) or not 0 < n <= 100_000:
-                raise InputError(f"expected a whole number 1..100000, got {str(n)[:40]}", path, line.number, "nrays")
+                raise InputError(
+                    f"expected a whole number 1..100000, got {str(n)[:40]}",
+                    path,
+                    line.number,
+                    "nrays",
+                )
             readings = _array(obj, "readings", n, path, line.number, allow_null=True)
             theta = _theta(obj, n, path, line.number)
             valid = _array(obj, "valid", n, path, line.number) != 0 if "valid" in obj else None
-            pose = _pose(obj, "true_pose", path, line.number) or _pose(obj, "estimate", path, line.number)
-            log.add(scan_or_reason(readings, theta, path, line.number, "theta", valid=valid, pose=pose,
-                                   odometry=_pose(obj, "odometry", path, line.number),
-                                   source=ScanSource(str(path), log.records, line.number)))
+            pose = _pose(obj, "true_pose", path, line.number) or _pose(
+                obj, "estimate", path, line.number
+            )
+            log.add(
+                scan_or_reason(
+                    readings,
+                    theta,
+                    path,
+                    line.number,
+                    "theta",
+                    valid=valid,
+                    pose=pose,
+                    odometry=_pose(obj, "odometry", path, line.number),
+                    source=ScanSource(str(path), log.records, line.number),
+                )
+            )
     if not log.records:
         raise InputError("no laser_data objects in the file", path)
     return log

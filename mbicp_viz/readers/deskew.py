@@ -17,31 +17,43 @@ from dataclasses import replace
 
 import numpy as np
 
+from mbicp_viz.choices import Deskew
 from mbicp_viz.core import Pose2, Scan, ScanError, deskew, relative, twist
 from mbicp_viz.errors import InputError
-from mbicp_viz.choices import Deskew
 
 from .log import ScanLog
 
-
-SWEEP_SLACK = 1.5  # a sweep may outlast the gap to the next stamp this much (stamps jitter), no more
+SWEEP_SLACK = (
+    1.5  # a sweep may outlast the gap to the next stamp this much (stamps jitter), no more
+)
 
 
 def _check(log: ScanLog, mode: Deskew) -> None:
     if any(s.beam_times is None for s in log.scans):
-        raise InputError("its scans do not say when each beam was measured (a LaserScan's time_increment): "
-                         "nothing to correct the motion with", log.path, field="--deskew")
+        raise InputError(
+            "its scans do not say when each beam was measured (a LaserScan's time_increment): "
+            "nothing to correct the motion with",
+            log.path,
+            field="--deskew",
+        )
     if any(s.stamp is None for s in log.scans):
         raise InputError("its scans have no time stamps", log.path, field="--deskew")
     for a, b in zip(log.scans[:-1], log.scans[1:]):  # a sweep ends before the next scan begins
         sweep, gap = float(np.max(a.beam_times)) - float(np.min(a.beam_times)), b.stamp - a.stamp
         if gap > 0 and sweep > SWEEP_SLACK * gap:
-            raise InputError(f"scan message {a.source.index} sweeps for {sweep:.4g} s (its time_increment times its "
-                             f"beams) but the next scan comes {gap:.4g} s later: its beam times are wrong", log.path,
-                             field="--deskew")
+            raise InputError(
+                f"scan message {a.source.index} sweeps for {sweep:.4g} s (its time_increment times "
+                "its "
+                f"beams) but the next scan comes {gap:.4g} s later: its beam times are wrong",
+                log.path,
+                field="--deskew",
+            )
     if mode is Deskew.odometry and any(s.odometry is None for s in log.scans):
-        raise InputError("no odometry at every scan's stamp: use --deskew velocity (from the matches)", log.path,
-                         field="--deskew")
+        raise InputError(
+            "no odometry at every scan's stamp: use --deskew velocity (from the matches)",
+            log.path,
+            field="--deskew",
+        )
 
 
 def _motions(log: ScanLog, mode: Deskew) -> list[Pose2 | None]:
@@ -53,7 +65,11 @@ def _motions(log: ScanLog, mode: Deskew) -> list[Pose2 | None]:
         if mode is Deskew.odometry:
             out.append(relative(a.odometry, b.odometry))
             continue
-        guess = relative(a.odometry, b.odometry) if a.odometry is not None and b.odometry is not None else Pose2()
+        guess = (
+            relative(a.odometry, b.odometry)
+            if a.odometry is not None and b.odometry is not None
+            else Pose2()
+        )
         try:
             out.append(match(a, b, guess, ImprovedParams()).pose)
         except (ScanError, ValueError, FloatingPointError, np.linalg.LinAlgError):
@@ -86,9 +102,14 @@ def deskew_log(log: ScanLog, mode: Deskew | str) -> ScanLog:
         try:
             scans.append(s if v is None else deskew(s, v))
         except ScanError as e:
-            raise InputError(e.reason, log.path, field=f"--deskew (scan message {s.source.index})") from None
-    how = ("the odometry between consecutive scans" if mode is Deskew.odometry else
-           "the motion improved MbICP finds between consecutive scans as measured")
+            raise InputError(
+                e.reason, log.path, field=f"--deskew (scan message {s.source.index})"
+            ) from None
+    how = (
+        "the odometry between consecutive scans"
+        if mode is Deskew.odometry
+        else "the motion improved MbICP finds between consecutive scans as measured"
+    )
     note = f"corrected for motion during each scan (--deskew {mode.value}): the velocity from {how}"
     missing = sum(s.raw is None for s in scans)
     if missing:

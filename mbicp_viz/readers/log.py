@@ -46,13 +46,21 @@ class Frames:
         """Which frame a match's pose is given in, and why."""
         laser = f"the laser frame{f' {self.frame_id!r}' if self.frame_id else ''}"
         if not self.reports_base(base):
-            return laser if not base else f"{laser} (no mount known: give --mount X Y THETA_DEG for the base's motion)"
+            return (
+                laser
+                if not base
+                else f"{laser} (no mount known: give --mount X Y THETA_DEG for the base's motion)"
+            )
         m = self.mount
-        return (f"the robot's {self.base_frame} (laser mount ({m.x:g} m, {m.y:g} m, {math.degrees(m.theta):g} deg) "
-                f"from {self.mount_source})")
+        return (
+            f"the robot's {self.base_frame} (laser mount ({m.x:g} m, {m.y:g} m, "
+            f"{math.degrees(m.theta):g} deg) "
+            f"from {self.mount_source})"
+        )
 
     def reported(self, motion: Pose2, base: bool) -> Pose2:
-        """A motion of the laser as reported: the base's motion when ``base`` and the mount is known."""
+        """A motion of the laser as reported: the base's motion when ``base`` and the mount is "
+        "known."""
         return self.mount.conjugate(motion) if self.reports_base(base) else motion
 
 
@@ -60,12 +68,17 @@ class Frames:
 class ScanLog:
     path: str
     scans: list[Scan]  # the usable scans, in file order
-    odometry: list[tuple[float, Pose2]] = field(default_factory=list)  # (stamp [s], pose) from ODOM lines
+    # (stamp [s], pose) from ODOM lines
+    odometry: list[tuple[float, Pose2]] = field(default_factory=list)
     skipped: dict[str, int] = field(default_factory=dict)  # message type -> records read past
-    unusable: dict[int, UnusableScan] = field(default_factory=dict)  # scan record -> why it cannot be matched
+    # scan record -> why it cannot be matched
+    unusable: dict[int, UnusableScan] = field(default_factory=dict)
     frames: Frames = field(default_factory=Frames)
-    topic: str | None = None  # the scan stream read: a bag's topic, a CARMEN log's laser message type
-    scan_topics: dict[str, str] = field(default_factory=dict)  # the file's scan streams -> their descriptions
+    topic: str | None = (
+        None  # the scan stream read: a bag's topic, a CARMEN log's laser message type
+    )
+    # the file's scan streams -> their descriptions
+    scan_topics: dict[str, str] = field(default_factory=dict)
     odometry_source: str | None = None
     notes: list[str] = field(default_factory=list)  # warnings for the user (a bag cut short ...)
 
@@ -88,12 +101,20 @@ class ScanLog:
         """The scan of record ``index`` (negative: counted from the end)."""
         n = self.records
         if not -n <= index < n:
-            raise InputError(f"scan index {index} out of range: the log holds {n} scans", self.path, field="index")
+            raise InputError(
+                f"scan index {index} out of range: the log holds {n} scans",
+                self.path,
+                field="index",
+            )
         index %= n
         if index in self.unusable:
             bad = self.unusable[index]
-            raise InputError(f"scan {index} cannot be matched: {bad.reason}", self.path, bad.source.line,
-                             None if bad.source.line else "index")
+            raise InputError(
+                f"scan {index} cannot be matched: {bad.reason}",
+                self.path,
+                bad.source.line,
+                None if bad.source.line else "index",
+            )
         return self.scans[index - bisect.bisect_left(sorted(self.unusable), index)]
 
     def record_numbers(self) -> list[int]:
@@ -101,11 +122,12 @@ class ScanLog:
         return [r for r in range(self.records) if r not in self.unusable]
 
     def consecutive_pairs(self, limit: int | None = None) -> list[tuple[int, int]]:
-        """Record numbers of each usable scan and the next usable one (the first ``limit`` pairs)."""
+        """Record numbers of each usable scan and the next usable one (the first ``limit`` "
+        "pairs)."""
         n = len(self.scans) - 1 if limit is None else min(limit, len(self.scans) - 1)
         if n < 1:
             raise InputError("needs at least two usable scans", self.path)
-        records = self.record_numbers()[:n + 1]
+        records = self.record_numbers()[: n + 1]
         return list(zip(records[:-1], records[1:]))
 
     def unusable_summary(self) -> str | None:
@@ -113,19 +135,30 @@ class ScanLog:
         if not self.unusable:
             return None
         first = min(self.unusable)
-        where = f", line {self.unusable[first].source.line}" if self.unusable[first].source.line else ""
-        return (f"{self.path}: skipped {len(self.unusable)} unusable scan(s) of {self.records} "
-                f"(first: scan {first}{where}: {self.unusable[first].reason})")
+        where = (
+            f", line {self.unusable[first].source.line}" if self.unusable[first].source.line else ""
+        )
+        return (
+            f"{self.path}: skipped {len(self.unusable)} unusable scan(s) of {self.records} "
+            f"(first: scan {first}{where}: {self.unusable[first].reason})"
+        )
 
 
-def scan_or_reason(ranges, bearings, path: str, line: int | None, field: str, **kw) -> Scan | UnusableScan:
+def scan_or_reason(
+    ranges, bearings, path: str, line: int | None, field: str, **kw
+) -> Scan | UnusableScan:
     """A reader's scan (``make_scan``'s keywords), or the reason it is unusable, which the log keeps
     and skips. Malformed beams are an error naming the file, line (or message) and field."""
     b = np.asarray(bearings, dtype=float)
     steps = np.abs(np.diff(b))
     if len(steps) and np.all(np.isfinite(steps)) and steps.min() < MIN_BEARING_STEP_RAD:
-        raise InputError(f"bearings {steps.min():.3g} rad apart: below the finest scanner's step "
-                         f"({MIN_BEARING_STEP_RAD} rad)", path, line, field)
+        raise InputError(
+            f"bearings {steps.min():.3g} rad apart: below the finest scanner's step "
+            f"({MIN_BEARING_STEP_RAD} rad)",
+            path,
+            line,
+            field,
+        )
     try:
         return make_scan(ranges, bearings, **kw)
     except UnusableScan as e:
@@ -138,7 +171,15 @@ def mirrored(log: ScanLog) -> ScanLog:
     """The log of a laser mounted upside down, its scans turned upright (every bearing negated)."""
     from dataclasses import replace
 
-    scans = [replace(s, ranges=s.ranges[::-1], bearings=-s.bearings[::-1], valid=s.valid[::-1],
-                     beam_times=None if s.beam_times is None else s.beam_times[::-1]) for s in log.scans]
+    scans = [
+        replace(
+            s,
+            ranges=s.ranges[::-1],
+            bearings=-s.bearings[::-1],
+            valid=s.valid[::-1],
+            beam_times=None if s.beam_times is None else s.beam_times[::-1],
+        )
+        for s in log.scans
+    ]
     source = f"{log.frames.mount_source or 'no mount given'}, the laser upside down"
     return replace(log, scans=scans, frames=replace(log.frames, mount_source=source))

@@ -20,8 +20,16 @@ from .text import Fields, token_lines
 def _scan(fields: Fields, index: int, ranges, odometry=None):
     n = len(ranges)
     bearings = uniform_bearings(n, -math.pi / 2, math.pi / (n - 1) if n > 1 else 0.0)
-    return scan_or_reason(ranges, bearings, fields.path, fields.line, "ranges", invalid_values=NO_RETURN_CODES_M,
-                          odometry=odometry, source=ScanSource(str(fields.path), index, fields.line))
+    return scan_or_reason(
+        ranges,
+        bearings,
+        fields.path,
+        fields.line,
+        "ranges",
+        invalid_values=NO_RETURN_CODES_M,
+        odometry=odometry,
+        source=ScanSource(str(fields.path), index, fields.line),
+    )
 
 
 def read_off(path: str) -> ScanLog:
@@ -36,7 +44,9 @@ def read_off(path: str) -> ScanLog:
         width = len(first.t)
         for fields in (first, *records):
             if len(fields.t) != width:
-                raise fields.error(f"{len(fields.t)} ranges where the first scan has {width}", "ranges")
+                raise fields.error(
+                    f"{len(fields.t)} ranges where the first scan has {width}", "ranges"
+                )
             log.add(_scan(fields, log.records, fields.take_floats(width, "range")))
     return log
 
@@ -49,16 +59,23 @@ def _read_blocks(header: Fields, records, log: ScanLog) -> None:
         for _ in range(n_rays):
             fields = next(records, None)
             if fields is None:
-                raise header.error(f"the header announces {n_scans} scans of {n_rays} ranges; the file ends in "
-                                   f"scan {k}", "header")
+                raise header.error(
+                    f"the header announces {n_scans} scans of {n_rays} ranges; the file ends in "
+                    f"scan {k}",
+                    "header",
+                )
             first = first or fields
             ranges.append(fields.take("range", finite=False))
             fields.end("one range per line")
         pose_line = next(records, None)
         if pose_line is None:
-            raise header.error(f"the header announces {n_scans} scans; the file ends before the pose of scan {k}",
-                               "header")
-        pose = Pose2(pose_line.take("pose_x"), pose_line.take("pose_y"), pose_line.take("pose_theta"))
+            raise header.error(
+                f"the header announces {n_scans} scans; the file ends before the pose of scan {k}",
+                "header",
+            )
+        pose = Pose2(
+            pose_line.take("pose_x"), pose_line.take("pose_y"), pose_line.take("pose_theta")
+        )
         pose_line.end("x y theta")
         log.add(_scan(first, log.records, ranges, pose))
     extra = next(records, None)

@@ -4,8 +4,9 @@ Keys are the parameter names of the matcher (``Bw``, ``Br``, ``L``, ...), flat o
 named after the matcher (``[improved]``); the correlative search's parameters sit in a
 ``[search]`` table. A field in radians may be given in degrees instead by suffixing its name with
 ``_deg`` (``Bw_deg = 45``); files written here use that form, since degrees are what people type.
-``--params`` also takes the name of a preset shipped in ``mbicp_viz/presets`` (``--params poor-guess``):
-the parameter sets the README and docs/results.md measure, each saying in its comments what it is for.
+``--params`` also takes the name of a preset shipped in ``mbicp_viz/presets`` (``--params
+poor-guess``): the parameter sets the README and docs/results.md measure, each saying in its
+comments what it is for.
 """
 
 from __future__ import annotations
@@ -45,22 +46,32 @@ def presets_for(algorithm: str) -> dict[str, Params]:
 
 
 def params_file(path: str | Path) -> Path:
-    """The file ``--params`` names: a path, or else a bare name (no folder, no suffix) of a preset."""
+    """The file ``--params`` names: a path, or else a bare name (no folder, no suffix) of a "
+    "preset."""
     p = Path(path)
     if p.exists() or p.suffix or len(p.parts) > 1:
         return p
     if (PRESETS / f"{p}.toml").is_file():
         return PRESETS / f"{p}.toml"
-    raise InputError(f"no such file, nor a preset of that name (presets: {', '.join(preset_names())})", str(path))
+    raise InputError(
+        f"no such file, nor a preset of that name (presets: {', '.join(preset_names())})", str(path)
+    )
 
 
-def params_from_mapping(params_type: type, values: dict, path: str | None = None, table: str | None = None) -> Params:
-    """``params_type`` from TOML keys (``_deg`` for radians); errors name the key (``table.key``)."""
+def params_from_mapping(
+    params_type: type, values: dict, path: str | None = None, table: str | None = None
+) -> Params:
+    """``params_type`` from TOML keys (``_deg`` for radians); errors name the key "
+    "(``table.key``)."""
     specs = {s.name: s for s in field_specs(params_type)}
     kwargs = {}
     for key, value in values.items():
         where = f"{table}.{key}" if table else key
-        name = key[:-4] if key.endswith("_deg") and specs.get(key[:-4]) and specs[key[:-4]].unit == "rad" else key
+        name = (
+            key[:-4]
+            if key.endswith("_deg") and specs.get(key[:-4]) and specs[key[:-4]].unit == "rad"
+            else key
+        )
         if name not in specs:
             raise InputError(f"unknown parameter; known: {', '.join(specs)}", path, field=where)
         if name != key:
@@ -92,12 +103,14 @@ def read_toml(path: str | Path) -> dict:
 
 
 def load_params(path: str | Path, algorithm: str) -> Params:
-    """Parameters for ``algorithm`` from a TOML file or preset (flat keys, or a table named after the
-    algorithm)."""
+    """Parameters for ``algorithm`` from a TOML file or preset (flat keys, or a table named after
+    the algorithm)."""
     path = params_file(path)
     data = read_toml(path)
     if isinstance(data.get(algorithm), dict):
-        return params_from_mapping(MATCHERS[algorithm].params_type, data[algorithm], str(path), algorithm)
+        return params_from_mapping(
+            MATCHERS[algorithm].params_type, data[algorithm], str(path), algorithm
+        )
     flat = {k: v for k, v in data.items() if not isinstance(v, dict) and k != "algorithm"}
     return params_from_mapping(MATCHERS[algorithm].params_type, flat, str(path))
 
@@ -116,7 +129,9 @@ def load_search(path: str | Path | None) -> SearchParams:
 def make_params(algorithm: str, path: str | Path | None) -> Params:
     """Defaults of ``algorithm``, or its parameters from a ``--params`` file."""
     if algorithm not in MATCHERS:
-        raise InputError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(MATCHERS)}", field="--algo")
+        raise InputError(
+            f"unknown algorithm {algorithm!r}; choose one of {', '.join(MATCHERS)}", field="--algo"
+        )
     return load_params(path, algorithm) if path else MATCHERS[algorithm].params_type()
 
 
@@ -134,8 +149,15 @@ def _lines(params: Params) -> list[str]:
 def params_to_toml(params: Params, search: SearchParams | None = None) -> str:
     """A ``--params`` file: the matcher's parameters, then the search's ``[search]`` table."""
     name = next(m.name for m in MATCHERS.values() if type(params) is m.params_type)
-    lines = [f"# mbicp-viz parameters for {name}; read back with --params FILE", f'algorithm = "{name}"',
-             *_lines(params)]
+    lines = [
+        f"# mbicp-viz parameters for {name}; read back with --params FILE",
+        f'algorithm = "{name}"',
+        *_lines(params),
+    ]
     if search is not None:
-        lines += ["", f"[{SEARCH_TABLE}]  # the correlative search (--search, --guess search)", *_lines(search)]
+        lines += [
+            "",
+            f"[{SEARCH_TABLE}]  # the correlative search (--search, --guess search)",
+            *_lines(search),
+        ]
     return "\n".join(lines) + "\n"

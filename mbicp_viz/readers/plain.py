@@ -26,15 +26,25 @@ def read_plain_text(path: str) -> ScanLog:
     log = ScanLog(str(path), [])
     for fields in token_lines(path):
         if len(fields.t) < 4:
-            raise fields.error(f"expected 'angle_min_rad angle_increment_rad range_1_m ...', got {len(fields.t)} "
-                               "fields")
+            raise fields.error(
+                f"expected 'angle_min_rad angle_increment_rad range_1_m ...', got {len(fields.t)} "
+                "fields"
+            )
         start = fields.take("angle_min_rad")
         inc = fields.take("angle_increment_rad")
         if inc <= 0:
             raise fields.error(f"must be positive, got {inc}", "angle_increment_rad")
         ranges = fields.take_floats(fields.left, "range")
-        log.add(scan_or_reason(ranges, uniform_bearings(len(ranges), start, inc), path, fields.line, "ranges",
-                               source=ScanSource(str(path), log.records, fields.line)))
+        log.add(
+            scan_or_reason(
+                ranges,
+                uniform_bearings(len(ranges), start, inc),
+                path,
+                fields.line,
+                "ranges",
+                source=ScanSource(str(path), log.records, fields.line),
+            )
+        )
     if not log.records:
         raise InputError("no scan lines", path)
     return log
@@ -49,8 +59,11 @@ def _load_npz(path: str) -> dict[str, np.ndarray]:
         with zipfile.ZipFile(path) as zf:
             size = sum(i.file_size for i in zf.infolist())
         if size > MAX_NPZ_BYTES:
-            raise InputError(f"unpacks to {size / 1e6:.0f} MB, over the {MAX_NPZ_BYTES / 1e6:.0f} MB a scan file may",
-                             path)
+            raise InputError(
+                f"unpacks to {size / 1e6:.0f} MB, over the {MAX_NPZ_BYTES / 1e6:.0f} MB a scan "
+                "file may",
+                path,
+            )
         with np.load(path, allow_pickle=False) as z:  # never unpickle a user's file
             return {k: z[k] for k in z.files}
     except FileNotFoundError:
@@ -60,7 +73,9 @@ def _load_npz(path: str) -> dict[str, np.ndarray]:
     except InputError:
         raise
     except Exception as e:  # numpy parses a damaged array header with Python's tokenizer: any error
-        raise InputError(f"not a readable .npz file ({type(e).__name__}: {str(e)[:160]})", path) from None
+        raise InputError(
+            f"not a readable .npz file ({type(e).__name__}: {str(e)[:160]})", path
+        ) from None
 
 
 def _real_array(arrays: dict, name: str, path: str) -> np.ndarray:
@@ -76,19 +91,37 @@ def read_npz(path: str) -> ScanLog:
         raise InputError(f"needs arrays 'ranges' and 'bearings', has {sorted(arrays)}", path)
     ranges = np.atleast_2d(_real_array(arrays, "ranges", path))
     if ranges.ndim != 2 or ranges.size == 0:
-        raise InputError(f"expected an (S, N) array of scans, got shape {ranges.shape}", path, field="ranges")
+        raise InputError(
+            f"expected an (S, N) array of scans, got shape {ranges.shape}", path, field="ranges"
+        )
     bearings = _real_array(arrays, "bearings", path)
     if bearings.shape not in ((ranges.shape[1],), ranges.shape):
-        raise InputError(f"expected shape ({ranges.shape[1]},) or {ranges.shape}, got {bearings.shape}", path,
-                         field="bearings")
+        raise InputError(
+            f"expected shape ({ranges.shape[1]},) or {ranges.shape}, got {bearings.shape}",
+            path,
+            field="bearings",
+        )
     bearings = np.broadcast_to(bearings, ranges.shape)
     poses = _real_array(arrays, "poses", path) if "poses" in arrays else None
     if poses is not None and (poses.shape != (len(ranges), 3) or not np.all(np.isfinite(poses))):
-        raise InputError(f"expected a finite ({len(ranges)}, 3) array, got shape {poses.shape}", path, field="poses")
+        raise InputError(
+            f"expected a finite ({len(ranges)}, 3) array, got shape {poses.shape}",
+            path,
+            field="poses",
+        )
     log = ScanLog(str(path), [])
     for k in range(len(ranges)):
-        log.add(scan_or_reason(ranges[k], bearings[k], path, None, f"scan {k}", source=ScanSource(str(path), k),
-                               pose=Pose2(*poses[k]) if poses is not None else None))
+        log.add(
+            scan_or_reason(
+                ranges[k],
+                bearings[k],
+                path,
+                None,
+                f"scan {k}",
+                source=ScanSource(str(path), k),
+                pose=Pose2(*poses[k]) if poses is not None else None,
+            )
+        )
     return log
 
 

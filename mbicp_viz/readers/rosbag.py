@@ -39,7 +39,6 @@ from .tf import Mount, TfTree, interpolate
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
-TF_TOPICS = {"/tf": False, "/tf_static": True, "tf": False, "tf_static": True}
 _MAGIC = b"#ROSBAG V2.0\n"
 _OP_MSG, _OP_HEADER, _OP_INDEX, _OP_CHUNK, _OP_CONN = 2, 3, 4, 5, 7
 MAX_CHUNK_BYTES = 256 * 1024 * 1024  # a chunk unpacking to more is damaged (or hostile)
@@ -69,7 +68,9 @@ def _typestore(name: str):
         return get_typestore(Stores[name])
     except KeyError:
         known = ", ".join(s.name for s in Stores if s.name.startswith("ROS"))
-        raise InputError(f"unknown ROS distro {name!r}; known: {known}", field="--typestore") from None
+        raise InputError(
+            f"unknown ROS distro {name!r}; known: {known}", field="--typestore"
+        ) from None
 
 
 def _messages(p: Path, typestore: str, notes: list[str]) -> list[Message]:
@@ -79,10 +80,18 @@ def _messages(p: Path, typestore: str, notes: list[str]) -> list[Message]:
     store = _typestore(typestore)
     try:
         with AnyReader([p], default_typestore=store) as reader:
-            wanted = [c for c in reader.connections if _normalise(c.msgtype) in (LASER_SCAN, ODOMETRY, TF)]
-            return [Message(conn.topic, _normalise(conn.msgtype), t * 1e-9, _decode(reader.deserialize, raw,
-                                                                                       conn.msgtype, p, n))
-                    for n, (conn, t, raw) in enumerate(reader.messages(connections=wanted))]
+            wanted = [
+                c for c in reader.connections if _normalise(c.msgtype) in (LASER_SCAN, ODOMETRY, TF)
+            ]
+            return [
+                Message(
+                    conn.topic,
+                    _normalise(conn.msgtype),
+                    t * 1e-9,
+                    _decode(reader.deserialize, raw, conn.msgtype, p, n),
+                )
+                for n, (conn, t, raw) in enumerate(reader.messages(connections=wanted))
+            ]
     except AnyReaderError as e:
         reason = " ".join(str(a) for a in e.args) or type(e).__name__
     except InputError:
@@ -98,8 +107,9 @@ def _decode(deserialize, raw, msgtype: str, p: Path, n: int):
     try:
         return deserialize(raw, msgtype)
     except Exception as e:  # rosbags' serde errors: damaged message data
-        raise InputError(f"message {n} ({msgtype}) cannot be decoded: {type(e).__name__}: {str(e)[:200]}",
-                         str(p)) from None
+        raise InputError(
+            f"message {n} ({msgtype}) cannot be decoded: {type(e).__name__}: {str(e)[:200]}", str(p)
+        ) from None
 
 
 def _normalise(msgtype: str) -> str:
@@ -110,13 +120,14 @@ def _normalise(msgtype: str) -> str:
 
 # ---- ROS 1 bags, walked record by record (rosbags refuses a damaged or missing index) ------------
 
+
 def _header(buf: bytes, path) -> dict[str, bytes]:
     fields, i = {}, 0
     while i < len(buf):
         if i + 4 > len(buf):
             raise InputError("truncated record header", str(path))
         (n,) = struct.unpack_from("<I", buf, i)
-        key, sep, value = buf[i + 4:i + 4 + n].partition(b"=")
+        key, sep, value = buf[i + 4 : i + 4 + n].partition(b"=")
         if not sep:
             raise InputError("malformed record header field", str(path))
         fields[key.decode("ascii", "replace")] = value
@@ -139,7 +150,7 @@ def _records(buf: bytes, start: int, path):
         (hlen,) = struct.unpack_from("<I", buf, pos)
         if pos + 8 + hlen > len(buf):
             raise _CutShort(pos)
-        h = _header(buf[pos + 4:pos + 4 + hlen], path)
+        h = _header(buf[pos + 4 : pos + 4 + hlen], path)
         (dlen,) = struct.unpack_from("<I", buf, pos + 4 + hlen)
         data_at = pos + 8 + hlen
         op = h.get("op", b"\0")[0]
@@ -148,7 +159,7 @@ def _records(buf: bytes, start: int, path):
             dlen = 12 * struct.unpack("<I", h["count"])[0]
         if data_at + dlen > len(buf):
             raise _CutShort(pos, h, buf[data_at:])
-        yield op, h, buf[data_at:data_at + dlen]
+        yield op, h, buf[data_at : data_at + dlen]
         pos = data_at + dlen
 
 
@@ -165,9 +176,13 @@ def _decompress(kind: bytes, data: bytes, size: int, path) -> bytes:
 
             return lz4.frame.decompress(data)[:size]
     except ImportError:
-        raise InputError("the bag's chunks are lz4-compressed: pip install lz4", str(path)) from None
+        raise InputError(
+            "the bag's chunks are lz4-compressed: pip install lz4", str(path)
+        ) from None
     except (OSError, ValueError, EOFError, RuntimeError) as e:
-        raise InputError(f"a damaged compressed chunk ({type(e).__name__}: {e})", str(path)) from None
+        raise InputError(
+            f"a damaged compressed chunk ({type(e).__name__}: {e})", str(path)
+        ) from None
     raise InputError(f"unknown chunk compression {kind[:20]!r}", str(path))
 
 
@@ -180,8 +195,10 @@ def _register(store, definition: bytes, msgtype: str, p: Path) -> None:
     try:
         store.register(get_types_from_msg(definition.decode("utf-8"), msgtype))
     except Exception as e:  # a damaged definition
-        raise InputError(f"the definition of {msgtype} cannot be read ({type(e).__name__}: {str(e)[:120]})",
-                         str(p)) from None
+        raise InputError(
+            f"the definition of {msgtype} cannot be read ({type(e).__name__}: {str(e)[:120]})",
+            str(p),
+        ) from None
 
 
 def _walk_ros1(p: Path, notes: list[str], why: str):
@@ -198,20 +215,31 @@ def _walk_ros1(p: Path, notes: list[str], why: str):
             if op == _OP_HEADER and "index_pos" in h:
                 index_pos = struct.unpack("<Q", h["index_pos"])[0]
                 if index_pos == 0 or index_pos > len(buf):
-                    notes.append(f"{p}: the bag's index is missing (a recording never closed, or a file cut short); "
-                                 "its chunks were read one by one")
+                    notes.append(
+                        f"{p}: the bag's index is missing (a recording never closed, or a file cut "
+                        "short); "
+                        "its chunks were read one by one"
+                    )
             elif op == _OP_CHUNK:
                 size = struct.unpack("<I", h["size"])[0] if "size" in h else MAX_CHUNK_BYTES
-                _chunk(_decompress(h.get("compression", b"none"), data, size, p), p, store, conns, out)
+                _chunk(
+                    _decompress(h.get("compression", b"none"), data, size, p), p, store, conns, out
+                )
     except _CutShort as cut:
-        if cut.header is not None and cut.header.get("op", b"\0")[0] == _OP_CHUNK and \
-                cut.header.get("compression", b"none") == b"none":
+        if (
+            cut.header is not None
+            and cut.header.get("op", b"\0")[0] == _OP_CHUNK
+            and cut.header.get("compression", b"none") == b"none"
+        ):
             try:
                 _chunk(cut.data, p, store, conns, out)
             except _CutShort:
                 pass
-        notes.append(f"{p}: the bag ends inside a record at byte {cut.at} of {len(buf)} (cut short?): the {len(out)} "
-                     "messages before the cut were read, the rest is lost")
+        notes.append(
+            f"{p}: the bag ends inside a record at byte {cut.at} of {len(buf)} (cut short?): the "
+            f"{len(out)} "
+            "messages before the cut were read, the rest is lost"
+        )
     except struct.error as e:
         raise InputError(f"a damaged record ({e}); rosbags: {why[:200]}", str(p)) from None
     return out
@@ -230,7 +258,10 @@ def _chunk_records(data: bytes, p: Path, store, conns: dict, out: list) -> None:
         if op == _OP_CONN:
             conn = _header(d, p)
             msgtype = _normalise(conn["type"].decode("utf-8", "replace"))
-            conns[struct.unpack("<I", h["conn"])[0]] = (h["topic"].decode("utf-8", "replace"), msgtype)
+            conns[struct.unpack("<I", h["conn"])[0]] = (
+                h["topic"].decode("utf-8", "replace"),
+                msgtype,
+            )
             _register(store, conn.get("message_definition", b""), msgtype, p)
         elif op == _OP_MSG:
             conn_id = struct.unpack("<I", h["conn"])[0]
@@ -239,11 +270,18 @@ def _chunk_records(data: bytes, p: Path, store, conns: dict, out: list) -> None:
             topic, msgtype = conns[conn_id]
             if msgtype in (LASER_SCAN, ODOMETRY, TF):
                 sec, nsec = struct.unpack("<II", h["time"]) if "time" in h else (0, 0)
-                out.append(Message(topic, msgtype, sec + 1e-9 * nsec, _decode(store.deserialize_ros1, d, msgtype, p,
-                                                                              len(out))))
+                out.append(
+                    Message(
+                        topic,
+                        msgtype,
+                        sec + 1e-9 * nsec,
+                        _decode(store.deserialize_ros1, d, msgtype, p, len(out)),
+                    )
+                )
 
 
 # ---- scans, topics, frames and odometry ---------------------------------------------------------
+
 
 def _scan_topics(messages: list[Message]) -> dict[str, str]:
     """Every LaserScan topic, described by its message count and frame id."""
@@ -255,24 +293,39 @@ def _scan_topics(messages: list[Message]) -> dict[str, str]:
     return {t: f"{n} messages, frame_id {f!r}" for t, (n, f) in sorted(counts.items())}
 
 
-def _scan_topic(topics: dict[str, str], messages: list[Message], topic: str | None, path: str) -> str:
-    """The one scan topic to read: the one named, else the only one; several: an error listing them."""
+def _scan_topic(
+    topics: dict[str, str], messages: list[Message], topic: str | None, path: str
+) -> str:
+    """The one scan topic to read: the one named, else the only one; several: an error listing "
+    "them."""
     listing = "; ".join(f"{t} ({d})" for t, d in topics.items())
     if topic is not None:
         if topic not in topics:
-            raise InputError(f"no LaserScan topic {topic!r}; the bag has: {listing or 'none'}", path, field="--topic")
+            raise InputError(
+                f"no LaserScan topic {topic!r}; the bag has: {listing or 'none'}",
+                path,
+                field="--topic",
+            )
         return topic
     if not topics:
         others = sorted({m.topic for m in messages})
-        raise InputError(f"no {LASER_SCAN} messages (topics read: {', '.join(others) or 'none'})", path)
+        raise InputError(
+            f"no {LASER_SCAN} messages (topics read: {', '.join(others) or 'none'})", path
+        )
     if len(topics) > 1:
-        raise InputError(f"{len(topics)} LaserScan topics, choose one with --topic: {listing}", path, field="--topic")
+        raise InputError(
+            f"{len(topics)} LaserScan topics, choose one with --topic: {listing}",
+            path,
+            field="--topic",
+        )
     return next(iter(topics))
 
 
 def _odometry(messages: list[Message], tf: TfTree, mount: Mount | None):
     """(source, stamps, base poses) from an Odometry topic (``/odom`` first), else from /tf."""
-    topics = sorted({m.topic for m in messages if m.msgtype == ODOMETRY}, key=lambda t: (t != "/odom", t))
+    topics = sorted(
+        {m.topic for m in messages if m.msgtype == ODOMETRY}, key=lambda t: (t != "/odom", t)
+    )
     if topics:
         msgs = [m.msg for m in messages if m.topic == topics[0]]
         stamps = np.array([o.header.stamp.sec + 1e-9 * o.header.stamp.nanosec for o in msgs])
@@ -284,7 +337,11 @@ def _odometry(messages: list[Message], tf: TfTree, mount: Mount | None):
 
 def _planar(pose) -> tuple[float, float, float]:
     q = pose.orientation
-    return pose.position.x, pose.position.y, float(np.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z)))
+    return (
+        pose.position.x,
+        pose.position.y,
+        float(np.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))),
+    )
 
 
 def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[str]) -> ScanLog:
@@ -294,7 +351,9 @@ def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[s
     except InputError as e:
         if not notes:
             raise
-        raise InputError(f"{e.message}: {notes[-1].split(': ', 1)[-1]}", path, field=e.field) from None
+        raise InputError(
+            f"{e.message}: {notes[-1].split(': ', 1)[-1]}", path, field=e.field
+        ) from None
     tf = TfTree()
     for m in messages:
         if m.msgtype == TF and m.topic.lstrip("/") in ("tf", "tf_static"):
@@ -303,19 +362,26 @@ def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[s
     frame_id = scans[0].msg.header.frame_id.lstrip("/")
     mount = tf.mount(frame_id, path) if frame_id else None
     odometry = _odometry(messages, tf, mount)
-    frames = Frames(mount.pose, mount.source, mount.base_frame, frame_id) if mount else Frames(frame_id=frame_id)
+    frames = (
+        Frames(mount.pose, mount.source, mount.base_frame, frame_id)
+        if mount
+        else Frames(frame_id=frame_id)
+    )
     log = ScanLog(path, [], frames=frames, topic=chosen, scan_topics=topics, notes=notes)
     if odometry is not None:
         log.odometry_source = odometry[0]
     for k, m in enumerate(scans):
-        log.add(_scan(m.msg, path, k, mount is not None and mount.upside_down, odometry, frames.mount))
+        log.add(
+            _scan(m.msg, path, k, mount is not None and mount.upside_down, odometry, frames.mount)
+        )
     return log
 
 
 def _scan(m, path: str, k: int, upside_down: bool, odometry, mount: Pose2):
-    """One LaserScan as a scan in the (upright) laser frame, bearings increasing; its odometry is the
-    pose of the laser in the odom frame at the scan's stamp."""
-    with np.errstate(invalid="ignore", over="ignore"):  # damaged numbers become invalid readings, silently
+    """One LaserScan as a scan in the (upright) laser frame, bearings increasing; its odometry is
+    the pose of the laser in the odom frame at the scan's stamp."""
+    # damaged numbers become invalid readings, silently
+    with np.errstate(invalid="ignore", over="ignore"):
         ranges = np.asarray(m.ranges, dtype=float)
     inc = float(m.angle_increment)
     bearings = float(m.angle_min) + inc * np.arange(len(ranges))
@@ -323,7 +389,8 @@ def _scan(m, path: str, k: int, upside_down: bool, odometry, mount: Pose2):
     times = dt * np.arange(len(ranges)) if np.isfinite(dt) and dt > 0 else None
     if upside_down:  # the laser's z axis points down: seen upright, every bearing is mirrored
         bearings = -bearings
-    if len(bearings) > 1 and bearings[1] < bearings[0]:  # clockwise in the upright frame: store increasing
+    # clockwise in the upright frame: store increasing
+    if len(bearings) > 1 and bearings[1] < bearings[0]:
         ranges, bearings = ranges[::-1], bearings[::-1]
         times = None if times is None else times[::-1]
     stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
@@ -333,5 +400,16 @@ def _scan(m, path: str, k: int, upside_down: bool, odometry, mount: Pose2):
         odom = base @ mount if base is not None else None
     range_max = float(m.range_max) if np.isfinite(m.range_max) and m.range_max > 0 else np.inf
     range_min = float(m.range_min) if np.isfinite(m.range_min) else 0.0
-    return scan_or_reason(ranges, bearings, path, None, f"message {k}", range_min=range_min, range_max=range_max,
-                          stamp=stamp, odometry=odom, source=ScanSource(path, k), beam_times=times)
+    return scan_or_reason(
+        ranges,
+        bearings,
+        path,
+        None,
+        f"message {k}",
+        range_min=range_min,
+        range_max=range_max,
+        stamp=stamp,
+        odometry=odom,
+        source=ScanSource(path, k),
+        beam_times=times,
+    )

@@ -35,7 +35,8 @@ class EvalRow:
     guess_source: str
     pose: Pose2  # the evaluation's answer, in ``frame``
     frame: str
-    stream: str | None  # the scan stream the log was read as (a bag's topic ...; None: its only one)
+    # the scan stream the log was read as (a bag's topic ...; None: its only one)
+    stream: str | None
     converged: bool
     reason: str  # why the matcher stopped
     success: bool | None = None  # with ``--truth``: within the criteria of the scan poses
@@ -58,8 +59,11 @@ class _Fields:
         if key not in self.obj:
             if optional:
                 return None
-            raise self.error(key, "missing (rows are written by `mbicp-viz eval sequence --out`; a file from an "
-                                  "older version lacks the fields that reopen a pair: run it again)")
+            raise self.error(
+                key,
+                "missing (rows are written by `mbicp-viz eval sequence --out`; a file from an "
+                "older version lacks the fields that reopen a pair: run it again)",
+            )
         v = self.obj[key]
         if isinstance(v, bool) != (bool in kinds) or not isinstance(v, kinds):
             raise self.error(key, f"expected {what}, got {json.dumps(v)[:40]}")
@@ -79,9 +83,13 @@ class _Fields:
 
     def pose(self, key: str) -> Pose2:
         v = self.get(key, (list,), "[x, y, theta]")
-        if len(v) != 3 or any(isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
-                              for c in v):
-            raise self.error(key, f"expected [x, y, theta] of finite numbers, got {json.dumps(v)[:60]}")
+        if len(v) != 3 or any(
+            isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
+            for c in v
+        ):
+            raise self.error(
+                key, f"expected [x, y, theta] of finite numbers, got {json.dumps(v)[:60]}"
+            )
         return Pose2(*(float(c) for c in v))
 
     def params(self, algorithm: str) -> Params:
@@ -103,15 +111,25 @@ def parse_row(obj, path: str, line: int) -> EvalRow:
     ref, obj_ = f.count("ref"), f.count("obj")
     if ref == obj_:
         raise f.error("obj", f"the same record as ref ({ref})")
-    return EvalRow(line, ref, obj_, algorithm, f.params(algorithm), f.pose("guess_pose"),
-                   f.get("guess", (str,), "where the guess came from"),
-                   Pose2(f.number("x"), f.number("y"), f.number("theta")), f.get("frame", (str,), "a frame's name"),
-                   f.get("stream", (str, type(None)), "a scan stream's name or null", optional=True),
-                   f.get("converged", (bool,), "true or false"), f.get("reason", (str,), "a stopping reason"),
-                   f.get("success", (bool,), "true or false", optional=True),
-                   f.number("error_xy", optional=True), f.number("error_theta", optional=True),
-                   f.number("inliers_truth", optional=True),
-                   f.number("condition_number", optional=True, finite=False))
+    return EvalRow(
+        line,
+        ref,
+        obj_,
+        algorithm,
+        f.params(algorithm),
+        f.pose("guess_pose"),
+        f.get("guess", (str,), "where the guess came from"),
+        Pose2(f.number("x"), f.number("y"), f.number("theta")),
+        f.get("frame", (str,), "a frame's name"),
+        f.get("stream", (str, type(None)), "a scan stream's name or null", optional=True),
+        f.get("converged", (bool,), "true or false"),
+        f.get("reason", (str,), "a stopping reason"),
+        f.get("success", (bool,), "true or false", optional=True),
+        f.number("error_xy", optional=True),
+        f.number("error_theta", optional=True),
+        f.number("inliers_truth", optional=True),
+        f.number("condition_number", optional=True, finite=False),
+    )
 
 
 def _objects(text: str, path: str):
@@ -131,7 +149,11 @@ def _objects(text: str, path: str):
 
     p = skip(0)
     if p >= n or text[p] != "[":
-        raise InputError("expected a JSON array of rows (the file `eval sequence --out` writes)", path, line_at(p))
+        raise InputError(
+            "expected a JSON array of rows (the file `eval sequence --out` writes)",
+            path,
+            line_at(p),
+        )
     p = skip(p + 1)
     if p < n and text[p] == "]":
         return
@@ -149,7 +171,9 @@ def _objects(text: str, path: str):
                 raise InputError("text after the closing ']'", path, line_at(skip(p + 1)))
             return
         if p >= n or text[p] != ",":
-            raise InputError("expected ',' or ']' after a row (is the file cut short?)", path, line_at(min(p, n)))
+            raise InputError(
+                "expected ',' or ']' after a row (is the file cut short?)", path, line_at(min(p, n))
+            )
         p = skip(p + 1)
 
 

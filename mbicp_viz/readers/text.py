@@ -14,9 +14,9 @@ import io
 import lzma
 import math
 import zlib
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Iterator
 
 import numpy as np
 
@@ -56,7 +56,9 @@ def open_binary(path: str):
         except InputError:
             raise
         except _CORRUPT as e:
-            raise InputError(f"cannot read: damaged or truncated data ({type(e).__name__}: {e})", str(path)) from None
+            raise InputError(
+                f"cannot read: damaged or truncated data ({type(e).__name__}: {e})", str(path)
+            ) from None
 
 
 @contextmanager
@@ -93,14 +95,19 @@ def lines(stream, path: str) -> Iterator[Line]:
             raise InputError(f"line longer than {MAX_LINE_CHARS} characters", path, number)
         if not text.endswith("\n"):
             if text.strip():
-                raise InputError("the file ends in the middle of this line (cut short?); a complete file ends "
-                                 "with a line break", path, number)
+                raise InputError(
+                    "the file ends in the middle of this line (cut short?); a complete file ends "
+                    "with a line break",
+                    path,
+                    number,
+                )
             return
         yield Line(number, text.rstrip("\r\n"))
 
 
-def token_lines(path: str, comment: str | None = "#") -> Iterator["Fields"]:
-    """``Fields`` of every line of a text file that has tokens once ``comment`` and what follows are cut."""
+def token_lines(path: str, comment: str | None = "#") -> Iterator[Fields]:
+    """``Fields`` of every line of a text file that has tokens once ``comment`` and what follows "
+    "are cut."""
     with open_text(path) as f:
         for line in lines(f, path):
             text = line.text.split(comment, 1)[0] if comment else line.text
@@ -162,8 +169,10 @@ class Fields:
         """``n`` numbers (NaN and inf allowed: readings with no return); ``count_field`` names the
         field that announced ``n``, blamed when fewer fields follow."""
         if self.left < n:
-            raise self.error(f"{n} {name}s announced but only {self.left} fields follow", count_field or name)
-        toks = self.t[self.i:self.i + n]
+            raise self.error(
+                f"{n} {name}s announced but only {self.left} fields follow", count_field or name
+            )
+        toks = self.t[self.i : self.i + n]
         try:
             values = np.array(toks, dtype=float)
         except ValueError:
@@ -179,5 +188,8 @@ class Fields:
 
     def end(self, layout: str) -> None:
         if self.left:
-            raise self.error(f"{self.left} more field(s) than the layout '{layout}' holds: the record's counts "
-                             "disagree with its fields", "fields")
+            raise self.error(
+                f"{self.left} more field(s) than the layout '{layout}' holds: the record's counts "
+                "disagree with its fields",
+                "fields",
+            )

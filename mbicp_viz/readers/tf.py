@@ -30,16 +30,20 @@ class Transform3:
     t: np.ndarray  # (3,)
 
     @staticmethod
-    def from_msg(translation, rotation) -> "Transform3":
+    def from_msg(translation, rotation) -> Transform3:
         x, y, z, w = rotation.x, rotation.y, rotation.z, rotation.w
         n = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
         x, y, z, w = x / n, y / n, z / n, w / n
-        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        R = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+            ]
+        )
         return Transform3(R, np.array([translation.x, translation.y, translation.z], dtype=float))
 
-    def __matmul__(self, other: "Transform3") -> "Transform3":
+    def __matmul__(self, other: Transform3) -> Transform3:
         return Transform3(self.R @ other.R, self.R @ other.t + self.t)
 
     def planar(self) -> Pose2:
@@ -59,15 +63,20 @@ class Mount:
 
 
 def mount_of(T: Transform3, source: str, base_frame: str, where: str) -> Mount:
-    """A planar mount from a 3-D T_base_laser: upright, or upside down (z axis down); refuses a tilt."""
+    """A planar mount from a 3-D T_base_laser: upright, or upside down (z axis down); refuses a "
+    "tilt."""
     z = T.R[2, 2]
     if z >= UPRIGHT_TOLERANCE:
         return Mount(T.planar(), False, source, base_frame)
     if z <= -UPRIGHT_TOLERANCE:  # turned about x: the upright laser frame is this one turned back
         flip = Transform3(np.diag([1.0, -1.0, -1.0]), np.zeros(3))
         return Mount((T @ flip).planar(), True, source, base_frame)
-    raise InputError(f"the laser is tilted {math.degrees(math.acos(max(-1.0, min(1.0, z)))):.1f} deg from the "
-                     "vertical: not a 2-D scanner's mount", where, field="tf")
+    raise InputError(
+        f"the laser is tilted {math.degrees(math.acos(max(-1.0, min(1.0, z)))):.1f} deg from the "
+        "vertical: not a 2-D scanner's mount",
+        where,
+        field="tf",
+    )
 
 
 @dataclass
@@ -93,7 +102,8 @@ class TfTree:
         return out
 
     def chain(self, ancestor: str, frame: str) -> list[tuple[str, str]] | None:
-        """The edges from ``ancestor`` down to ``frame``, or None when ``frame`` does not hang below it."""
+        """The edges from ``ancestor`` down to ``frame``, or None when ``frame`` does not hang "
+        "below it."""
         parents, edges, f = self.parents(), [], frame
         while f != ancestor:
             if f not in parents or len(edges) > 64:
@@ -103,14 +113,16 @@ class TfTree:
         return edges[::-1]
 
     def constant(self, edges: list[tuple[str, str]]) -> Transform3:
-        """The product along ``edges``, each static or its first timed value (a mount published on /tf)."""
+        """The product along ``edges``, each static or its first timed value (a mount published on "
+        "/tf)."""
         T = Transform3(np.eye(3), np.zeros(3))
         for e in edges:
             T = T @ (self.static[e] if e in self.static else self.timed[e][0][1])
         return T
 
     def mount(self, laser_frame: str, where: str) -> Mount | None:
-        """The laser's mount below the first base frame it hangs from (None when it hangs below none)."""
+        """The laser's mount below the first base frame it hangs from (None when it hangs below "
+        "none)."""
         for base in BASE_FRAMES:
             edges = self.chain(base, laser_frame)
             if edges is not None:
@@ -139,7 +151,9 @@ class TfTree:
         return None
 
 
-def interpolate(stamps: np.ndarray, poses: np.ndarray, t: float, max_gap: float = 0.5) -> Pose2 | None:
+def interpolate(
+    stamps: np.ndarray, poses: np.ndarray, t: float, max_gap: float = 0.5
+) -> Pose2 | None:
     """The pose at time ``t`` between the two recorded around it (linear in x, y and the shorter
     way round in theta); None outside the recording or across a gap longer than ``max_gap`` [s]."""
     if len(stamps) == 0 or not stamps[0] <= t <= stamps[-1]:
@@ -153,5 +167,8 @@ def interpolate(stamps: np.ndarray, poses: np.ndarray, t: float, max_gap: float 
         return None
     w = (t - stamps[a]) / dt if dt > 0 else 0.0
     dth = (poses[b, 2] - poses[a, 2] + math.pi) % (2 * math.pi) - math.pi
-    return Pose2(poses[a, 0] + w * (poses[b, 0] - poses[a, 0]), poses[a, 1] + w * (poses[b, 1] - poses[a, 1]),
-                 poses[a, 2] + w * dth)
+    return Pose2(
+        poses[a, 0] + w * (poses[b, 0] - poses[a, 0]),
+        poses[a, 1] + w * (poses[b, 1] - poses[a, 1]),
+        poses[a, 2] + w * dth,
+    )

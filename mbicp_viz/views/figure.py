@@ -40,23 +40,46 @@ def draw_layers(ax, layers: list[scene.Layer], shown: dict[str, scene.Style]) ->
         z = ly.style.order
         if isinstance(ly, scene.Points):
             colors = ly.colors[:, :3] / 255 if ly.colors is not None else [_rgb(ly.style)]
-            # s is the marker's area in points^2: the smallest dots 3 points^2, the others by their radius
+            # s is the marker's area in points^2: the smallest dots 3 points^2, the others by their
+            # radius
             size = float(np.clip(3.0 * (ly.radius / unit) ** 2, 3.0, 40.0))
             ax.scatter(ly.xy[:, 0], ly.xy[:, 1], s=size, c=colors, linewidths=0, zorder=z)
         elif isinstance(ly, scene.Segments):
-            ax.add_collection(LineCollection(np.stack((ly.starts, ly.ends), axis=1), colors=[_rgb(ly.style)],
-                                             linewidths=0.6, zorder=z))
+            ax.add_collection(
+                LineCollection(
+                    np.stack((ly.starts, ly.ends), axis=1),
+                    colors=[_rgb(ly.style)],
+                    linewidths=0.6,
+                    zorder=z,
+                )
+            )
         elif isinstance(ly, scene.Strips):
-            ax.add_collection(LineCollection(ly.strips, colors=[_rgb(ly.style)], linewidths=0.8, zorder=z))
+            ax.add_collection(
+                LineCollection(ly.strips, colors=[_rgb(ly.style)], linewidths=0.8, zorder=z)
+            )
         elif isinstance(ly, scene.Boxes):
             for c, rgba in zip(ly.centers, ly.colors):
-                ax.add_patch(Rectangle(c - ly.half_size, 2 * ly.half_size, 2 * ly.half_size, facecolor=rgba / 255,
-                                       edgecolor=rgba[:3] / 255, linewidth=0.3, zorder=z))
+                ax.add_patch(
+                    Rectangle(
+                        c - ly.half_size,
+                        2 * ly.half_size,
+                        2 * ly.half_size,
+                        facecolor=rgba / 255,
+                        edgecolor=rgba[:3] / 255,
+                        linewidth=0.3,
+                        zorder=z,
+                    )
+                )
         elif isinstance(ly, scene.Frame):
             p, n = ly.pose, ly.length
             for angle, rgb in ((p.theta, scene.AXIS_X), (p.theta + np.pi / 2, scene.AXIS_Y)):
-                ax.annotate("", xy=(p.x + n * np.cos(angle), p.y + n * np.sin(angle)), xytext=(p.x, p.y),
-                            arrowprops=dict(arrowstyle="->", color=_unit(rgb), lw=1.2), zorder=z)
+                ax.annotate(
+                    "",
+                    xy=(p.x + n * np.cos(angle), p.y + n * np.sin(angle)),
+                    xytext=(p.x, p.y),
+                    arrowprops=dict(arrowstyle="->", color=_unit(rgb), lw=1.2),
+                    zorder=z,
+                )
         shown.setdefault(ly.style.label, ly.style)
 
 
@@ -81,8 +104,10 @@ def _legend(fig, shown: dict[str, scene.Style], columns: int) -> float:
     """The legend under the panels; returns the height it takes [inches]."""
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], marker="o", linestyle="", markersize=6, color=_rgb(s), label=s.label)
-               for s in shown.values()]
+    handles = [
+        Line2D([], [], marker="o", linestyle="", markersize=6, color=_rgb(s), label=s.label)
+        for s in shown.values()
+    ]
     if handles:
         fig.legend(handles=handles, loc="lower center", ncol=columns, fontsize=7, frameon=False)
     return 0.2 + 0.16 * -(-len(handles) // columns)
@@ -99,10 +124,15 @@ class Plot:
     y_values: bool = True  # False: the heights are relative (no tick values)
 
 
-def scene_png(panels: list[tuple[str, list[scene.Layer]]], side: Plot | None, title: str,
-              window: tuple[float, float, float, float] | None = None) -> bytes:
+def scene_png(
+    panels: list[tuple[str, list[scene.Layer]]],
+    side: Plot | None,
+    title: str,
+    window: tuple[float, float, float, float] | None = None,
+) -> bytes:
     """PNG bytes: one scan-plane panel per (title, layers), side by side with the same window
-    (``window``, else all they draw), and optionally a plot beside them; one legend for everything."""
+    (``window``, else all they draw), and optionally a plot beside them; one legend for
+    everything."""
     plt = pyplot()
     n = len(panels) + (side is not None)
     fig, axes = plt.subplots(1, n, figsize=(4.6 * n, 4.8), squeeze=False)

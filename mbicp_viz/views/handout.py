@@ -17,17 +17,36 @@ def side_plot(sr: StepRun, iteration: int | None = None) -> Plot | None:
     distances; at ``iteration`` (default: the step's)."""
     if "distances" in sr.facts:
         d = sr.facts["distances"]
-        return Plot(f"paper 000 Fig. 9: {d['n']} distances", "distance (the paper's unit)", "", sr.distance_layers(),
-                    y_values=False)
+        return Plot(
+            f"paper 000 Fig. 9: {d['n']} distances",
+            "distance (the paper's unit)",
+            "",
+            sr.distance_layers(),
+            y_values=False,
+        )
     k = sr.iteration if iteration is None else iteration
     for run in sr.runs:
         ranges = [ly for ly in sr.layers(run, k) if ly.path.startswith(f"{scene.POLAR}/ranges/")]
         if ranges:
-            return Plot(f"{run.name}: ranges per bearing at iteration {k}", "bearing [deg]", "range [dm]", ranges)
-    hist = [ly for ly in sr.layers(sr.runs[0], k) if ly.path.startswith(f"{scene.TEACH}/histogram/")] if sr.runs else []
+            return Plot(
+                f"{run.name}: ranges per bearing at iteration {k}",
+                "bearing [deg]",
+                "range [dm]",
+                ranges,
+            )
+    hist = (
+        [ly for ly in sr.layers(sr.runs[0], k) if ly.path.startswith(f"{scene.TEACH}/histogram/")]
+        if sr.runs
+        else []
+    )
     if hist:
-        return Plot(f"{sr.runs[0].name}: pair distances at iteration {k}", "pair distance [m]",
-                    "pairs per bin (relative heights)", hist, y_values=False)
+        return Plot(
+            f"{sr.runs[0].name}: pair distances at iteration {k}",
+            "pair distance [m]",
+            "pairs per bin (relative heights)",
+            hist,
+            y_values=False,
+        )
     return None
 
 
@@ -37,18 +56,28 @@ def panel_title(sr: StepRun, name: str, n: int) -> str:
 
 
 def step_png(sr: StepRun) -> bytes:
-    panels = [(panel_title(sr, r.name, len(r.iterations)), sr.layers(r, shown_only=True)) for r in sr.runs]
-    return scene_png(panels, side_plot(sr), f"Step {sr.step.number}: {sr.step.title}", sr.step.window)
+    panels = [
+        (panel_title(sr, r.name, len(r.iterations)), sr.layers(r, shown_only=True)) for r in sr.runs
+    ]
+    return scene_png(
+        panels, side_plot(sr), f"Step {sr.step.number}: {sr.step.title}", sr.step.window
+    )
 
 
 def handout_markdown(step_runs: list[StepRun], pngs: list[str]) -> str:
-    parts = ["# MbICP, step by step\n",
-             "A guided lesson from mbicp-viz (`mbicp-viz lesson`): each step is a real scan pair, a matcher and "
-             "its parameters; every number in the texts comes from the step's own run.\n"]
+    parts = [
+        "# MbICP, step by step\n",
+        "A guided lesson from mbicp-viz (`mbicp-viz lesson`): each step is a real scan pair, a "
+        "matcher and "
+        "its parameters; every number in the texts comes from the step's own run.\n",
+    ]
     for sr, png in zip(step_runs, pngs):
         s = sr.step
-        parts.append(f"## Step {s.number}: {s.title}\n\n![Step {s.number}]({png})\n\n{sr.text}\n\n"
-                     f"**Try:** {sr.try_text}\n\n*Data: `{s.path.name}`; matchers: {', '.join(r.name for r in sr.runs)}.*\n")
+        parts.append(
+            f"## Step {s.number}: {s.title}\n\n![Step {s.number}]({png})\n\n{sr.text}\n\n"
+            f"**Try:** {sr.try_text}\n\n*Data: `{s.path.name}`; matchers: "
+            f"{', '.join(r.name for r in sr.runs)}.*\n"
+        )
     return "\n".join(parts)
 
 

@@ -18,8 +18,19 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from mbicp_viz.core import (Event, FinishEvent, IterationEvent, MatchResult, Observer, Params, Pose2, Scan,
-                            StartEvent, broadcast, match)
+from mbicp_viz.core import (
+    Event,
+    FinishEvent,
+    IterationEvent,
+    MatchResult,
+    Observer,
+    Params,
+    Pose2,
+    Scan,
+    StartEvent,
+    broadcast,
+    match,
+)
 from mbicp_viz.errors import InputError
 
 from . import scene
@@ -36,7 +47,9 @@ def new_stream(recording_id: str, live: bool = False) -> rr.RecordingStream:
     (``rerun rrd compare`` compares chunks). A live viewer gets rerun's default, timely batching.
     """
     batching = rr.ChunkBatcherConfig.DEFAULT() if live else rr.ChunkBatcherConfig.NEVER()
-    return rr.RecordingStream(APP_ID, recording_id=recording_id, send_properties=False, batcher_config=batching)
+    return rr.RecordingStream(
+        APP_ID, recording_id=recording_id, send_properties=False, batcher_config=batching
+    )
 
 
 # The debugger's light background: black correspondences (paper 000's colour) stay visible.
@@ -44,10 +57,12 @@ BACKGROUND = (250, 250, 250)
 
 
 def y_up_view(space: str, name: str) -> rrb.Spatial2DView:
-    """A 2-D view of the entity ``space`` (logged under ``log_y_up``), y pointing up, on the debugger's
-    light background."""
+    """A 2-D view of the entity ``space`` (logged under ``log_y_up``), y pointing up, on the
+    debugger's light background."""
     parent = space.rsplit("/", 1)[0] or "/"
-    return rrb.Spatial2DView(origin=parent, contents=f"{space}/**", name=name, background=BACKGROUND)
+    return rrb.Spatial2DView(
+        origin=parent, contents=f"{space}/**", name=name, background=BACKGROUND
+    )
 
 
 def log_y_up(stream: rr.RecordingStream, space: str) -> None:
@@ -64,74 +79,164 @@ def _spaces(root: str, teaching: bool, polar: bool) -> list[str]:
     return out
 
 
-def blueprint(roots: list[str], teaching: bool = False, about: bool = False, polar: set[str] = frozenset()
-              ) -> rrb.Blueprint:
+def blueprint(
+    roots: list[str], teaching: bool = False, about: bool = False, polar: set[str] = frozenset()
+) -> rrb.Blueprint:
     """Scans side by side, error and threshold plots, the text log; time panel on ``iteration``.
 
     Polar matchers add their cost-per-shift and range-per-bearing plots (x in degrees)."""
     scans = [y_up_view(f"/{r}/{scene.SCANS}", f"{r}: scans (reference frame, m)") for r in roots]
-    polar_views = [rrb.Tabs(y_up_view(f"/{r}/{scene.POLAR}/cost", f"{r}: cost [cm] per shift [deg]"),
-                            y_up_view(f"/{r}/{scene.POLAR}/ranges", f"{r}: ranges [dm] per bearing [deg]"))
-                   for r in roots if r in polar]
+    polar_views = [
+        rrb.Tabs(
+            y_up_view(f"/{r}/{scene.POLAR}/cost", f"{r}: cost [cm] per shift [deg]"),
+            y_up_view(f"/{r}/{scene.POLAR}/ranges", f"{r}: ranges [dm] per bearing [deg]"),
+        )
+        for r in roots
+        if r in polar
+    ]
     log = rrb.TextLogView(origin="/", contents=[f"/{r}/{scene.LOG}" for r in roots], name="log")
-    side = [rrb.TimeSeriesView(origin="/", contents=[f"/{r}/{scene.PLOTS}/**" for r in roots],
-                               name="error [m²] and threshold [m] per iteration"),
-            rrb.Tabs(rrb.TextDocumentView(origin=f"/{ABOUT}", name="what to look at"), log) if about else log]
+    side = [
+        rrb.TimeSeriesView(
+            origin="/",
+            contents=[f"/{r}/{scene.PLOTS}/**" for r in roots],
+            name="error [m²] and threshold [m] per iteration",
+        ),
+        rrb.Tabs(rrb.TextDocumentView(origin=f"/{ABOUT}", name="what to look at"), log)
+        if about
+        else log,
+    ]
     if teaching:
-        side.insert(1, rrb.Tabs(*[y_up_view(f"/{r}/{scene.TEACH}/histogram", f"{r}: pair distances [m]")
-                                  for r in roots]))
+        side.insert(
+            1,
+            rrb.Tabs(
+                *[
+                    y_up_view(f"/{r}/{scene.TEACH}/histogram", f"{r}: pair distances [m]")
+                    for r in roots
+                ]
+            ),
+        )
     main = scans[0] if len(scans) == 1 else rrb.Horizontal(*scans)
-    return rrb.Blueprint(rrb.Horizontal(main, rrb.Vertical(*polar_views, *side), column_shares=[3, 2]),
-                         rrb.TimePanel(timeline="iteration", expanded=True), collapse_panels=True)
+    return rrb.Blueprint(
+        rrb.Horizontal(main, rrb.Vertical(*polar_views, *side), column_shares=[3, 2]),
+        rrb.TimePanel(timeline="iteration", expanded=True),
+        collapse_panels=True,
+    )
 
 
 def _rgb(c):
     return np.asarray(c, dtype=np.uint8)
 
 
-def log_layer(stream: rr.RecordingStream, root: str, layer: scene.Layer, static: bool = False) -> None:
+def log_layer(
+    stream: rr.RecordingStream, root: str, layer: scene.Layer, static: bool = False
+) -> None:
     """One layer as rerun archetypes under ``root``; a layer type it does not know is an error."""
     path = f"{root}/{layer.path}"
     if isinstance(layer, scene.Points):
         colors = layer.colors if layer.colors is not None else _rgb(layer.style.color)
-        stream.log(path, rr.Points2D(layer.xy, colors=colors, radii=layer.radius, labels=layer.labels,
-                                     show_labels=False if layer.labels else None, draw_order=layer.style.order),
-                   static=static)
+        stream.log(
+            path,
+            rr.Points2D(
+                layer.xy,
+                colors=colors,
+                radii=layer.radius,
+                labels=layer.labels,
+                show_labels=False if layer.labels else None,
+                draw_order=layer.style.order,
+            ),
+            static=static,
+        )
     elif isinstance(layer, scene.Segments):
-        strips = np.stack((layer.starts, layer.ends), axis=1) if len(layer.starts) else np.zeros((0, 2, 2))
-        stream.log(path, rr.LineStrips2D(strips, colors=_rgb(layer.style.color), radii=layer.width,
-                                         draw_order=layer.style.order), static=static)
+        strips = (
+            np.stack((layer.starts, layer.ends), axis=1)
+            if len(layer.starts)
+            else np.zeros((0, 2, 2))
+        )
+        stream.log(
+            path,
+            rr.LineStrips2D(
+                strips,
+                colors=_rgb(layer.style.color),
+                radii=layer.width,
+                draw_order=layer.style.order,
+            ),
+            static=static,
+        )
     elif isinstance(layer, scene.Strips):
-        stream.log(path, rr.LineStrips2D(layer.strips, colors=_rgb(layer.style.color), radii=layer.width,
-                                         draw_order=layer.style.order), static=static)
+        stream.log(
+            path,
+            rr.LineStrips2D(
+                layer.strips,
+                colors=_rgb(layer.style.color),
+                radii=layer.width,
+                draw_order=layer.style.order,
+            ),
+            static=static,
+        )
     elif isinstance(layer, scene.Boxes):
-        stream.log(path, rr.Boxes2D(centers=layer.centers, half_sizes=np.full((len(layer.centers), 2), layer.half_size),
-                                    colors=layer.colors, labels=layer.labels, show_labels=False, radii=0.002,
-                                    draw_order=layer.style.order), static=static)
+        stream.log(
+            path,
+            rr.Boxes2D(
+                centers=layer.centers,
+                half_sizes=np.full((len(layer.centers), 2), layer.half_size),
+                colors=layer.colors,
+                labels=layer.labels,
+                show_labels=False,
+                radii=0.002,
+                draw_order=layer.style.order,
+            ),
+            static=static,
+        )
     elif isinstance(layer, scene.Scalar):
         stream.log(path, rr.Scalars(layer.value), static=static)
     elif isinstance(layer, scene.Text):
         stream.log(path, rr.TextLog(layer.text, level=layer.level), static=static)
     elif isinstance(layer, scene.Frame):
         p = layer.pose
-        stream.log(path, rr.Transform3D(translation=[p.x, p.y, 0.0],
-                                        rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=p.theta)),
-                   static=static)
+        stream.log(
+            path,
+            rr.Transform3D(
+                translation=[p.x, p.y, 0.0],
+                rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=p.theta),
+            ),
+            static=static,
+        )
         # the frame's axes as the debugger draws them: x red, y green (the legend says so)
-        stream.log(f"{path}/heading", rr.Arrows2D(origins=[[0.0, 0.0]] * 2, vectors=[[layer.length, 0.0],
-                                                                                     [0.0, layer.length]],
-                                                  colors=[scene.AXIS_X, scene.AXIS_Y], radii=0.025 * layer.length,
-                                                  draw_order=layer.style.order), static=static)
+        stream.log(
+            f"{path}/heading",
+            rr.Arrows2D(
+                origins=[[0.0, 0.0]] * 2,
+                vectors=[[layer.length, 0.0], [0.0, layer.length]],
+                colors=[scene.AXIS_X, scene.AXIS_Y],
+                radii=0.025 * layer.length,
+                draw_order=layer.style.order,
+            ),
+            static=static,
+        )
     else:
-        raise TypeError(f"the rerun front end cannot draw a {type(layer).__name__} layer ({layer.path})")
+        raise TypeError(
+            f"the rerun front end cannot draw a {type(layer).__name__} layer ({layer.path})"
+        )
 
 
 class RerunObserver:
     """An observer that writes one run under ``root`` of a rerun stream as it happens."""
 
-    def __init__(self, stream: rr.RecordingStream, root: str, teaching: bool = False, truth: Pose2 | None = None,
-                 odometry: Pose2 | None = None):
-        self.stream, self.root, self.teaching, self.truth, self.odometry = stream, root, teaching, truth, odometry
+    def __init__(
+        self,
+        stream: rr.RecordingStream,
+        root: str,
+        teaching: bool = False,
+        truth: Pose2 | None = None,
+        odometry: Pose2 | None = None,
+    ):
+        self.stream, self.root, self.teaching, self.truth, self.odometry = (
+            stream,
+            root,
+            teaching,
+            truth,
+            odometry,
+        )
         self.start: StartEvent | None = None
         self.last_iteration = 0
         self.series: set[str] = set()  # plot paths whose line style is logged
@@ -167,8 +272,15 @@ class RerunObserver:
     def _series_style(self, layer: scene.Scalar) -> None:
         """A plot line's colour and legend name, logged with its first value."""
         self.series.add(layer.path)
-        self.stream.log(f"{self.root}/{layer.path}", rr.SeriesLines(
-            colors=_rgb(layer.style.color), names=f"{self.root}: {layer.style.label}", widths=2.0), static=True)
+        self.stream.log(
+            f"{self.root}/{layer.path}",
+            rr.SeriesLines(
+                colors=_rgb(layer.style.color),
+                names=f"{self.root}: {layer.style.label}",
+                widths=2.0,
+            ),
+            static=True,
+        )
 
 
 @dataclass(frozen=True)
@@ -184,10 +296,17 @@ class Run:
     truth: Pose2 | None = None
 
 
-def record(runs: list[Run], path: str | None = None, connect: str | None = None, teaching: bool = False,
-           recording_id: str = "mbicp-viz", extra_observer: Observer | None = None,
-           about: str | None = None) -> list[MatchResult]:
-    """Match every run with a rerun observer attached; write ``path`` (.rrd) and/or stream to ``connect``.
+def record(
+    runs: list[Run],
+    path: str | None = None,
+    connect: str | None = None,
+    teaching: bool = False,
+    recording_id: str = "mbicp-viz",
+    extra_observer: Observer | None = None,
+    about: str | None = None,
+) -> list[MatchResult]:
+    """Match every run with a rerun observer attached; write ``path`` (.rrd) and/or stream to
+    ``connect``.
 
     ``about`` (Markdown) is stored as a document beside the runs: what the recording shows.
     """
@@ -206,8 +325,15 @@ def record(runs: list[Run], path: str | None = None, connect: str | None = None,
     results = []
     for r in runs:
         obs = RerunObserver(stream, r.root, teaching, r.truth, stored_odometry(r.ref, r.obj))
-        results.append(match(r.ref, r.obj, r.guess, r.params, obs if extra_observer is None
-                             else broadcast(obs, extra_observer)))
+        results.append(
+            match(
+                r.ref,
+                r.obj,
+                r.guess,
+                r.params,
+                obs if extra_observer is None else broadcast(obs, extra_observer),
+            )
+        )
     stream.flush()
     stream.disconnect()
     return results
@@ -227,23 +353,42 @@ def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
     exe = str(beside) if beside.exists() else shutil.which("rerun")
     if exe is None:
         raise InputError("the rerun viewer command is not installed (pip install rerun-sdk)")
-    cmd = [exe, "--serve-web", "--bind", host, "--web-viewer-port", str(port), "--port", str(port + 1), path]
+    cmd = [
+        exe,
+        "--serve-web",
+        "--bind",
+        host,
+        "--web-viewer-port",
+        str(port),
+        "--port",
+        str(port + 1),
+        path,
+    ]
     return subprocess.call(cmd)
 
 
-def record_sequence(log, rows: list[dict], path: str, recording_id: str = "mbicp-viz/sequence") -> None:
-    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, per-pair log."""
+def record_sequence(
+    log, rows: list[dict], path: str, recording_id: str = "mbicp-viz/sequence"
+) -> None:
+    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, "
+    "per-pair log."""
     from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
 
     stream = new_stream(recording_id)
     root = "sequence"
     space = f"/{root}/{scene.SEQUENCE}"
     bp = rrb.Blueprint(
-        rrb.Horizontal(y_up_view(space, "trajectory and map (first scan's frame, m)"),
-                       rrb.Vertical(rrb.TimeSeriesView(origin=f"/{root}/{scene.PLOTS}", name="iterations, time [ms]"),
-                                    rrb.TextLogView(origin=f"/{root}/{scene.LOG}", name="pairs")),
-                       column_shares=[3, 2]),
-        rrb.TimePanel(timeline="scan", expanded=True), collapse_panels=True)
+        rrb.Horizontal(
+            y_up_view(space, "trajectory and map (first scan's frame, m)"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin=f"/{root}/{scene.PLOTS}", name="iterations, time [ms]"),
+                rrb.TextLogView(origin=f"/{root}/{scene.LOG}", name="pairs"),
+            ),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(timeline="scan", expanded=True),
+        collapse_panels=True,
+    )
     stream.save(path, default_blueprint=bp)
     log_y_up(stream, space)
     poses, stored = accumulate(rows), log_poses(log, rows)
@@ -252,7 +397,9 @@ def record_sequence(log, rows: list[dict], path: str, recording_id: str = "mbicp
         stream.set_time("scan", sequence=k)
         traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
         stored_traj = None if stored is None else np.array([[p.x, p.y] for p in stored[: n + 1]])
-        for layer in scene.sequence_layers(k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k)):
+        for layer in scene.sequence_layers(
+            k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k)
+        ):
             log_layer(stream, root, layer)
     stream.flush()
     stream.disconnect()
@@ -266,23 +413,40 @@ def record_basin(atlas, path: str) -> None:
 
     stream = new_stream("mbicp-viz/basin")
     names = list(atlas.outcome)
-    stream.save(path, default_blueprint=rrb.Blueprint(
-        rrb.Horizontal(*[y_up_view(f"/basin/{n}", f"{n}: outcome per initial offset (dx, dy) [m]") for n in names]),
-        rrb.TimePanel(timeline="theta_offset", expanded=True), collapse_panels=True))
+    stream.save(
+        path,
+        default_blueprint=rrb.Blueprint(
+            rrb.Horizontal(
+                *[
+                    y_up_view(f"/basin/{n}", f"{n}: outcome per initial offset (dx, dy) [m]")
+                    for n in names
+                ]
+            ),
+            rrb.TimePanel(timeline="theta_offset", expanded=True),
+            collapse_panels=True,
+        ),
+    )
     for n in names:
         log_y_up(stream, f"basin/{n}")
     for t, th in enumerate(atlas.thetas):
         stream.set_time("theta_offset", sequence=t)
         for n in names:
-            for layer in scene.basin_layers(n, atlas.offsets_xy, atlas.outcome[n][t], OUTCOME_NAMES, OUTCOME_COLORS,
-                                            math.degrees(th)):
+            for layer in scene.basin_layers(
+                n,
+                atlas.offsets_xy,
+                atlas.outcome[n][t],
+                OUTCOME_NAMES,
+                OUTCOME_COLORS,
+                math.degrees(th),
+            ):
                 log_layer(stream, "", layer)
     stream.flush()
     stream.disconnect()
 
 
 def time_recordings(log, params: Params, limit: int | None, repeat: int, teaching: bool):
-    """Time for matching and writing each consecutive pair to an .rrd, and the file sizes [bytes]."""
+    """Time for matching and writing each consecutive pair to an .rrd, and the file sizes "
+    "[bytes]."""
     import os
     import tempfile
     import time

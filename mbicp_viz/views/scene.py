@@ -1,4 +1,5 @@
-"""Events -> drawable layers: the one scene mapping both front ends (rerun, the viser debugger) draw.
+"""Events -> drawable layers: the one scene mapping both front ends (rerun, the viser debugger)
+draw.
 
 A layer is plain data (points, segments, strips, boxes, a pose, a scalar, a text) under a path,
 and every drawable layer carries its ``Style``: the legend entry, colour, draw order and whether
@@ -13,7 +14,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Union
 
 import numpy as np
 
@@ -35,7 +35,8 @@ class Style:
 
 # Every drawable scene layer has one of these; the legend lists them.
 REFERENCE = Style("reference scan", (220, 40, 40), 2.0)
-TRUTH = Style("object scan at the known answer", (0, 190, 190), 1.0)  # larger, under the object: seen where it differs
+# larger, under the object: seen where it differs
+TRUTH = Style("object scan at the known answer", (0, 190, 190), 1.0)
 INITIAL = Style("object scan at the initial guess", (165, 165, 165), 0.5)
 ODOMETRY = Style("object scan at the odometry", (150, 210, 40), 0.8)
 OBJECT = Style("object scan where the pairs were made", (40, 90, 220), 3.0)
@@ -50,13 +51,38 @@ ISO_EUCLID = Style("Euclidean circle through the same target", (150, 130, 0), 4.
 CIRCLE = Style("PMWN projected circle and its centre", (210, 0, 130), 4.2)
 HELD = Style("held direction: left to the guess, the surfaces barely fix it", (120, 0, 60), 4.6)
 ESTIMATE = Style("estimate: object frame (x red, y green)", (40, 90, 220), 5.0)
-BEAMS = Style("reference beams: bearing and range of every few readings", (200, 200, 200), 0.2, on=False)
-INVALID = Style("reference bearings with no valid reading (short rays)", (190, 150, 230), 0.3, on=False)
+BEAMS = Style(
+    "reference beams: bearing and range of every few readings", (200, 200, 200), 0.2, on=False
+)
+INVALID = Style(
+    "reference bearings with no valid reading (short rays)", (190, 150, 230), 0.3, on=False
+)
 SENSOR = Style("reference sensor frame (x red: bearing 0, y green)", (60, 60, 60), 5.0, on=False)
 RAW = Style("scans as measured, before the motion correction (--deskew)", (240, 110, 190), 1.5)
 SEAM = Style("360° seam: the first and the last beam of the reference", (0, 0, 0), 4.8)
-STYLES = (REFERENCE, TRUTH, INITIAL, ODOMETRY, OBJECT, OBJECT_AFTER, HIDDEN, PAIR_POINT, PAIR_INTERPOLATED, PAIR_REJECTED,
-          GRID, ISO_METRIC, ISO_EUCLID, CIRCLE, HELD, ESTIMATE, BEAMS, INVALID, SENSOR, RAW, SEAM)
+STYLES = (
+    REFERENCE,
+    TRUTH,
+    INITIAL,
+    ODOMETRY,
+    OBJECT,
+    OBJECT_AFTER,
+    HIDDEN,
+    PAIR_POINT,
+    PAIR_INTERPOLATED,
+    PAIR_REJECTED,
+    GRID,
+    ISO_METRIC,
+    ISO_EUCLID,
+    CIRCLE,
+    HELD,
+    ESTIMATE,
+    BEAMS,
+    INVALID,
+    SENSOR,
+    RAW,
+    SEAM,
+)
 
 # Plot series: the legend of the plots.
 ERROR = Style("mean squared residual [m²]", (90, 90, 90))
@@ -68,15 +94,23 @@ METRIC_WEIGHT = Style("PMWN metric weight λ [m/rad]", (210, 0, 130))
 def threshold_style(params) -> Style:
     """What a matcher's per-iteration threshold (``IterationEvent.threshold``) is, in its plots."""
     if getattr(params, "mad_rejection", False):
-        return replace(THRESHOLD, label=f"MAD threshold: median + {params.mad_k:g} MAD, at least "
-                                        f"{params.mad_floor:g} m [m]")
+        return replace(
+            THRESHOLD,
+            label=f"MAD threshold: median + {params.mad_k:g} MAD, at least "
+            f"{params.mad_floor:g} m [m]",
+        )
     if hasattr(params, "max_error"):
         return replace(THRESHOLD, label="max_error: residuals beyond are not used [m]")
     if hasattr(params, "outliers_maxPerc"):
-        return replace(THRESHOLD, label=f"trim limit: the {100 * params.outliers_maxPerc:g} % quantile or "
-                                        f"{params.outliers_adaptive_mult:g} x the {100 * params.outliers_adaptive_order:g} % "
-                                        "quantile of the segment distances, the smaller [m]")
-    return replace(THRESHOLD, label=f"trim cut: the best {100 * params.filter:g} % of the pairs kept [m]")
+        return replace(
+            THRESHOLD,
+            label=f"trim limit: the {100 * params.outliers_maxPerc:g} % quantile or "
+            f"{params.outliers_adaptive_mult:g} x the {100 * params.outliers_adaptive_order:g} % "
+            "quantile of the segment distances, the smaller [m]",
+        )
+    return replace(
+        THRESHOLD, label=f"trim cut: the best {100 * params.filter:g} % of the pairs kept [m]"
+    )
 
 
 def hard_cut(params) -> tuple[Style, float] | None:
@@ -85,13 +119,24 @@ def hard_cut(params) -> tuple[Style, float] | None:
     if hasattr(params, "Br"):
         return replace(HARD_CUT, label=f"Br: radial window, {params.Br:g} m"), params.Br
     if hasattr(params, "max_correspondence_dist"):
-        return (replace(HARD_CUT, label=f"max_correspondence_dist, {params.max_correspondence_dist:g} m"),
-                params.max_correspondence_dist)
+        return (
+            replace(
+                HARD_CUT, label=f"max_correspondence_dist, {params.max_correspondence_dist:g} m"
+            ),
+            params.max_correspondence_dist,
+        )
     return None
 
+
 # Compare mode: one colour per matcher, none of them a colour of the layers above.
-RUN_COLORS: dict[str, RGB] = {"icp": (230, 159, 0), "mbicp": (0, 114, 178), "improved": (204, 80, 170),
-                              "psm": (0, 158, 115), "pmwn": (86, 180, 233), "plicp": (120, 80, 30)}
+RUN_COLORS: dict[str, RGB] = {
+    "icp": (230, 159, 0),
+    "mbicp": (0, 114, 178),
+    "improved": (204, 80, 170),
+    "psm": (0, 158, 115),
+    "pmwn": (86, 180, 233),
+    "plicp": (120, 80, 30),
+}
 
 
 def run_style(name: str) -> Style:
@@ -138,7 +183,11 @@ class Boxes:
     labels: list[str]
 
 
-AXIS_X, AXIS_Y = (220, 30, 30), (30, 160, 30)  # a drawn frame: x axis red, y axis green, as viser draws it
+# a drawn frame: x axis red, y axis green, as viser draws it
+AXIS_X, AXIS_Y = (
+    (220, 30, 30),
+    (30, 160, 30),
+)
 
 
 @dataclass(frozen=True)
@@ -165,8 +214,15 @@ class Text:
     level: str = "INFO"
 
 
-Layer = Union[Points, Segments, Strips, Boxes, Frame, Scalar, Text]
-DRAWN = (Points, Segments, Strips, Boxes, Frame)  # layers of the 2-D scene (the rest are plots and logs)
+Layer = Points | Segments | Strips | Boxes | Frame | Scalar | Text
+# layers of the 2-D scene (the rest are plots and logs)
+DRAWN = (
+    Points,
+    Segments,
+    Strips,
+    Boxes,
+    Frame,
+)
 
 # Paths, relative to a run's root; the front ends and the blueprints rely on them.
 SCANS = "scene"
@@ -187,33 +243,50 @@ def scene_scale(points: np.ndarray) -> float:
 
 
 def ratio_colors(ratio: np.ndarray) -> np.ndarray:
-    """RGBA cell colour by sampling ratio: faint grey for thinned near cells, blue for kept far ones."""
+    """RGBA cell colour by sampling ratio: faint grey for thinned near cells, blue for kept far "
+    "ones."""
     r = np.clip(ratio, 0.0, 1.0)[:, None]
     rgb = (1 - r) * np.array([200, 200, 200]) + r * np.array(GRID.color)
     alpha = 40 + 100 * r
     return np.round(np.hstack((rgb, alpha))).astype(np.uint8)
 
 
-def static_layers(start: StartEvent, truth: Pose2 | None = None, odometry: Pose2 | None = None) -> list[Layer]:
+def static_layers(
+    start: StartEvent, truth: Pose2 | None = None, odometry: Pose2 | None = None
+) -> list[Layer]:
     """What every iteration shows: the reference scan, the object scan at the initial guess, the
     resampling grid (improved MbICP), and the object scan at the known answer and at the log's
     odometry when there are some (the odometry unless it is the guess itself)."""
     s = scene_scale(start.ref_points)
     layers: list[Layer] = [
         Points(f"{SCANS}/reference", start.ref_points, REFERENCE, 0.02 * s),
-        Points(f"{SCANS}/object_initial", start.initial_guess.apply(start.obj_points), INITIAL, 0.01 * s),
+        Points(
+            f"{SCANS}/object_initial",
+            start.initial_guess.apply(start.obj_points),
+            INITIAL,
+            0.01 * s,
+        ),
     ]
     if truth is not None:
         layers.append(Points(f"{SCANS}/truth", truth.apply(start.obj_points), TRUTH, 0.03 * s))
     if odometry is not None and odometry != start.initial_guess:
-        layers.append(Points(f"{SCANS}/odometry", odometry.apply(start.obj_points), ODOMETRY, 0.02 * s))
+        layers.append(
+            Points(f"{SCANS}/odometry", odometry.apply(start.obj_points), ODOMETRY, 0.02 * s)
+        )
     rs = start.resampling
     if rs is not None:
         # the grid lives in the object sensor frame: draw it where the initial guess puts it
         centers = rs.origin + (rs.cells[:, ::-1] + 0.5) * rs.cell_size
-        layers.append(Boxes(f"{SCANS}/resampling_grid", start.initial_guess.apply(centers), rs.cell_size / 2, GRID,
-                            ratio_colors(rs.ratio),
-                            [f"eta={e:.2f} kept {k}/{n}" for e, k, n in zip(rs.ratio, rs.kept_count, rs.count)]))
+        layers.append(
+            Boxes(
+                f"{SCANS}/resampling_grid",
+                start.initial_guess.apply(centers),
+                rs.cell_size / 2,
+                GRID,
+                ratio_colors(rs.ratio),
+                [f"eta={e:.2f} kept {k}/{n}" for e, k, n in zip(rs.ratio, rs.kept_count, rs.count)],
+            )
+        )
     return layers
 
 
@@ -226,19 +299,25 @@ def beam_layers(scan: Scan, most: int = 90) -> list[Layer]:
     every = max(1, -(-len(pts) // most))
     bad = scan.bearings[~scan.valid]
     ends = 1.0 * s * np.column_stack((np.cos(bad), np.sin(bad)))
-    return [Segments(f"{SCANS}/beams/valid", np.zeros((len(pts[::every]), 2)), pts[::every], BEAMS, 0.003 * s),
-            Segments(f"{SCANS}/beams/invalid", np.zeros((len(bad), 2)), ends, INVALID, 0.004 * s),
-            Frame(f"{SCANS}/sensor", Pose2(), SENSOR, length=0.5 * s)]
+    return [
+        Segments(
+            f"{SCANS}/beams/valid", np.zeros((len(pts[::every]), 2)), pts[::every], BEAMS, 0.003 * s
+        ),
+        Segments(f"{SCANS}/beams/invalid", np.zeros((len(bad), 2)), ends, INVALID, 0.004 * s),
+        Frame(f"{SCANS}/sensor", Pose2(), SENSOR, length=0.5 * s),
+    ]
 
 
 def deskew_layers(ref: Scan, obj: Scan, pose: Pose2) -> list[Layer]:
-    """Scans corrected for motion (``Scan.raw``): both as measured (the object at ``pose``), and for a
-    360° reference the seam between its first and last beams, which the motion opens."""
+    """Scans corrected for motion (``Scan.raw``): both as measured (the object at ``pose``), and
+    for a 360° reference the seam between its first and last beams, which the motion opens."""
     s = scene_scale(ref.points())
     layers: list[Layer] = []
     if ref.raw is not None or obj.raw is not None:
-        measured = [ref.raw.points() if ref.raw is not None else np.zeros((0, 2)),
-                    pose.apply(obj.raw.points()) if obj.raw is not None else np.zeros((0, 2))]
+        measured = [
+            ref.raw.points() if ref.raw is not None else np.zeros((0, 2)),
+            pose.apply(obj.raw.points()) if obj.raw is not None else np.zeros((0, 2)),
+        ]
         layers.append(Points(f"{SCANS}/as_measured", np.vstack(measured), RAW, 0.012 * s))
     if ref.is_full_circle() and ref.n_valid >= 2:
         first_last = ref.points()[[0, -1]]
@@ -249,13 +328,21 @@ def deskew_layers(ref: Scan, obj: Scan, pose: Pose2) -> list[Layer]:
 def initial_layers(start: StartEvent) -> list[Layer]:
     """Iteration 0: the object scan at the initial guess, before any pairing."""
     s = scene_scale(start.ref_points)
-    return [Points(f"{SCANS}/object", start.initial_guess.apply(start.obj_points[start.used]), OBJECT, 0.02 * s),
-            Frame(f"{SCANS}/estimate", start.initial_guess, length=0.4 * s),
-            Text(LOG, f"{start.algorithm}: initial guess {start.initial_guess}")]
+    return [
+        Points(
+            f"{SCANS}/object",
+            start.initial_guess.apply(start.obj_points[start.used]),
+            OBJECT,
+            0.02 * s,
+        ),
+        Frame(f"{SCANS}/estimate", start.initial_guess, length=0.4 * s),
+        Text(LOG, f"{start.algorithm}: initial guess {start.initial_guess}"),
+    ]
 
 
 def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
-    """Layers of one iteration: where the object was, its pairs by kind and status, where it went."""
+    """Layers of one iteration: where the object was, its pairs by kind and status, where it "
+    "went."""
     from .text import iteration_text
 
     s = scene_scale(start.ref_points)
@@ -266,11 +353,22 @@ def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
     inter = kept & (p.kind == PairKind.INTERPOLATED)
     layers: list[Layer] = [
         Points(f"{SCANS}/object", ev.moved_points, OBJECT, 0.02 * s),
-        Points(f"{SCANS}/object_after", ev.estimate_after.apply(start.obj_points[start.used]), OBJECT_AFTER,
-               0.012 * s),
-        Points(f"{SCANS}/hidden", ev.estimate_before.apply(start.obj_points[ev.hidden]), HIDDEN, 0.015 * s),
+        Points(
+            f"{SCANS}/object_after",
+            ev.estimate_after.apply(start.obj_points[start.used]),
+            OBJECT_AFTER,
+            0.012 * s,
+        ),
+        Points(
+            f"{SCANS}/hidden",
+            ev.estimate_before.apply(start.obj_points[ev.hidden]),
+            HIDDEN,
+            0.015 * s,
+        ),
         Segments(f"{SCANS}/pairs/point", src[point], p.target[point], PAIR_POINT, 0.004 * s),
-        Segments(f"{SCANS}/pairs/interpolated", src[inter], p.target[inter], PAIR_INTERPOLATED, 0.004 * s),
+        Segments(
+            f"{SCANS}/pairs/interpolated", src[inter], p.target[inter], PAIR_INTERPOLATED, 0.004 * s
+        ),
         Segments(f"{SCANS}/pairs/rejected", src[~kept], p.target[~kept], PAIR_REJECTED, 0.003 * s),
         Points(f"{SCANS}/interpolated_targets", p.target[inter], PAIR_INTERPOLATED, 0.012 * s),
         Frame(f"{SCANS}/estimate", ev.estimate_after, length=0.4 * s),
@@ -290,19 +388,31 @@ def held_layer(ev: IterationEvent, s: float) -> Segments:
     d = np.array(ev.held.direction[:2])
     u = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else np.array([1.0, 0.0])
     o = np.array([ev.estimate_after.x, ev.estimate_after.y])
-    return Segments(f"{SCANS}/held", (o - 1.5 * s * u)[None], (o + 1.5 * s * u)[None], HELD, 0.012 * s)
+    return Segments(
+        f"{SCANS}/held", (o - 1.5 * s * u)[None], (o + 1.5 * s * u)[None], HELD, 0.012 * s
+    )
 
 
 def finish_layers(result) -> list[Layer]:
     from .text import result_sentence
 
-    return [Text(LOG, result_sentence(result), "INFO" if result.converged else "WARN"),
-            Frame(f"{SCANS}/estimate", result.pose)]
+    return [
+        Text(LOG, result_sentence(result), "INFO" if result.converged else "WARN"),
+        Frame(f"{SCANS}/estimate", result.pose),
+    ]
 
 
-def layers_at(start: StartEvent, iterations: list[IterationEvent], k: int, truth: Pose2 | None = None,
-              teaching: bool = False, chosen: int | None = None, odometry: Pose2 | None = None) -> list[Layer]:
-    """Every layer of a recorded run at iteration ``k`` (0: the initial guess; past the last: the last)."""
+def layers_at(
+    start: StartEvent,
+    iterations: list[IterationEvent],
+    k: int,
+    truth: Pose2 | None = None,
+    teaching: bool = False,
+    chosen: int | None = None,
+    odometry: Pose2 | None = None,
+) -> list[Layer]:
+    """Every layer of a recorded run at iteration ``k`` (0: the initial guess; past the last: the "
+    "last)."""
     layers = static_layers(start, truth, odometry)
     if k == 0 or not iterations:
         return layers + initial_layers(start)
@@ -311,16 +421,28 @@ def layers_at(start: StartEvent, iterations: list[IterationEvent], k: int, truth
     return layers + teaching_layers(start, ev, chosen=chosen) if teaching else layers
 
 
-def pair_layers(ref: Scan, obj: Scan, name: str, start: StartEvent, iterations: list[IterationEvent], k: int,
-                truth: Pose2 | None, odometry: Pose2 | None, several: bool = False,
-                chosen: int | None = None) -> list[Layer]:
+def pair_layers(
+    ref: Scan,
+    obj: Scan,
+    name: str,
+    start: StartEvent,
+    iterations: list[IterationEvent],
+    k: int,
+    truth: Pose2 | None,
+    odometry: Pose2 | None,
+    several: bool = False,
+    chosen: int | None = None,
+) -> list[Layer]:
     """Everything the views draw of one matcher's run (``name``) on the scans ``ref`` and ``obj`` at
     iteration ``k``: the reference as measured (beams, invalid bearings, sensor frame), the scans
     before a motion correction, the run's layers with the teaching ones; among ``several``
     matchers its object scan takes the matcher's colour (compare mode)."""
     ev = iterations[min(k, len(iterations)) - 1] if k > 0 and iterations else None
-    layers = beam_layers(ref) + deskew_layers(ref, obj, ev.estimate_before if ev is not None else start.initial_guess) \
+    layers = (
+        beam_layers(ref)
+        + deskew_layers(ref, obj, ev.estimate_before if ev is not None else start.initial_guess)
         + layers_at(start, iterations, k, truth, teaching=True, chosen=chosen, odometry=odometry)
+    )
     return compared(layers, name) if several else layers
 
 
@@ -333,11 +455,15 @@ def has_content(layer: Layer) -> bool:
 
 
 def compared(layers: list[Layer], name: str) -> list[Layer]:
-    """A run's layers among several matchers' (compare mode): its object scan in the matcher's colour."""
-    return [replace(ly, style=run_style(name)) if ly.path == f"{SCANS}/object" else ly for ly in layers]
+    """A run's layers among several matchers' (compare mode): its object scan in the matcher's "
+    "colour."""
+    return [
+        replace(ly, style=run_style(name)) if ly.path == f"{SCANS}/object" else ly for ly in layers
+    ]
 
 
 # Teaching layers (switchable): paper 000 Fig. 3 and Fig. 9b.
+
 
 def metric_isocurve(p: np.ndarray, target: np.ndarray, L: float, n: int = 72) -> np.ndarray:
     """The iso-distance curve of MbICP's metric through ``target`` around ``p`` (paper 000 Fig. 3).
@@ -361,8 +487,13 @@ def circle(center: np.ndarray, radius: float, n: int = 72) -> np.ndarray:
     return np.asarray(center) + radius * np.column_stack((np.cos(t), np.sin(t)))
 
 
-def teaching_layers(start: StartEvent, ev: IterationEvent, n_points: int = 6, bins: int = 30,
-                    chosen: int | None = None) -> list[Layer]:
+def teaching_layers(
+    start: StartEvent,
+    ev: IterationEvent,
+    n_points: int = 6,
+    bins: int = 30,
+    chosen: int | None = None,
+) -> list[Layer]:
     """Iso-distance curves for a few object points and the histogram of pair distances.
 
     For every chosen point the metric ellipse and the Euclidean circle pass through its target,
@@ -375,22 +506,42 @@ def teaching_layers(start: StartEvent, ev: IterationEvent, n_points: int = 6, bi
     L = getattr(start.params, "L", None)
     w = 0.004 * scene_scale(start.ref_points)
     if L is not None and len(p.kind):
-        mine = np.flatnonzero(p.obj_index == chosen) if chosen is not None else np.empty(0, np.int64)
-        pick = mine[:1] if len(mine) else np.unique(np.linspace(0, len(p.kind) - 1, n_points).round().astype(int))
+        mine = (
+            np.flatnonzero(p.obj_index == chosen) if chosen is not None else np.empty(0, np.int64)
+        )
+        pick = (
+            mine[:1]
+            if len(mine)
+            else np.unique(np.linspace(0, len(p.kind) - 1, n_points).round().astype(int))
+        )
         src, tgt = p.source[pick], p.target[pick]
-        layers.append(Strips(f"{SCANS}/{TEACH}/metric_isocurves",
-                             [metric_isocurve(s, t, L) for s, t in zip(src, tgt)], ISO_METRIC, w))
-        layers.append(Strips(f"{SCANS}/{TEACH}/euclidean_circles",
-                             [circle(t, float(np.linalg.norm(s - t))) for s, t in zip(src, tgt)], ISO_EUCLID, w))
+        layers.append(
+            Strips(
+                f"{SCANS}/{TEACH}/metric_isocurves",
+                [metric_isocurve(s, t, L) for s, t in zip(src, tgt)],
+                ISO_METRIC,
+                w,
+            )
+        )
+        layers.append(
+            Strips(
+                f"{SCANS}/{TEACH}/euclidean_circles",
+                [circle(t, float(np.linalg.norm(s - t))) for s, t in zip(src, tgt)],
+                ISO_EUCLID,
+                w,
+            )
+        )
     if len(p.distance):
-        layers += histogram_layers(histogram(p.distance, ev.threshold, bins), threshold_style(start.params))
+        layers += histogram_layers(
+            histogram(p.distance, ev.threshold, bins), threshold_style(start.params)
+        )
     return layers
 
 
 @dataclass(frozen=True, eq=False)
 class Histogram:
-    """The pair distances of one iteration (paper 000 Fig. 9b): bins [m], counts, their median and the
-    rejection threshold (None when the matcher applies none beyond its radial window)."""
+    """The pair distances of one iteration (paper 000 Fig. 9b): bins [m], counts, their median and
+    the rejection threshold (None when the matcher applies none beyond its radial window)."""
 
     edges: np.ndarray  # (B + 1,) [m]
     counts: np.ndarray  # (B,)
@@ -417,14 +568,27 @@ def histogram_layers(h: Histogram, threshold: Style = THRESHOLD) -> list[Layer]:
     range, so that the view is square), with median and threshold lines."""
     hi = float(h.edges[-1])
     heights = h.counts / max(h.counts.max(), 1) * hi * 0.6
-    bars = [np.array([[a, 0.0], [a, y], [b, y], [b, 0.0]])
-            for a, b, y in zip(h.edges[:-1], h.edges[1:], heights) if y > 0]
+    bars = [
+        np.array([[a, 0.0], [a, y], [b, y], [b, 0.0]])
+        for a, b, y in zip(h.edges[:-1], h.edges[1:], heights)
+        if y > 0
+    ]
     top, w = hi * 0.65, hi * 0.004
-    out: list[Layer] = [Strips(f"{TEACH}/histogram/bars", bars, HIST_BARS, w),
-                        Strips(f"{TEACH}/histogram/median", [np.array([[h.median, 0.0], [h.median, top]])], MEDIAN, w)]
+    out: list[Layer] = [
+        Strips(f"{TEACH}/histogram/bars", bars, HIST_BARS, w),
+        Strips(
+            f"{TEACH}/histogram/median", [np.array([[h.median, 0.0], [h.median, top]])], MEDIAN, w
+        ),
+    ]
     if h.threshold is not None:
-        out.append(Strips(f"{TEACH}/histogram/threshold", [np.array([[h.threshold, 0.0], [h.threshold, top]])],
-                          threshold, w))
+        out.append(
+            Strips(
+                f"{TEACH}/histogram/threshold",
+                [np.array([[h.threshold, 0.0], [h.threshold, top]])],
+                threshold,
+                w,
+            )
+        )
     return out
 
 
@@ -437,8 +601,14 @@ ITERATIONS = Style("iterations", (90, 90, 90))
 TIME = Style("match time [ms]", (245, 160, 0))
 
 
-def sequence_layers(k: int, pose: Pose2, points: np.ndarray, trajectory: np.ndarray,
-                    log_trajectory: np.ndarray | None, row: dict | None) -> list[Layer]:
+def sequence_layers(
+    k: int,
+    pose: Pose2,
+    points: np.ndarray,
+    trajectory: np.ndarray,
+    log_trajectory: np.ndarray | None,
+    row: dict | None,
+) -> list[Layer]:
     """Scan ``k`` placed at the pose accumulated from the matches (world = first scan's frame)."""
     layers: list[Layer] = [
         Points(f"{SEQUENCE}/map/scan_{k:05d}", pose.apply(points), MAP, 0.02),
@@ -449,25 +619,48 @@ def sequence_layers(k: int, pose: Pose2, points: np.ndarray, trajectory: np.ndar
     if log_trajectory is not None:
         layers.append(Strips(f"{SEQUENCE}/log_trajectory", [log_trajectory], LOG_TRAJECTORY, 0.015))
     if row is not None:
-        layers += [Scalar(f"{PLOTS}/iterations", float(row["iterations"]), ITERATIONS),
-                   Scalar(f"{PLOTS}/time_ms", float(row["time_ms"]), TIME),
-                   Text(LOG, f"pair {row['ref']} -> {row['obj']}: ({row['x']:+.3f} m, {row['y']:+.3f} m, "
-                             f"{math.degrees(row['theta']):+.2f} deg), {row['iterations']} iterations, "
-                             f"{row['reason']}", "INFO" if row["converged"] else "WARN")]
+        layers += [
+            Scalar(f"{PLOTS}/iterations", float(row["iterations"]), ITERATIONS),
+            Scalar(f"{PLOTS}/time_ms", float(row["time_ms"]), TIME),
+            Text(
+                LOG,
+                f"pair {row['ref']} -> {row['obj']}: ({row['x']:+.3f} m, {row['y']:+.3f} m, "
+                f"{math.degrees(row['theta']):+.2f} deg), {row['iterations']} iterations, "
+                f"{row['reason']}",
+                "INFO" if row["converged"] else "WARN",
+            ),
+        ]
     return layers
 
 
 # Convergence atlas (``eval basin --rrd``): outcome per initial offset.
-def basin_layers(name: str, offsets_xy: np.ndarray, outcome: np.ndarray, names: tuple[str, ...],
-                 colors: tuple[RGB, ...], theta_deg: float) -> list[Layer]:
+def basin_layers(
+    name: str,
+    offsets_xy: np.ndarray,
+    outcome: np.ndarray,
+    names: tuple[str, ...],
+    colors: tuple[RGB, ...],
+    theta_deg: float,
+) -> list[Layer]:
     """One matcher's outcomes over the (dx, dy) grid of one theta offset, coloured by outcome."""
     gx, gy = np.meshgrid(offsets_xy, offsets_xy)
     o = outcome.ravel()
     step = float(offsets_xy[1] - offsets_xy[0]) if len(offsets_xy) > 1 else 0.1
     style = Style(f"{name}: outcome per initial offset [m]", colors[0])
-    return [Points(f"basin/{name}/outcome", np.column_stack((gx.ravel(), gy.ravel())), style, step * 0.4,
-                   colors=np.array(colors, dtype=np.uint8)[o], labels=[names[k] for k in o]),
-            Text(f"basin/{name}/note", f"dtheta {theta_deg:+.1f} deg: {np.mean(o == 0) * 100:.0f} % correct")]
+    return [
+        Points(
+            f"basin/{name}/outcome",
+            np.column_stack((gx.ravel(), gy.ravel())),
+            style,
+            step * 0.4,
+            colors=np.array(colors, dtype=np.uint8)[o],
+            labels=[names[k] for k in o],
+        ),
+        Text(
+            f"basin/{name}/note",
+            f"dtheta {theta_deg:+.1f} deg: {np.mean(o == 0) * 100:.0f} % correct",
+        ),
+    ]
 
 
 # Polar matchers (PSM, PMWN): how they think, in plot spaces of their own (x in degrees).
@@ -483,7 +676,11 @@ def fitted_curve(polar, shift_deg: float, n: int = 21) -> np.ndarray | None:
     if polar.fit_abc is None or polar.best_shift is None:
         return None
     a, b, c = polar.fit_abc
-    k0 = round(polar.best_shift) if abs(polar.best_shift - round(polar.best_shift)) <= 0.5 else polar.best_shift
+    k0 = (
+        round(polar.best_shift)
+        if abs(polar.best_shift - round(polar.best_shift)) <= 0.5
+        else polar.best_shift
+    )
     x = np.linspace(-1.0, 1.0, n)
     if polar.fit == "V":
         m = max(a, c) - b
@@ -504,7 +701,8 @@ def polar_step_deg(polar) -> float:
 
 
 def polar_layers(ev: IterationEvent, scale: float = 1.0) -> list[Layer]:
-    """Cost per shift with the chosen minimum and its fit; ranges vs bearing; PMWN's projected circle."""
+    """Cost per shift with the chosen minimum and its fit; ranges vs bearing; PMWN's projected "
+    "circle."""
     P = ev.polar
     if P is None:
         return []
@@ -512,23 +710,42 @@ def polar_layers(ev: IterationEvent, scale: float = 1.0) -> list[Layer]:
     layers: list[Layer] = []
     ok = np.isfinite(P.cost)
     if ok.any():
-        layers.append(Strips(f"{POLAR}/cost/curve",
-                             [np.column_stack((P.shifts[ok] * step_deg, P.cost[ok] * COST_SCALE))], COST, 0.1))
+        layers.append(
+            Strips(
+                f"{POLAR}/cost/curve",
+                [np.column_stack((P.shifts[ok] * step_deg, P.cost[ok] * COST_SCALE))],
+                COST,
+                0.1,
+            )
+        )
         fit = fitted_curve(P, step_deg)
         if fit is not None:
             fit = fit * [1.0, COST_SCALE]
             layers.append(Strips(f"{POLAR}/cost/fit", [fit], FIT, 0.12))
-            layers.append(Points(f"{POLAR}/cost/minimum", np.array([[P.best_shift * step_deg, fit[:, 1].min()]]),
-                                 MINIMUM, 0.4))
+            layers.append(
+                Points(
+                    f"{POLAR}/cost/minimum",
+                    np.array([[P.best_shift * step_deg, fit[:, 1].min()]]),
+                    MINIMUM,
+                    0.4,
+                )
+            )
     deg = np.degrees(P.bearings)
-    for name, r, style in (("reference", P.ref_ranges, RANGE_REF), ("projected", P.projected_ranges, RANGE_PROJ)):
+    for name, r, style in (
+        ("reference", P.ref_ranges, RANGE_REF),
+        ("projected", P.projected_ranges, RANGE_PROJ),
+    ):
         pts = np.column_stack((deg, r * RANGE_SCALE))
         layers.append(Points(f"{POLAR}/ranges/{name}", pts[np.isfinite(r)], style, 0.3))
     if P.metric_weight is not None:
         layers.append(Scalar(f"{PLOTS}/metric_weight", P.metric_weight, METRIC_WEIGHT))
     if P.circle_points is not None:
-        layers.append(Points(f"{SCANS}/{POLAR}/circle_points", P.circle_points, CIRCLE, 0.01 * scale))
-        layers.append(Points(f"{SCANS}/{POLAR}/circle_centre", P.circle_centre[None, :], CIRCLE, 0.03 * scale))
+        layers.append(
+            Points(f"{SCANS}/{POLAR}/circle_points", P.circle_points, CIRCLE, 0.01 * scale)
+        )
+        layers.append(
+            Points(f"{SCANS}/{POLAR}/circle_centre", P.circle_centre[None, :], CIRCLE, 0.03 * scale)
+        )
     return layers
 
 
@@ -549,10 +766,20 @@ def distance_layers(d: np.ndarray, threshold: float, sigma_threshold: float) -> 
     def vline(x: float) -> list[np.ndarray]:
         return [np.array([[x, -top], [x, top]])]
 
-    return [Points(f"{LESSON}/distances/kept", np.column_stack((d[d <= threshold], np.zeros(np.sum(d <= threshold)))),
-                   DOT_KEPT, r),
-            Points(f"{LESSON}/distances/rejected", np.column_stack((d[d > threshold], np.zeros(np.sum(d > threshold)))),
-                   DOT_REJECTED, r),
-            Strips(f"{LESSON}/distances/median", vline(float(np.median(d))), MEDIAN, r / 4),
-            Strips(f"{LESSON}/distances/mad_threshold", vline(threshold), MAD_LINE, r / 4),
-            Strips(f"{LESSON}/distances/sigma_threshold", vline(sigma_threshold), SIGMA_LINE, r / 4)]
+    return [
+        Points(
+            f"{LESSON}/distances/kept",
+            np.column_stack((d[d <= threshold], np.zeros(np.sum(d <= threshold)))),
+            DOT_KEPT,
+            r,
+        ),
+        Points(
+            f"{LESSON}/distances/rejected",
+            np.column_stack((d[d > threshold], np.zeros(np.sum(d > threshold)))),
+            DOT_REJECTED,
+            r,
+        ),
+        Strips(f"{LESSON}/distances/median", vline(float(np.median(d))), MEDIAN, r / 4),
+        Strips(f"{LESSON}/distances/mad_threshold", vline(threshold), MAD_LINE, r / 4),
+        Strips(f"{LESSON}/distances/sigma_threshold", vline(sigma_threshold), SIGMA_LINE, r / 4),
+    ]

@@ -13,20 +13,42 @@ def result_fields(r: MatchResult, frame: str = "the laser frame") -> list[tuple[
     names the frame whose motion the pose is."""
     fields = [
         ("algorithm", r.algorithm),
-        ("pose", f"{r.pose}   (motion of {frame}: its pose at the object scan, in its frame at the reference scan)"),
-        ("status", f"{'converged' if r.converged else 'NOT converged: ' + r.reason.value} after {r.iterations} "
-                   "iterations"),
-        ("error", f"{r.error:.3e} m^2 mean squared residual; pairs kept {r.pairs_kept}, rejected {r.pairs_rejected}"),
+        (
+            "pose",
+            f"{r.pose}   (motion of {frame}: its pose at the object scan, in its frame at the "
+            "reference scan)",
+        ),
+        (
+            "status",
+            f"{'converged' if r.converged else 'NOT converged: ' + r.reason.value} after "
+            f"{r.iterations} "
+            "iterations",
+        ),
+        (
+            "error",
+            f"{r.error:.3e} m^2 mean squared residual; pairs kept {r.pairs_kept}, rejected "
+            f"{r.pairs_rejected}",
+        ),
     ]
     if r.covariance is not None:
         sx, sy, st = (math.sqrt(max(r.covariance[i, i], 0.0)) for i in range(3))
-        fields.append(("1-sigma", f"x {sx * 1000:.2f} mm, y {sy * 1000:.2f} mm, theta {math.degrees(st):.3f} deg"))
+        fields.append(
+            (
+                "1-sigma",
+                f"x {sx * 1000:.2f} mm, y {sy * 1000:.2f} mm, theta {math.degrees(st):.3f} deg",
+            )
+        )
     if r.degeneracy is not None:
         d = r.degeneracy
-        fields.append(("degeneracy", f"condition number {d.condition_number:.1f}; weakest direction "
-                                     f"(x, y, L*theta) = ({d.weakest_direction[0]:+.2f}, "
-                                     f"{d.weakest_direction[1]:+.2f}, {d.weakest_direction[2]:+.2f}), heading "
-                                     f"{d.weakest_heading_deg:+.0f} deg"))
+        fields.append(
+            (
+                "degeneracy",
+                f"condition number {d.condition_number:.1f}; weakest direction "
+                f"(x, y, L*theta) = ({d.weakest_direction[0]:+.2f}, "
+                f"{d.weakest_direction[1]:+.2f}, {d.weakest_direction[2]:+.2f}), heading "
+                f"{d.weakest_heading_deg:+.0f} deg",
+            )
+        )
     return fields
 
 
@@ -37,17 +59,25 @@ def result_lines(r: MatchResult, frame: str = "the laser frame") -> list[str]:
 
 def result_sentence(r: MatchResult) -> str:
     """The result as one line (rerun's text log, the debugger's compare summary)."""
-    text = (f"{r.algorithm}: {'converged' if r.converged else 'NOT converged (' + r.reason.value + ')'} after "
-            f"{r.iterations} iterations; pose {r.pose}; error {r.error:.3e} m^2; "
-            f"pairs kept {r.pairs_kept}, rejected {r.pairs_rejected}")
+    text = (
+        f"{r.algorithm}: "
+        f"{'converged' if r.converged else 'NOT converged (' + r.reason.value + ')'} after "
+        f"{r.iterations} iterations; pose {r.pose}; error {r.error:.3e} m^2; "
+        f"pairs kept {r.pairs_kept}, rejected {r.pairs_rejected}"
+    )
     if r.degeneracy is not None:
-        text += (f"; condition number {r.degeneracy.condition_number:.1f}, weakest direction heading "
-                 f"{r.degeneracy.weakest_heading_deg:+.0f} deg")
+        text += (
+            f"; condition number {r.degeneracy.condition_number:.1f}, weakest direction heading "
+            f"{r.degeneracy.weakest_heading_deg:+.0f} deg"
+        )
     return text
 
 
 def agreement_line(on_ref: float, radius_m: float) -> str:
-    return f"{100 * on_ref:.1f} % of the object points lie within {100 * radius_m:.0f} cm of a reference point"
+    return (
+        f"{100 * on_ref:.1f} % of the object points lie within {100 * radius_m:.0f} cm of a "
+        "reference point"
+    )
 
 
 def pose_distance(pose: Pose2, other: Pose2) -> str:
@@ -59,8 +89,10 @@ def truth_line(pose: Pose2, truth: Pose2) -> str:
     return f"{pose_distance(pose, truth)} from the known answer"
 
 
-ITERATION_HEADER = (f"{'it':>3} {'pairs':>5} {'interp':>6} {'kept':>5} {'rejected':>8} {'threshold_m':>11} "
-                    f"{'error_m2':>10} {'dx_m':>9} {'dy_m':>9} {'dtheta_deg':>10}")
+ITERATION_HEADER = (
+    f"{'it':>3} {'pairs':>5} {'interp':>6} {'kept':>5} {'rejected':>8} {'threshold_m':>11} "
+    f"{'error_m2':>10} {'dx_m':>9} {'dy_m':>9} {'dtheta_deg':>10}"
+)
 
 
 def iteration_line(e: IterationEvent) -> str:
@@ -69,9 +101,13 @@ def iteration_line(e: IterationEvent) -> str:
     thr = f"{e.threshold:.4f}" if e.threshold is not None else "-"
     n = len(p.kind)
     kept = p.count(status=PairStatus.KEPT)
-    return (f"{e.iteration:>3} {n:>5} {p.count(kind=PairKind.INTERPOLATED):>6} {kept:>5} {n - kept:>8} {thr:>11} "
-            f"{e.error:>10.3e} {e.increment.x:>+9.4f} {e.increment.y:>+9.4f} {math.degrees(e.increment.theta):>+10.4f}"
-            + (f"  extrapolated x{1.0 + e.extrapolated:.2f}" if e.extrapolated else ""))
+    return (
+        f"{e.iteration:>3} {n:>5} {p.count(kind=PairKind.INTERPOLATED):>6} {kept:>5} {n - kept:>8} "
+        f"{thr:>11} "
+        f"{e.error:>10.3e} {e.increment.x:>+9.4f} {e.increment.y:>+9.4f} "
+        f"{math.degrees(e.increment.theta):>+10.4f}"
+        + (f"  extrapolated x{1.0 + e.extrapolated:.2f}" if e.extrapolated else "")
+    )
 
 
 def iteration_text(ev: IterationEvent) -> str:
@@ -81,25 +117,49 @@ def iteration_text(ev: IterationEvent) -> str:
     by = {s.name.lower(): p.count(status=s) for s in PairStatus if s != PairStatus.KEPT}
     rej = ", ".join(f"{v} {k}" for k, v in by.items() if v) or "none"
     thr = f"{ev.threshold:.3f} m" if ev.threshold is not None else "-"
-    return (f"iteration {ev.iteration}: {len(p.kind)} pairs ({p.count(kind=PairKind.INTERPOLATED)} interpolated), "
-            f"{n_kept} kept, rejected: {rej}; threshold {thr}; error {ev.error:.3e} m^2; "
-            f"step ({ev.increment.x:+.4f} m, {ev.increment.y:+.4f} m, {math.degrees(ev.increment.theta):+.3f} deg)"
-            + (f"; held along heading {ev.held.heading_deg:+.0f} deg (surface condition number "
-               f"{ev.held.condition_number:.0f}): the step left the guess's value there" if ev.held else "")
-            + (f"; extrapolated (Aitken): MbICP's own step was shorter than the one before and within 90 deg of it, "
-               f"so the step went on to {1.0 + ev.extrapolated:.2f} times its length" if ev.extrapolated else "")
-            + (f"; {ev.note}" if ev.note else ""))
+    return (
+        f"iteration {ev.iteration}: {len(p.kind)} pairs ({p.count(kind=PairKind.INTERPOLATED)} "
+        "interpolated), "
+        f"{n_kept} kept, rejected: {rej}; threshold {thr}; error {ev.error:.3e} m^2; "
+        f"step ({ev.increment.x:+.4f} m, {ev.increment.y:+.4f} m, "
+        f"{math.degrees(ev.increment.theta):+.3f} deg)"
+        + (
+            f"; held along heading {ev.held.heading_deg:+.0f} deg (surface condition number "
+            f"{ev.held.condition_number:.0f}): the step left the guess's value there"
+            if ev.held
+            else ""
+        )
+        + (
+            "; extrapolated (Aitken): MbICP's own step was shorter than the one before and within "
+            "90 deg of it, "
+            f"so the step went on to {1.0 + ev.extrapolated:.2f} times its length"
+            if ev.extrapolated
+            else ""
+        )
+        + (f"; {ev.note}" if ev.note else "")
+    )
 
 
-def match_report(label: str, setup, outcome, result: MatchResult, frame: str, truth: Pose2 | None) -> list[str]:
+def match_report(
+    label: str, setup, outcome, result: MatchResult, frame: str, truth: Pose2 | None
+) -> list[str]:
     """``match``'s report: the pair, the guess (laser frame, as the iterations) and where it came
     from, one line per iteration, the result as reported (``result`` in ``frame``), the agreement
     with the data and, when known, the error against the answer (``truth``, in the same frame)."""
     from mbicp_viz.core.agreement import INLIER_RADIUS_M
 
-    lines = [label, f"initial guess {setup.guess} (laser frame; from: {setup.guess_source})", "", ITERATION_HEADER]
+    lines = [
+        label,
+        f"initial guess {setup.guess} (laser frame; from: {setup.guess_source})",
+        "",
+        ITERATION_HEADER,
+    ]
     lines += [iteration_line(e) for e in outcome.recorder.iterations]
-    lines += ["", *result_lines(result, frame), f"{'on ref':<11} {agreement_line(outcome.on_ref, INLIER_RADIUS_M)}"]
+    lines += [
+        "",
+        *result_lines(result, frame),
+        f"{'on ref':<11} {agreement_line(outcome.on_ref, INLIER_RADIUS_M)}",
+    ]
     if truth is not None:
         lines.append(f"{'truth':<11} {truth_line(result.pose, truth)} ({setup.truth_source})")
     how = "; interpreted while numba compiled the kernels" if outcome.interpreted else ""

@@ -20,12 +20,15 @@ Z_PER_ORDER = 0.002  # [m] height per unit of draw order: higher draws on top
 
 
 def in_scan_plane(layer: scene.Layer) -> bool:
-    """True for a layer the scan plane draws, False for one a panel shows; an error for anything else."""
+    """True for a layer the scan plane draws, False for one a panel shows; an error for anything "
+    "else."""
     if isinstance(layer, (scene.Scalar, scene.Text)) or layer.path.startswith(PLOT_SPACES):
         return False
     if layer.path.startswith(f"{scene.SCANS}/") and isinstance(layer, scene.DRAWN):
         return True
-    raise TypeError(f"the debugger has no place for the {type(layer).__name__} layer {layer.path!r}")
+    raise TypeError(
+        f"the debugger has no place for the {type(layer).__name__} layer {layer.path!r}"
+    )
 
 
 def _xyz(xy: np.ndarray, z: float = 0.0) -> np.ndarray:
@@ -56,7 +59,11 @@ def _line_geometry(layer, z: float):
     elif isinstance(layer, scene.Strips):
         segs = _strip_segments(layer.strips, z)
     else:  # Boxes: each box's own colour on its four sides
-        segs = _box_segments(layer.centers, layer.half_size, z) if len(layer.centers) else np.zeros((0, 2, 3))
+        segs = (
+            _box_segments(layer.centers, layer.half_size, z)
+            if len(layer.centers)
+            else np.zeros((0, 2, 3))
+        )
         per_box = np.tile(layer.colors[:, :3], (4, 1))
         return segs, np.repeat(per_box[:, None, :], 2, axis=1).astype(np.uint8), 0.004
     width = layer.width
@@ -68,21 +75,39 @@ def draw(scene_api, name: str, layer: scene.Layer, visible: bool = True):
     z = layer.style.order * Z_PER_ORDER
     if isinstance(layer, scene.Points):
         pts = _xyz(layer.xy, z)
-        c = layer.colors[:, :3] if layer.colors is not None else np.broadcast_to(
-            np.asarray(layer.style.color, np.uint8), (len(pts), 3))
+        c = (
+            layer.colors[:, :3]
+            if layer.colors is not None
+            else np.broadcast_to(np.asarray(layer.style.color, np.uint8), (len(pts), 3))
+        )
         # viser 1.1's point shader draws point_size / tan(fov/2) * height / z pixels: twice the
         # projection of a world length, so a dot of diameter 2r takes point_size = r.
-        return scene_api.add_point_cloud(name, pts, np.asarray(c, np.uint8), point_size=layer.radius,
-                                         point_shape="circle", precision="float32", visible=visible)
+        return scene_api.add_point_cloud(
+            name,
+            pts,
+            np.asarray(c, np.uint8),
+            point_size=layer.radius,
+            point_shape="circle",
+            precision="float32",
+            visible=visible,
+        )
     if isinstance(layer, (scene.Segments, scene.Strips, scene.Boxes)):
         segs, colors, width = _line_geometry(layer, z)
         if len(segs) == 0:  # an empty node keeps the name (and its visibility)
             segs, colors = np.zeros((1, 2, 3), np.float32), np.zeros((1, 2, 3), np.uint8)
-        return scene_api.add_line_segments(name, segs, colors, thickness=max(width, 0.004) * 1.5, visible=visible)
+        return scene_api.add_line_segments(
+            name, segs, colors, thickness=max(width, 0.004) * 1.5, visible=visible
+        )
     if isinstance(layer, scene.Frame):
         p = layer.pose
-        return scene_api.add_frame(name, axes_length=layer.length, axes_radius=0.04 * layer.length,
-                                   position=(p.x, p.y, z), wxyz=yaw_to_wxyz(p.theta), visible=visible)
+        return scene_api.add_frame(
+            name,
+            axes_length=layer.length,
+            axes_radius=0.04 * layer.length,
+            position=(p.x, p.y, z),
+            wxyz=yaw_to_wxyz(p.theta),
+            visible=visible,
+        )
     raise TypeError(f"the debugger cannot draw a {type(layer).__name__} layer ({layer.path})")
 
 

@@ -31,12 +31,19 @@ def local_origins(host: str, port: int) -> set[str]:
 class App:
     """A viser server with one Session per connected browser tab."""
 
-    def __init__(self, source: Source, host: str = "127.0.0.1", port: int = 8080,
-                 allow_origins: tuple[str, ...] = ()):
-        tiers.quick_start()  # a person waits on this page: never a compile stall (before any kernel runs)
+    def __init__(
+        self,
+        source: Source,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        allow_origins: tuple[str, ...] = (),
+    ):
+        # a person waits on this page: never a compile stall (before any kernel runs)
+        tiers.quick_start()
         self.source = source
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())  # where every tab starts
+        # where every tab starts
+        TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())
         self.origins = local_origins(host, self.port) | set(allow_origins)
         self.sessions: dict[int, Session] = {}
         self.refused: dict[int, str] = {}  # client id -> the origin whose websocket was closed
@@ -64,7 +71,8 @@ class App:
             from .state import DebugState
 
             state = DebugState(self.source)
-            lesson = [name for step in self.source.lesson for name in step.scenario.params]  # every step's
+            # every step's
+            lesson = [name for step in self.source.lesson for name in step.scenario.params]
             names = list(dict.fromkeys([*state.algorithms, *lesson]))
             for name in names:
                 MATCHERS[name].load()

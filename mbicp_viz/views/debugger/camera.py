@@ -24,8 +24,11 @@ DEFAULT_ASPECT = 1.1  # a tab's view beside the fixed control panel, until it re
 class TopDownCamera:
     def __init__(self, client: viser.ClientHandle | viser.ViserServer):
         self.client = client
-        self.placed_at = -math.inf  # when this put the camera somewhere (the tab's reports lag behind)
-        self.pending: np.ndarray | None = None  # points to fit once the tab has reported its first view
+        # when this put the camera somewhere (the tab's reports lag behind)
+        self.placed_at = -math.inf
+        self.pending: np.ndarray | None = (
+            None  # points to fit once the tab has reported its first view
+        )
         self.recheck: threading.Timer | None = None
         if isinstance(client, viser.ClientHandle):
             client.camera.on_update(lambda cam: self.level(cam))
@@ -40,8 +43,11 @@ class TopDownCamera:
         d = np.asarray(position, float) - np.asarray(look_at, float)
         dist = float(np.linalg.norm(d))
         up = np.asarray(up, float)
-        return (dist > 0 and d[2] >= dist * math.cos(TOLERANCE_RAD)
-                and up[1] >= float(np.linalg.norm(up)) * math.cos(TOLERANCE_RAD))
+        return (
+            dist > 0
+            and d[2] >= dist * math.cos(TOLERANCE_RAD)
+            and up[1] >= float(np.linalg.norm(up)) * math.cos(TOLERANCE_RAD)
+        )
 
     def level(self, cam) -> None:
         """Fit a view asked for before the tab had one; put a tilted or turned camera back top-down
@@ -79,13 +85,17 @@ class TopDownCamera:
 
     def fit(self, points: np.ndarray) -> None:
         """Top-down over ``points`` (the reference scan), the whole scan in view. On the server, the
-        view "reset view" returns to; on a tab that has not reported its first view yet, done when it
-        does (a view placed while the tab is still opening is overwritten by the tab's own)."""
+        view "reset view" returns to; on a tab that has not reported its first view yet, done when
+        it does (a view placed while the tab is still opening is overwritten by the tab's own)."""
         pts = points if len(points) else np.zeros((1, 2))
         if isinstance(self.client, viser.ViserServer):
             cam = self.client.initial_camera
             c, height = self.framing(pts, cam.fov, DEFAULT_ASPECT)
-            cam.up, cam.position, cam.look_at = (0.0, 1.0, 0.0), (c[0], c[1], height), (c[0], c[1], 0.0)
+            cam.up, cam.position, cam.look_at = (
+                (0.0, 1.0, 0.0),
+                (c[0], c[1], height),
+                (c[0], c[1], 0.0),
+            )
             return
         cam = self.client.camera
         if cam.update_timestamp > 0.0:

@@ -22,7 +22,8 @@ from .state import DEFAULTS, TYPED
 
 def set_boxes(control, values: dict) -> None:
     """Put a control's checkboxes (``control.boxes``) on the model's values, with its callbacks
-    quiet meanwhile (``control.showing``): viser runs a box's callback as soon as its value is set."""
+    quiet meanwhile (``control.showing``): viser runs a box's callback as soon as its value is
+    set."""
     control.showing = True
     try:
         for key, box in control.boxes.items():
@@ -38,11 +39,19 @@ class Playback:
         self.s = session
         self.fps, self.playing = 4.0, False
         with gui.add_folder("Playback", order=order):
-            self.slider = gui.add_slider("iteration", min=0, max=1, step=1, initial_value=0,
-                                         hint="0: the initial guess; the last: where the match ended")
+            self.slider = gui.add_slider(
+                "iteration",
+                min=0,
+                max=1,
+                step=1,
+                initial_value=0,
+                hint="0: the initial guess; the last: where the match ended",
+            )
             prev_b, next_b = gui.add_button("previous"), gui.add_button("next")
             play = gui.add_checkbox("play", False)
-            speed = gui.add_slider("speed (iterations/s)", min=0.5, max=30.0, step=0.5, initial_value=self.fps)
+            speed = gui.add_slider(
+                "speed (iterations/s)", min=0.5, max=30.0, step=0.5, initial_value=self.fps
+            )
             self.text = gui.add_markdown("")
         self.slider.on_update(lambda _: session.guarded(self._moved))
         prev_b.on_click(lambda _: session.guarded(lambda: self.step(-1)))
@@ -53,7 +62,8 @@ class Playback:
         threading.Thread(target=self._play, daemon=True).start()
 
     def show(self, n: int) -> None:
-        """A new match of ``n`` iterations, shown where the model is (its end, or a lesson step's)."""
+        """A new match of ``n`` iterations, shown where the model is (its end, or a lesson "
+        "step's)."""
         self.slider.max = max(n, 1)
         self.slider.value = self.s.state.iteration  # the model is there already: no second redraw
 
@@ -64,7 +74,9 @@ class Playback:
             self.s.redraw()
 
     def step(self, delta: int) -> None:
-        self.slider.value = int(np.clip(self.s.state.iteration + delta, 0, self.s.state.max_iteration()))
+        self.slider.value = int(
+            np.clip(self.s.state.iteration + delta, 0, self.s.state.max_iteration())
+        )
 
     def _play(self) -> None:
         while not self.closed.wait(1.0 / max(self.fps, 0.5)):
@@ -73,7 +85,9 @@ class Playback:
                     if self.closed.is_set():  # closed while this frame waited for the lock
                         break
                     n = self.s.state.max_iteration()
-                    self.slider.value = 0 if self.s.state.iteration >= n else self.s.state.iteration + 1
+                    self.slider.value = (
+                        0 if self.s.state.iteration >= n else self.s.state.iteration + 1
+                    )
 
 
 class Matchers:
@@ -85,12 +99,18 @@ class Matchers:
         state = session.state
         self.edited = state.algorithms[0]
         with gui.add_folder("Matchers", order=order):
-            self.boxes = {name: gui.add_checkbox(name, name in state.algorithms, hint=m.title)
-                          for name, m in MATCHERS.items()}
+            self.boxes = {
+                name: gui.add_checkbox(name, name in state.algorithms, hint=m.title)
+                for name, m in MATCHERS.items()
+            }
             self.edit = gui.add_dropdown("parameters of", list(MATCHERS), initial_value=self.edited)
-            self.preset = gui.add_dropdown("preset", self._presets(), initial_value=state.preset_of(self.edited),
-                                           hint="the parameter sets shipped with the tool (--params NAME); "
-                                                f"'{TYPED}': values typed into the boxes")
+            self.preset = gui.add_dropdown(
+                "preset",
+                self._presets(),
+                initial_value=state.preset_of(self.edited),
+                hint="the parameter sets shipped with the tool (--params NAME); "
+                f"'{TYPED}': values typed into the boxes",
+            )
         for box in self.boxes.values():
             box.on_update(lambda _: session.guarded(self._chosen))
         self.edit.on_update(lambda _: session.guarded(self._edit))
@@ -101,14 +121,20 @@ class Matchers:
     def _build_params(self) -> None:
         if self.params is not None:
             self.params.folder.remove()
-        self.params = panels.param_panel(self.gui, f"Parameters: {self.edited}", self.s.state.params[self.edited],
-                                         self.order + 1, lambda name, text: self.s.guarded(lambda: self._typed(name, text)))
+        self.params = panels.param_panel(
+            self.gui,
+            f"Parameters: {self.edited}",
+            self.s.state.params[self.edited],
+            self.order + 1,
+            lambda name, text: self.s.guarded(lambda: self._typed(name, text)),
+        )
 
     def _presets(self) -> list[str]:
         return [DEFAULTS, *presets_for(self.edited), TYPED]
 
     def _show_preset(self) -> None:
-        """The picker names what the edited matcher's parameters are (its choices: that matcher's)."""
+        """The picker names what the edited matcher's parameters are (its choices: that "
+        "matcher's)."""
         self.preset.options = self._presets()
         self.preset.value = self.s.state.preset_of(self.edited)
 
@@ -134,11 +160,13 @@ class Matchers:
         self._show_preset()
 
     def _typed(self, name: str, text: str) -> None:
-        """Apply one parameter as typed, or say why not; the boxes then show what the matcher uses."""
+        """Apply one parameter as typed, or say why not; the boxes then show what the matcher "
+        "uses."""
         self._applied(self.s.state.set_params(self.edited, {name: text}))
 
     def _preset(self) -> None:
-        """Load the picked preset (or the defaults); picking 'as typed' or what is loaded does nothing."""
+        """Load the picked preset (or the defaults); picking 'as typed' or what is loaded does "
+        "nothing."""
         state = self.s.state
         if self.preset.value in (TYPED, state.preset_of(self.edited)):
             return
@@ -149,7 +177,9 @@ class Matchers:
         uses, the message why a value was refused; a match that ran is shown."""
         state = self.s.state
         refused = error is not None and error != state.message  # a value, not the match, is wrong
-        self.params.message.content = panels.warning(f"{error} — the last good value is kept" if refused else "")
+        self.params.message.content = panels.warning(
+            f"{error} — the last good value is kept" if refused else ""
+        )
         self.params.show(state.params[self.edited])
         self._show_preset()
         if not refused:
@@ -164,21 +194,41 @@ class Guess:
     def __init__(self, session, gui, order: float):
         self.s = session
         self.gizmo = session.client.scene.add_transform_controls(
-            "/guess", scale=0.8, disable_sliders=True, active_axes=(True, True, False),
-            rotation_limits=((0.0, 0.0), (0.0, 0.0), (-1000.0, 1000.0)))
+            "/guess",
+            scale=0.8,
+            disable_sliders=True,
+            active_axes=(True, True, False),
+            rotation_limits=((0.0, 0.0), (0.0, 0.0), (-1000.0, 1000.0)),
+        )
         self.gizmo.on_update(lambda _: session.guarded(self._dragged))
         with gui.add_folder("Initial guess (object frame in the reference frame)", order=order):
             self.info = gui.add_markdown("")
-            self.boxes = {key: panels.CommitBox(gui, label, "", "a number",
-                                                lambda text, key=key: session.guarded(lambda: self._typed(key, text)))
-                          for key, label in self.FIELDS}
+            self.boxes = {
+                key: panels.CommitBox(
+                    gui,
+                    label,
+                    "",
+                    "a number",
+                    lambda text, key=key: session.guarded(lambda: self._typed(key, text)),
+                )
+                for key, label in self.FIELDS
+            }
             drag = gui.add_checkbox("drag the guess in the view", True)
             drag.on_update(lambda _: setattr(self.gizmo, "visible", drag.value))
-            gui.add_button("search the guess", hint="correlative search around the current guess (search "
-                                                    "parameters below); the match restarts from its best pose"
-                           ).on_click(lambda _: session.guarded(lambda: session.after_match(session.state.search_guess())))
-        self.search = panels.param_panel(gui, "Search parameters", session.state.search, order + 1,
-                                         lambda name, text: session.guarded(lambda: self._search_typed(name, text)))
+            gui.add_button(
+                "search the guess",
+                hint="correlative search around the current guess (search "
+                "parameters below); the match restarts from its best pose",
+            ).on_click(
+                lambda _: session.guarded(lambda: session.after_match(session.state.search_guess()))
+            )
+        self.search = panels.param_panel(
+            gui,
+            "Search parameters",
+            session.state.search,
+            order + 1,
+            lambda name, text: session.guarded(lambda: self._search_typed(name, text)),
+        )
 
     def show(self) -> None:
         g, state = self.s.state.guess, self.s.state
@@ -195,16 +245,23 @@ class Guess:
             self.show()
             return
         g = self.s.state.guess
-        x, y, theta = (value if key == k else v for k, v in (("x", g.x), ("y", g.y), ("theta", math.degrees(g.theta))))
+        x, y, theta = (
+            value if key == k else v
+            for k, v in (("x", g.x), ("y", g.y), ("theta", math.degrees(g.theta)))
+        )
         self.s.after_match(self.s.state.set_guess(Pose2(x, y, math.radians(theta))))
 
     def _dragged(self) -> None:
         x, y, _ = (float(v) for v in self.gizmo.position)
-        self.s.after_match(self.s.state.set_guess(Pose2(x, y, viser_draw.wxyz_to_yaw(self.gizmo.wxyz)), "dragged"))
+        self.s.after_match(
+            self.s.state.set_guess(Pose2(x, y, viser_draw.wxyz_to_yaw(self.gizmo.wxyz)), "dragged")
+        )
 
     def _search_typed(self, name: str, text: str) -> None:
         error = self.s.state.set_search({name: text})
-        self.search.message.content = panels.warning(f"{error} — the last good value is kept" if error else "")
+        self.search.message.content = panels.warning(
+            f"{error} — the last good value is kept" if error else ""
+        )
         self.search.show(self.s.state.search)
 
 
@@ -218,15 +275,30 @@ class Scans:
         log = state.source.log
         with gui.add_folder("Scans", order=order):
             self.info = gui.add_markdown("")
-            if len(log.scan_topics) > 1 and not state.source.rows_label:  # an evaluation's rows hold to one topic
-                self.topic = gui.add_dropdown("scan stream", list(log.scan_topics), initial_value=log.topic,
-                                              hint="; ".join(f"{t}: {d}" for t, d in log.scan_topics.items()))
+            # an evaluation's rows hold to one topic
+            if len(log.scan_topics) > 1 and not state.source.rows_label:
+                self.topic = gui.add_dropdown(
+                    "scan stream",
+                    list(log.scan_topics),
+                    initial_value=log.topic,
+                    hint="; ".join(f"{t}: {d}" for t, d in log.scan_topics.items()),
+                )
                 self.topic.on_update(lambda _: session.guarded(self._topic))
             self.consecutive = gui.add_checkbox("consecutive (object = reference + 1)", True)
-            self.ref = panels.CommitBox(gui, "reference scan", str(state.pair[0]), "a scan number",
-                                        lambda text: session.guarded(lambda: self._typed(ref=text)))
-            self.obj = panels.CommitBox(gui, "object scan", str(state.pair[1]), "a scan number",
-                                        lambda text: session.guarded(lambda: self._typed(obj=text)))
+            self.ref = panels.CommitBox(
+                gui,
+                "reference scan",
+                str(state.pair[0]),
+                "a scan number",
+                lambda text: session.guarded(lambda: self._typed(ref=text)),
+            )
+            self.obj = panels.CommitBox(
+                gui,
+                "object scan",
+                str(state.pair[1]),
+                "a scan number",
+                lambda text: session.guarded(lambda: self._typed(obj=text)),
+            )
         self._show_records()
 
     def _typed(self, ref: str | None = None, obj: str | None = None) -> None:
@@ -242,8 +314,11 @@ class Scans:
 
     def _show_records(self) -> None:
         log = self.s.state.source.log
-        self.info.content = (f"records 0 .. {log.records - 1}" + (f" of {log.topic}" if log.topic else "")
-                             + (f" ({len(log.unusable)} unusable)" if log.unusable else ""))
+        self.info.content = (
+            f"records 0 .. {log.records - 1}"
+            + (f" of {log.topic}" if log.topic else "")
+            + (f" ({len(log.unusable)} unusable)" if log.unusable else "")
+        )
 
     def _topic(self) -> None:
         error = self.s.state.set_topic(self.topic.value)
@@ -272,20 +347,30 @@ class Layers:
             self.boxes = {}
             for style in scene.STYLES:
                 box = gui.add_checkbox(style.label, session.state.visible[style.label])
-                box.on_update(lambda ev, label=style.label: session.guarded(lambda: self._toggled(label, ev.target.value)))
+                box.on_update(
+                    lambda ev, label=style.label: session.guarded(
+                        lambda: self._toggled(label, ev.target.value)
+                    )
+                )
                 self.boxes[style.label] = box
-            self.iso = panels.CommitBox(gui, "iso-curves of object point", "",
-                                        "click a blue point in the view, or type its index (empty: a few spread)",
-                                        lambda text: session.guarded(lambda: self._iso_typed(text)))
-        session.client.scene.on_click()(lambda ev: session.guarded(lambda: self.click(ev.ray_origin,
-                                                                                      ev.ray_direction)))
+            self.iso = panels.CommitBox(
+                gui,
+                "iso-curves of object point",
+                "",
+                "click a blue point in the view, or type its index (empty: a few spread)",
+                lambda text: session.guarded(lambda: self._iso_typed(text)),
+            )
+        session.client.scene.on_click()(
+            lambda ev: session.guarded(lambda: self.click(ev.ray_origin, ev.ray_direction))
+        )
 
     def show(self) -> None:
         """The boxes as the model holds them (a lesson step opens with its own layers)."""
         set_boxes(self, self.s.state.visible)
 
     def _toggled(self, label: str, value: bool) -> None:
-        if self.showing:  # the model sets the boxes (``set_boxes``): one redraw after, not one per box
+        # the model sets the boxes (``set_boxes``): one redraw after, not one per box
+        if self.showing:
             return
         self.s.state.visible[label] = bool(value)
         self.s.redraw()
@@ -326,15 +411,19 @@ class Failures:
 
         self.s = session
         src = session.state.source
-        rows = src.failures[:self.MAX_LISTED]
+        rows = src.failures[: self.MAX_LISTED]
         self.rows = {failure_label(k + 1, r): r for k, r in enumerate(rows)}
         with gui.add_folder(f"Failures ({src.rows_label})", order=order):
             if not rows:
                 gui.add_markdown("no failed pair among them")
                 return
-            gui.add_markdown(f"{len(src.failures)} failed, worst first (translation error)"
-                             + (f"; the first {len(rows)} are listed" if len(src.failures) > len(rows) else ""))
-            self.pick = gui.add_dropdown("open", list(self.rows), initial_value=next(iter(self.rows)))
+            gui.add_markdown(
+                f"{len(src.failures)} failed, worst first (translation error)"
+                + (f"; the first {len(rows)} are listed" if len(src.failures) > len(rows) else "")
+            )
+            self.pick = gui.add_dropdown(
+                "open", list(self.rows), initial_value=next(iter(self.rows))
+            )
         self.pick.on_update(lambda _: session.guarded(self._picked))
 
     def _picked(self) -> None:

@@ -1,4 +1,5 @@
-"""``bench-gui``: the debugger's latency on a real pair, server side (a real ViserServer, no browser)."""
+"""``bench-gui``: the debugger's latency on a real pair, server side (a real ViserServer, no "
+"browser)."""
 
 from __future__ import annotations
 
@@ -15,9 +16,15 @@ from .session import Session
 from .state import Source
 
 
-def gui_latency(path: str, pair: tuple[int, int], options: ReadOptions | None = None, steps: int = 3,
-                changes: int = 40) -> tuple[Timing, Timing]:
-    """Iteration step -> redraw, and parameter change -> re-match -> redraw, as a user drives them."""
+def gui_latency(
+    path: str,
+    pair: tuple[int, int],
+    options: ReadOptions | None = None,
+    steps: int = 3,
+    changes: int = 40,
+) -> tuple[Timing, Timing]:
+    """Iteration step -> redraw, and parameter change -> re-match -> redraw, as a user drives "
+    "them."""
     log = read_log(path, options)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     s = Session(server, Source(path, log, pair=pair, guess=Pose2(), options=options))
@@ -33,16 +40,18 @@ def gui_latency(path: str, pair: tuple[int, int], options: ReadOptions | None = 
             t0 = time.perf_counter()
             s.matchers.params.boxes["Br"].handle.value = f"{float(v)!r}\n"  # typed, then Enter
             change_ms.append(1000.0 * (time.perf_counter() - t0))
-        return (Timing("iteration step redraw", np.array(step_ms), "steps"),
-                Timing("parameter change", np.array(change_ms), "changes"))
+        return (
+            Timing("iteration step redraw", np.array(step_ms), "steps"),
+            Timing("parameter change", np.array(change_ms), "changes"),
+        )
     finally:
         s.close()
         server.stop()
 
 
 def first_result_ms(path: str) -> float:
-    """From nothing to a tab's first result: a debugger on ``path``'s first pair, its kernels compiled
-    (or loaded from numba's cache), one session's match drawn [ms]."""
+    """From nothing to a tab's first result: a debugger on ``path``'s first pair, its kernels
+    compiled (or loaded from numba's cache), one session's match drawn [ms]."""
     from .app import App
 
     t0 = time.perf_counter()

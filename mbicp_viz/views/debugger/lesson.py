@@ -9,30 +9,45 @@ import io
 
 import numpy as np
 
-from mbicp_viz.views.lesson.steps import Step, StepRun, run_step
 from mbicp_viz.readers import ScanLog
+from mbicp_viz.views.lesson.steps import Step, StepRun, run_step
 
 from ..figure import Plot, scene_png
 from .state import Source
 
-CHANGED = ("*The numbers above are the step's own run, as its file sets it up; the Result panel follows "
-           "what you change.*")
+CHANGED = (
+    "*The numbers above are the step's own run, as its file sets it up; the Result panel follows "
+    "what you change.*"
+)
 
 
 def step_source(step: Step, lesson: tuple[Step, ...]) -> Source:
     """The debugger's source for one step of ``lesson``."""
     s = step.scenario
-    return Source("the MbICP lesson", ScanLog(s.name, [s.ref, s.obj]), (0, 1), False,
-                  s.guess, truth=s.truth, params=dict(s.params), algorithms=tuple(s.params), teaching=True,
-                  shown=tuple(st.label for st in step.layers), lesson=lesson, lesson_step=lesson.index(step),
-                  view=step.window)
+    return Source(
+        "the MbICP lesson",
+        ScanLog(s.name, [s.ref, s.obj]),
+        (0, 1),
+        False,
+        s.guess,
+        truth=s.truth,
+        params=dict(s.params),
+        algorithms=tuple(s.params),
+        teaching=True,
+        shown=tuple(st.label for st in step.layers),
+        lesson=lesson,
+        lesson_step=lesson.index(step),
+        view=step.window,
+    )
 
 
 def plot_image(plot: Plot) -> np.ndarray:
     """A plot beside the text (the step's list of distances), as RGB pixels."""
     import matplotlib.image
 
-    return (matplotlib.image.imread(io.BytesIO(scene_png([], plot, ""))) * 255).astype(np.uint8)[:, :, :3]
+    return (matplotlib.image.imread(io.BytesIO(scene_png([], plot, ""))) * 255).astype(np.uint8)[
+        :, :, :3
+    ]
 
 
 class Lesson:
@@ -44,10 +59,14 @@ class Lesson:
         with gui.add_folder("Lesson", order=order):
             self.heading = gui.add_markdown("")
             self.text = gui.add_markdown("")
-            self.figure = gui.add_image(np.full((8, 8, 3), 255, np.uint8), label="paper 000 Fig. 9", visible=False)
+            self.figure = gui.add_image(
+                np.full((8, 8, 3), 255, np.uint8), label="paper 000 Fig. 9", visible=False
+            )
             self.try_text = gui.add_markdown("")
             back, forward = gui.add_button("previous step"), gui.add_button("next step")
-            self.pick = gui.add_dropdown("step", [self._label(s) for s in steps], initial_value=self._label(steps[0]))
+            self.pick = gui.add_dropdown(
+                "step", [self._label(s) for s in steps], initial_value=self._label(steps[0])
+            )
         back.on_click(lambda _: session.guarded(lambda: self.open(self.k - 1)))
         forward.on_click(lambda _: session.guarded(lambda: self.open(self.k + 1)))
         self.pick.on_update(lambda _: session.guarded(self._picked))
@@ -71,7 +90,8 @@ class Lesson:
         if step.number not in self.runs:
             self.runs[step.number] = run_step(step)
         sr = self.runs[step.number]
-        self.s.load(step_source(step, self.steps), sr.iteration)  # the scene first: the text then describes it
+        # the scene first: the text then describes it
+        self.s.load(step_source(step, self.steps), sr.iteration)
         self.heading.content = f"**Step {step.number} of {len(self.steps)}: {step.title}**"
         self.text.content = sr.text
         self.try_text.content = f"**Try:** {sr.try_text}\n\n{CHANGED}"

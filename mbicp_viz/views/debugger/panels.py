@@ -66,8 +66,8 @@ class ParamPanel:
     message: viser.GuiMarkdownHandle
 
     def show(self, params: Params) -> None:
-        """Put every box on ``params``: after any change, the page shows what the matcher uses (a box
-        edited without Enter goes back), in the words the user typed when they say the same."""
+        """Put every box on ``params``: after any change, the page shows what the matcher uses (a
+        box edited without Enter goes back), in the words the user typed when they say the same."""
         for s in field_specs(type(params)):
             value, box = getattr(params, s.name), self.boxes[s.name]
             box.show(box.text if _says(s, box.text, value) else shown_value(s, value))
@@ -87,10 +87,24 @@ def param_panel(gui, title: str, params: Params, order: float, on_commit) -> Par
         message = gui.add_markdown("")
         boxes = {}
         for s in field_specs(type(params)):
-            lo, hi = (None if b is None else (math.degrees(b) if s.unit == "rad" else b) for b in (s.lo, s.hi))
-            bounds = "" if lo is None and hi is None else f" [{lo:g} .. {hi:g}]" if s.type is not bool else ""
-            boxes[s.name] = CommitBox(gui, box_label(s), shown_value(s, getattr(params, s.name)),
-                                      f"{s.help}{bounds}", lambda text, name=s.name: on_commit(name, text))
+            lo, hi = (
+                None if b is None else (math.degrees(b) if s.unit == "rad" else b)
+                for b in (s.lo, s.hi)
+            )
+            bounds = (
+                ""
+                if lo is None and hi is None
+                else f" [{lo:g} .. {hi:g}]"
+                if s.type is not bool
+                else ""
+            )
+            boxes[s.name] = CommitBox(
+                gui,
+                box_label(s),
+                shown_value(s, getattr(params, s.name)),
+                f"{s.help}{bounds}",
+                lambda text, name=s.name: on_commit(name, text),
+            )
     return ParamPanel(folder, boxes, message)
 
 
@@ -101,26 +115,37 @@ def _numeric(x_label: str, *axes: tuple[str, str, int, float]) -> dict:
     line on an auto-ranged axis starts with one)."""
     scales = {"x": uplot.Scale(time=False, auto=True)}
     scales |= {key: uplot.Scale(auto=False, range=(0.0, top)) for key, _, _, top in axes}
-    return dict(scales=scales, axes=(uplot.Axis(label=x_label, scale="x"),
-                                     *(uplot.Axis(label=label, scale=key, side=side) for key, label, side, _ in axes
-                                       if label)))
+    return dict(
+        scales=scales,
+        axes=(
+            uplot.Axis(label=x_label, scale="x"),
+            *(
+                uplot.Axis(label=label, scale=key, side=side)
+                for key, label, side, _ in axes
+                if label
+            ),
+        ),
+    )
 
 
 def _line(label: str, scale: str, style: scene.Style, dash: bool = False) -> uplot.Series:
-    return uplot.Series(label=label, scale=scale, stroke=_css(style.color), width=2, dash=[6, 4] if dash else None)
+    return uplot.Series(
+        label=label, scale=scale, stroke=_css(style.color), width=2, dash=[6, 4] if dash else None
+    )
 
 
 def _top(values) -> float:
-    """The top of a fixed y range: a little above the largest finite value (1 when there is none)."""
+    """The top of a fixed y range: a little above the largest finite value (1 when there is "
+    "none)."""
     v = np.asarray([x for x in values if x is not None], dtype=float)
     v = v[np.isfinite(v)]
     return float(v.max()) * 1.08 if len(v) and v.max() > 0 else 1.0
 
 
 class Plots:
-    """Error and threshold of every run per iteration; the pair distances and (PSM, PMWN) the cost per
-    shift of one run at the current iteration. The plots follow the runs: each run its lines, each
-    line its legend entry, numeric axes with units."""
+    """Error and threshold of every run per iteration; the pair distances and (PSM, PMWN) the cost
+    per shift of one run at the current iteration. The plots follow the runs: each run its lines,
+    each line its legend entry, numeric axes with units."""
 
     def __init__(self, gui, order: float):
         self.gui, self.shown = gui, None
@@ -128,7 +153,8 @@ class Plots:
             self.error = self.histogram = self.cost = None
 
     def show_runs(self, state: DebugState) -> None:
-        """Rebuild the plots when the runs (matchers, parameters, pair, guess) change; then fill them."""
+        """Rebuild the plots when the runs (matchers, parameters, pair, guess) change; then fill "
+        "them."""
         key = tuple(id(r) for r in state.runs)
         if key != self.shown:
             self.shown = key
@@ -145,22 +171,47 @@ class Plots:
         polar = polar_run(state)
         first = state.runs[0]
         self.error = self.gui.add_uplot(
-            data=error_series(state), series=error_legend(state), aspect=1.6, title="error and threshold per iteration",
-            **_numeric("iteration", ("err", "error [m²]", 3, _top(e.error for e in events)),
-                       ("m", "threshold [m]", 1, _top(e.threshold for e in events))))
-        counts = [scene.histogram(e.pairs.distance, e.threshold).counts.max() for e in first.iterations
-                  if len(e.pairs.distance)]
+            data=error_series(state),
+            series=error_legend(state),
+            aspect=1.6,
+            title="error and threshold per iteration",
+            **_numeric(
+                "iteration",
+                ("err", "error [m²]", 3, _top(e.error for e in events)),
+                ("m", "threshold [m]", 1, _top(e.threshold for e in events)),
+            ),
+        )
+        counts = [
+            scene.histogram(e.pairs.distance, e.threshold).counts.max()
+            for e in first.iterations
+            if len(e.pairs.distance)
+        ]
         self.histogram = self.gui.add_uplot(
-            data=histogram_series(state), series=histogram_legend(state), aspect=1.6,
+            data=histogram_series(state),
+            series=histogram_legend(state),
+            aspect=1.6,
             title=f"{first.name}: pair distances (this iteration)",
-            **_numeric("pair distance [m]", ("n", "pairs per bin", 3, _top(counts)), ("mark", "", 1, 1.0)))
-        costs = [np.nanmax(e.polar.cost) for e in (polar.iterations if polar else []) if np.any(np.isfinite(e.polar.cost))]
+            **_numeric(
+                "pair distance [m]", ("n", "pairs per bin", 3, _top(counts)), ("mark", "", 1, 1.0)
+            ),
+        )
+        costs = [
+            np.nanmax(e.polar.cost)
+            for e in (polar.iterations if polar else [])
+            if np.any(np.isfinite(e.polar.cost))
+        ]
         self.cost = self.gui.add_uplot(
-            data=cost_series(state) or (np.zeros(1),) * 3, aspect=1.6, visible=polar is not None,
+            data=cost_series(state) or (np.zeros(1),) * 3,
+            aspect=1.6,
+            visible=polar is not None,
             title=f"{polar.name if polar else 'polar matchers'}: cost per shift (this iteration)",
-            series=(uplot.Series(label="shift [deg]"), _line("cost [m]", "m", scene.COST),
-                    _line(scene.FIT.label, "m", scene.FIT)),
-            **_numeric("shift [deg]", ("m", "cost [m]", 3, _top(costs))))
+            series=(
+                uplot.Series(label="shift [deg]"),
+                _line("cost [m]", "m", scene.COST),
+                _line(scene.FIT.label, "m", scene.FIT),
+            ),
+            **_numeric("shift [deg]", ("m", "cost [m]", 3, _top(costs))),
+        )
 
     def iteration(self, state: DebugState) -> None:
         """The plots of the current iteration."""
@@ -176,22 +227,36 @@ def _css(rgb) -> str:
 
 def legend_html(styles: list[scene.Style], grid_m: float | None = None) -> str:
     """A swatch and a label per style (the layers shown now), and the grid's cell size."""
-    grid = (f'<div class="legend-entry" style="font-size:12px;line-height:1.6;color:#666">grid: {grid_m:g} m cells, '
-            f'thicker every {5 * grid_m:g} m; x right, y up (the reference laser frame)</div>' if grid_m else "")
+    grid = (
+        '<div class="legend-entry" style="font-size:12px;line-height:1.6;color:#666">grid: '
+        f"{grid_m:g} m cells, "
+        f"thicker every {5 * grid_m:g} m; x right, y up (the reference laser frame)</div>"
+        if grid_m
+        else ""
+    )
     rows = "".join(
-        f'<div class="legend-entry" style="display:flex;align-items:center;gap:6px;font-size:12px;line-height:1.6">'
-        f'<span style="display:inline-block;width:12px;height:12px;border-radius:6px;background:{_css(s.color)}">'
-        f'</span><span>{html.escape(s.label)}</span></div>' for s in styles)
-    return f'<div class="mbicp-legend" style="padding:2px 8px">{rows or "no layer shown"}{grid}</div>'
+        '<div class="legend-entry" '
+        'style="display:flex;align-items:center;gap:6px;font-size:12px;line-height:1.6">'
+        '<span style="display:inline-block;width:12px;height:12px;border-radius:6px;'
+        f'background:{_css(s.color)}">'
+        f"</span><span>{html.escape(s.label)}</span></div>"
+        for s in styles
+    )
+    return (
+        f'<div class="mbicp-legend" style="padding:2px 8px">{rows or "no layer shown"}{grid}</div>'
+    )
 
 
 # ---- plot data (what the plots show at the current iteration) ---------------------------------
+
 
 def error_legend(state: DebugState) -> tuple[uplot.Series, ...]:
     series = [uplot.Series(label="iteration")]
     for run in state.runs:
         own = scene.RUN_COLORS[run.name] if len(state.runs) > 1 else scene.ERROR.color
-        series.append(_line(f"{run.name}: {scene.ERROR.label}", "err", replace(scene.ERROR, color=own)))
+        series.append(
+            _line(f"{run.name}: {scene.ERROR.label}", "err", replace(scene.ERROR, color=own))
+        )
         thr = scene.threshold_style(run.start.params)
         own = scene.RUN_COLORS[run.name] if len(state.runs) > 1 else thr.color
         series.append(_line(f"{run.name}: {thr.label}", "m", replace(thr, color=own), dash=True))
@@ -199,7 +264,8 @@ def error_legend(state: DebugState) -> tuple[uplot.Series, ...]:
 
 
 def error_series(state: DebugState) -> tuple[np.ndarray, ...]:
-    """Iteration, then error [m²] and threshold [m] of each run (NaN past its end or without one)."""
+    """Iteration, then error [m²] and threshold [m] of each run (NaN past its end or without "
+    "one)."""
     n = max(state.max_iteration(), 1)
     out = [np.arange(1, n + 1, dtype=float)]
     for run in state.runs:
@@ -214,10 +280,13 @@ def error_series(state: DebugState) -> tuple[np.ndarray, ...]:
 def histogram_legend(state: DebugState) -> tuple[uplot.Series, ...]:
     params = state.runs[0].start.params
     cut = scene.hard_cut(params)
-    return (uplot.Series(label="distance [m]"), _line(scene.HIST_BARS.label, "n", scene.HIST_BARS),
-            _line(scene.MEDIAN.label, "mark", scene.MEDIAN),
-            _line(scene.threshold_style(params).label, "mark", scene.THRESHOLD),
-            _line(cut[0].label if cut else "no hard cut", "mark", scene.HARD_CUT, dash=True))
+    return (
+        uplot.Series(label="distance [m]"),
+        _line(scene.HIST_BARS.label, "n", scene.HIST_BARS),
+        _line(scene.MEDIAN.label, "mark", scene.MEDIAN),
+        _line(scene.threshold_style(params).label, "mark", scene.THRESHOLD),
+        _line(cut[0].label if cut else "no hard cut", "mark", scene.HARD_CUT, dash=True),
+    )
 
 
 def polar_run(state: DebugState):
@@ -240,7 +309,10 @@ def histogram_series(state: DebugState) -> tuple[np.ndarray, ...]:
     rows = [(x, b, nan, nan, nan) for x, b in zip(bx, by)]
     for column, value in ((2, h.median), (3, h.threshold), (4, cut[1] if cut else None)):
         if value is not None:
-            rows += [tuple(value if c == 0 else (y if c == column else nan) for c in range(5)) for y in (0.0, 1.0)]
+            rows += [
+                tuple(value if c == 0 else (y if c == column else nan) for c in range(5))
+                for y in (0.0, 1.0)
+            ]
     rows.sort(key=lambda r: r[0])  # stable: a line's two points stay in order
     x, bars, *lines = np.array(rows).T
     gaps = np.isnan(bars)
@@ -249,7 +321,8 @@ def histogram_series(state: DebugState) -> tuple[np.ndarray, ...]:
 
 
 def cost_series(state: DebugState) -> tuple[np.ndarray, ...] | None:
-    """PSM/PMWN: the orientation step's cost per shift and the fit at its minimum; None otherwise."""
+    """PSM/PMWN: the orientation step's cost per shift and the fit at its minimum; None "
+    "otherwise."""
     run = polar_run(state)
     ev = state.event(run) if run is not None else None
     polar = ev.polar if ev is not None else None

@@ -23,17 +23,25 @@ from .state import DebugState, Source
 
 def grid_cell(extent_m: float) -> float:
     """A round grid cell for a scene ``extent_m`` across: 10 to 40 cells over it."""
-    return next((c for c in (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0) if extent_m / c <= 40), 100.0)
+    return next(
+        (c for c in (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0) if extent_m / c <= 40), 100.0
+    )
 
 
-COMPILING = "Compiling the matchers' kernels (the first start after an install takes a few seconds)…"
+COMPILING = (
+    "Compiling the matchers' kernels (the first start after an install takes a few seconds)…"
+)
 
 
 class Session:
     """The wiring of one tab: it reads the controls, drives the model and redraws."""
 
-    def __init__(self, client: viser.ClientHandle | viser.ViserServer, source: Source,
-                 ready: threading.Event | None = None):
+    def __init__(
+        self,
+        client: viser.ClientHandle | viser.ViserServer,
+        source: Source,
+        ready: threading.Event | None = None,
+    ):
         """``client``: a browser tab, or the server itself (tests: state shared by every tab).
         Without ``ready`` the first match runs at once; with it, the caller runs ``first_match``
         and the page says meanwhile that the matchers' kernels are being compiled."""
@@ -49,9 +57,12 @@ class Session:
             self.say(COMPILING)
 
     def show_notes(self) -> None:
-        """What to look at, and how the log on screen was read (a scan stream picked is read anew)."""
+        """What to look at, and how the log on screen was read (a scan stream picked is read "
+        "anew)."""
         src = self.state.source
-        self.h_notes.content = "\n\n".join(filter(None, [src.note, *(f"*{n}*" for n in src.log.notes)]))
+        self.h_notes.content = "\n\n".join(
+            filter(None, [src.note, *(f"*{n}*" for n in src.log.notes)])
+        )
         self.h_notes.visible = bool(self.h_notes.content)
 
     def first_match(self, ready: threading.Event | None = None) -> None:
@@ -90,7 +101,8 @@ class Session:
         self.h_legend = gui.add_html(panels.legend_html([]), order=3)
         self.camera = TopDownCamera(self.client)
         gui.add_button("fit the view", order=4, hint="top-down over the reference scan").on_click(
-            lambda _: self.fit_view())
+            lambda _: self.fit_view()
+        )
         if src.rows_label:
             controls.Failures(self, gui, order=5)
         self.playback = controls.Playback(self, gui, order=10)
@@ -103,7 +115,9 @@ class Session:
         self.plots = panels.Plots(gui, order=70)
         with gui.add_folder("Export", order=80):
             gui.add_button("export .rrd").on_click(lambda _: self.guarded(self.export_rrd))
-            gui.add_button("save parameters (TOML)").on_click(lambda _: self.guarded(self.export_params))
+            gui.add_button("save parameters (TOML)").on_click(
+                lambda _: self.guarded(self.export_params)
+            )
 
     # ---- showing the model ------------------------------------------------------------------
     def say(self, text: str) -> None:
@@ -127,7 +141,8 @@ class Session:
         self.guess.show()
 
     def open_row(self, row) -> None:
-        """Reopen an evaluated pair as it ran; the controls then show its matcher, pair and guess."""
+        """Reopen an evaluated pair as it ran; the controls then show its matcher, pair and "
+        "guess."""
         error = self.state.open_row(row)
         if not error:
             self.matchers.show()
@@ -149,7 +164,8 @@ class Session:
             self.shown = list(shown.values())
             self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
             self.playback.text.content = "  \n".join(
-                f"**{r.name}**: {self.state.iteration_text(r)}" for r in self.state.runs)
+                f"**{r.name}**: {self.state.iteration_text(r)}" for r in self.state.runs
+            )
             if self.plots.shown is not None:
                 self.plots.iteration(self.state)
 
@@ -170,9 +186,16 @@ class Session:
         size = (np.ceil((hi - lo) / self.grid_m) + 4) * self.grid_m
         centre = np.round((lo + hi) / 2 / self.grid_m) * self.grid_m
         self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
-        self.client.scene.add_grid("/grid", float(size[0]), float(size[1]), plane="xy", cell_size=self.grid_m,
-                                   section_size=self.grid_m * 5, position=(float(centre[0]), float(centre[1]), -0.01),
-                                   shadow_opacity=0.0)
+        self.client.scene.add_grid(
+            "/grid",
+            float(size[0]),
+            float(size[1]),
+            plane="xy",
+            cell_size=self.grid_m,
+            section_size=self.grid_m * 5,
+            position=(float(centre[0]), float(centre[1]), -0.01),
+            shadow_opacity=0.0,
+        )
 
     def guarded(self, fn) -> None:
         """Run a callback under the tab's lock; a bug inside it is shown in the page and the server
@@ -194,8 +217,12 @@ class Session:
     def export_params(self) -> str:
         edited = self.matchers.edited
         text = params_to_toml(self.state.params[edited], self.state.search)
-        self.client.send_file_download(f"params-{edited}.toml", text.encode(), save_immediately=True)
-        self.h_status.content = f"saved the {edited} parameters and the search's (TOML, readable with --params)"
+        self.client.send_file_download(
+            f"params-{edited}.toml", text.encode(), save_immediately=True
+        )
+        self.h_status.content = (
+            f"saved the {edited} parameters and the search's (TOML, readable with --params)"
+        )
         return text
 
     def close(self) -> None:

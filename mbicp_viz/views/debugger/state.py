@@ -15,8 +15,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mbicp_viz.core import (MATCHERS, FieldSpec, IterationEvent, ParamError, Params, Pose2, ScanError, SearchParams,
-                            field_specs, pose_error)
+from mbicp_viz.core import (
+    MATCHERS,
+    FieldSpec,
+    IterationEvent,
+    ParamError,
+    Params,
+    Pose2,
+    ScanError,
+    SearchParams,
+    field_specs,
+    pose_error,
+)
 from mbicp_viz.core.agreement import INLIER_RADIUS_M, inlier_fraction
 from mbicp_viz.core.params import check_value
 from mbicp_viz.errors import InputError
@@ -46,21 +56,34 @@ class Source:
     search: SearchParams = field(default_factory=SearchParams)
     note: str = ""  # Markdown shown above the panels (a scenario's "what to look at")
     teaching: bool = False  # iso-distance curves on from the start
-    failures: list[EvalRow] = field(default_factory=list)  # an evaluation's failed pairs, worst first
+    # an evaluation's failed pairs, worst first
+    failures: list[EvalRow] = field(default_factory=list)
     rows_label: str = ""  # the rows file they come from, and how many rows it holds
     opened: EvalRow | None = None  # the row the first match reopens
     options: ReadOptions | None = None  # how the log was read (to read another of its scan streams)
-    shown: tuple[str, ...] | None = None  # the layers (legend labels) shown at first; None: each style's default
+    shown: tuple[str, ...] | None = (
+        None  # the layers (legend labels) shown at first; None: each style's default
+    )
     lesson: tuple = ()  # the lesson's steps (lesson/steps.py), in lesson mode
     lesson_step: int = 0  # the step a new tab opens (0-based)
-    view: tuple[float, float, float, float] | None = None  # what "fit the view" shows [m]; None: the reference scan
+    view: tuple[float, float, float, float] | None = (
+        None  # what "fit the view" shows [m]; None: the reference scan
+    )
 
 
-# What the preset picker shows for a matcher's parameters: its defaults, a preset's name, or neither.
+# What the preset picker shows for a matcher's parameters: its defaults, a preset's name, or
+# neither.
 DEFAULTS, TYPED = "defaults", "as typed"
 
 # What a failed match can raise that the user must read rather than a traceback.
-MATCH_ERRORS = (ScanError, ParamError, InputError, ValueError, FloatingPointError, np.linalg.LinAlgError)
+MATCH_ERRORS = (
+    ScanError,
+    ParamError,
+    InputError,
+    ValueError,
+    FloatingPointError,
+    np.linalg.LinAlgError,
+)
 
 
 def parse_entry(spec: FieldSpec, typed: str):
@@ -100,7 +123,8 @@ def parsed(params: Params, typed: dict[str, str]) -> Params:
 
 
 def shown_value(spec: FieldSpec, value) -> str:
-    """A parameter as its box shows it (degrees for radian fields), round-tripping ``parse_entry``."""
+    """A parameter as its box shows it (degrees for radian fields), round-tripping "
+    "``parse_entry``."""
     if spec.type is bool:
         return "true" if value else "false"
     if spec.unit == "rad":
@@ -118,7 +142,9 @@ class DebugState:
 
     def __init__(self, source: Source):
         self.source = source
-        self.params: dict[str, Params] = {n: source.params.get(n, m.params_type()) for n, m in MATCHERS.items()}
+        self.params: dict[str, Params] = {
+            n: source.params.get(n, m.params_type()) for n, m in MATCHERS.items()
+        }
         self.search = source.search
         self.algorithms: list[str] = list(source.algorithms)
         self.pair = source.pair
@@ -128,8 +154,12 @@ class DebugState:
             self._apply_row(source.opened)
         self.runs: list[Run] = []
         self.iteration = 0
-        self.visible = {s.label: s.label in source.shown if source.shown is not None else
-                        s.on or (source.teaching and s in (scene.ISO_METRIC, scene.ISO_EUCLID)) for s in scene.STYLES}
+        self.visible = {
+            s.label: s.label in source.shown
+            if source.shown is not None
+            else s.on or (source.teaching and s in (scene.ISO_METRIC, scene.ISO_EUCLID))
+            for s in scene.STYLES
+        }
         self.iso_point: int | None = None
         self.match_ms = 0.0
         self.message = ""  # the last failure, shown to the user
@@ -144,7 +174,8 @@ class DebugState:
         return self.source.log.scan(self.pair[1])
 
     def truth(self) -> Pose2 | None:
-        """The known answer: the source's, else the log's scan poses unless the guess came from them."""
+        """The known answer: the source's, else the log's scan poses unless the guess came from "
+        "them."""
         if self.source.truth is not None:
             return self.source.truth
         return stored_truth(self.ref, self.obj) if self.guess_source != "scan poses" else None
@@ -170,20 +201,24 @@ class DebugState:
         return self.rematch()
 
     def set_topic(self, topic: str) -> str | None:
-        """Read another scan stream of the file (a bag's topic, a CARMEN log's laser message type) and
-        open its first consecutive pair."""
+        """Read another scan stream of the file (a bag's topic, a CARMEN log's laser message type)
+        and open its first consecutive pair."""
         from dataclasses import replace
 
         src = self.source
         try:
             log = read_log(src.log.path, replace(src.options or ReadOptions(), topic=topic))
             if len(log.scans) < 2:
-                raise InputError(f"topic {topic} has fewer than two usable scans", log.path, field="topic")
+                raise InputError(
+                    f"topic {topic} has fewer than two usable scans", log.path, field="topic"
+                )
         except InputError as e:
             return str(e)
         old = self.source, self.pair, self.guess, self.guess_source
-        self.source, self.pair = replace(src, log=log, options=replace(src.options or ReadOptions(), topic=topic)), \
-            log.consecutive_pairs(1)[0]
+        self.source, self.pair = (
+            replace(src, log=log, options=replace(src.options or ReadOptions(), topic=topic)),
+            log.consecutive_pairs(1)[0],
+        )
         try:
             self.guess, self.guess_source = self._pair_guess()
             err = self.rematch()
@@ -202,15 +237,28 @@ class DebugState:
     def open_row(self, row: EvalRow) -> str | None:
         """Reopen an evaluated pair exactly as the evaluation ran it: its scans, matcher,
         parameters and initial guess. None, or why not (then nothing changes)."""
-        old = self.pair, self.opened, list(self.algorithms), self.params[row.algorithm], self.guess, self.guess_source
+        old = (
+            self.pair,
+            self.opened,
+            list(self.algorithms),
+            self.params[row.algorithm],
+            self.guess,
+            self.guess_source,
+        )
         try:
             self._apply_row(row)
             err = self.rematch()
         except InputError as e:
             err = str(e)
         if err:
-            (self.pair, self.opened, self.algorithms, self.params[row.algorithm], self.guess,
-             self.guess_source) = old
+            (
+                self.pair,
+                self.opened,
+                self.algorithms,
+                self.params[row.algorithm],
+                self.guess,
+                self.guess_source,
+            ) = old
         return err
 
     # ---- matching ---------------------------------------------------------------------------
@@ -218,7 +266,10 @@ class DebugState:
         """Re-run every shown matcher; None, or why it failed (the last good runs are kept)."""
         t0 = time.perf_counter()
         try:
-            runs = [run_match(n, self.ref, self.obj, self.guess, self.params[n]) for n in self.algorithms]
+            runs = [
+                run_match(n, self.ref, self.obj, self.guess, self.params[n])
+                for n in self.algorithms
+            ]
         except MATCH_ERRORS as e:
             self.message = f"The match failed and the last good result is kept: {e}"
             return self.message
@@ -253,14 +304,18 @@ class DebugState:
     def use_preset(self, matcher: str, name: str) -> str | None:
         """A matcher's defaults (``DEFAULTS``) or one of its presets (``--params NAME``), as
         ``set_params`` applies typed values."""
-        return self._use_params(matcher, MATCHERS[matcher].params_type() if name == DEFAULTS
-                                else presets_for(matcher)[name])
+        return self._use_params(
+            matcher,
+            MATCHERS[matcher].params_type() if name == DEFAULTS else presets_for(matcher)[name],
+        )
 
     def preset_of(self, matcher: str) -> str:
         """What a matcher's parameters are: ``DEFAULTS``, the name of a preset, or ``TYPED``."""
         if self.params[matcher] == MATCHERS[matcher].params_type():
             return DEFAULTS
-        return next((n for n, p in presets_for(matcher).items() if p == self.params[matcher]), TYPED)
+        return next(
+            (n for n, p in presets_for(matcher).items() if p == self.params[matcher]), TYPED
+        )
 
     def _use_params(self, matcher: str, new: Params) -> str | None:
         if new == self.params[matcher]:
@@ -297,7 +352,9 @@ class DebugState:
             found = correlative_search(self.ref, self.obj, self.guess, self.search)
         except ParamError as e:  # a search its parameters make too costly
             return f"the search was refused: {e}"
-        return self.set_guess(found.pose, f"searched within {self.search.window_text()} of the last guess")
+        return self.set_guess(
+            found.pose, f"searched within {self.search.window_text()} of the last guess"
+        )
 
     # ---- what is shown ----------------------------------------------------------------------
     def event(self, run: Run) -> IterationEvent | None:
@@ -309,8 +366,18 @@ class DebugState:
     def layers(self, run: Run) -> list[scene.Layer]:
         """The scene layers of ``run`` at the current iteration; in compare mode each run's object
         scan takes its matcher's colour."""
-        return scene.pair_layers(self.ref, self.obj, run.name, run.start, run.iterations, self.iteration, self.truth(),
-                                 stored_odometry(self.ref, self.obj), len(self.runs) > 1, self.iso_point)
+        return scene.pair_layers(
+            self.ref,
+            self.obj,
+            run.name,
+            run.start,
+            run.iterations,
+            self.iteration,
+            self.truth(),
+            stored_odometry(self.ref, self.obj),
+            len(self.runs) > 1,
+            self.iso_point,
+        )
 
     def iteration_text(self, run: Run) -> str:
         ev = self.event(run)
@@ -327,16 +394,27 @@ class DebugState:
         odometry = stored_odometry(self.ref, self.obj)
         for run in self.runs:
             r = reported(run.result, frames, True)
-            lines = [f"**{label}** {value}" for label, value in text.result_fields(r, frames.frame_text())]
+            lines = [
+                f"**{label}** {value}"
+                for label, value in text.result_fields(r, frames.frame_text())
+            ]
             on_ref = inlier_fraction(self.ref, self.obj, run.result.pose)
             lines.append(f"**on ref** {text.agreement_line(on_ref, INLIER_RADIUS_M)}")
             if truth is not None:
-                lines.append(f"**known answer** {text.truth_line(r.pose, frames.reported(truth, True))}")
+                lines.append(
+                    f"**known answer** {text.truth_line(r.pose, frames.reported(truth, True))}"
+                )
             if odometry is not None:
-                lines.append(f"**odometry** {text.pose_distance(r.pose, frames.reported(odometry, True))} from "
-                             f"the odometry ({self.source.log.odometry_source or 'the log'})")
+                lines.append(
+                    f"**odometry** {text.pose_distance(r.pose, frames.reported(odometry, True))} "
+                    "from "
+                    f"the odometry ({self.source.log.odometry_source or 'the log'})"
+                )
             parts.append("  \n".join(lines))
-        parts.append(f"initial guess {self.guess} (laser frame; {self.guess_source}); match time {self.match_ms:.1f} ms")
+        parts.append(
+            f"initial guess {self.guess} (laser frame; {self.guess_source}); match time "
+            f"{self.match_ms:.1f} ms"
+        )
         if (row := self.opened) is not None and self.pair == (row.ref, row.obj):
             parts.append(self._row_markdown(row))
         return "\n\n".join(parts)
@@ -346,22 +424,36 @@ class DebugState:
         from mbicp_viz.evaluation.failures import failed, failure_reason
         from mbicp_viz.evaluation.single import reported
 
-        lines = [f"**evaluation** ({self.source.rows_label}, line {row.line}): {row.algorithm} gave {row.pose} "
-                 f"(motion of the {row.frame} frame)"]
+        lines = [
+            f"**evaluation** ({self.source.rows_label}, line {row.line}): {row.algorithm} gave "
+            f"{row.pose} "
+            f"(motion of the {row.frame} frame)"
+        ]
         if row.error_xy is not None:
-            lines.append(f"{row.error_xy * 1000:.1f} mm, {math.degrees(row.error_theta):.3f} deg from the scan poses")
+            lines.append(
+                f"{row.error_xy * 1000:.1f} mm, {math.degrees(row.error_theta):.3f} deg from the "
+                "scan poses"
+            )
         if failed(row):
             lines.append(f"failed: {failure_reason(row)}")
         run = next((r for r in self.runs if r.name == row.algorithm), None)
         frames = self.source.log.frames
         if run is None or row.frame not in (frames.frame_name(True), frames.frame_name(False)):
-            lines.append(f"not comparable with this run (its matcher or its frame differ: this log reads as "
-                         f"{frames.frame_name(True)})")
+            lines.append(
+                f"not comparable with this run (its matcher or its frame differ: this log reads as "
+                f"{frames.frame_name(True)})"
+            )
         else:
-            et, er = pose_error(reported(run.result, frames, row.frame == frames.frame_name(True)).pose, row.pose)
-            lines.append("this run reproduces it (the poses agree within 1 nm and 1 nrad)" if et < 1e-9 and er < 1e-9
-                         else f"this run differs from it by {et * 1000:.1f} mm, {math.degrees(er):.3f} deg (its "
-                              "parameters, guess or scans changed)")
+            et, er = pose_error(
+                reported(run.result, frames, row.frame == frames.frame_name(True)).pose, row.pose
+            )
+            lines.append(
+                "this run reproduces it (the poses agree within 1 nm and 1 nrad)"
+                if et < 1e-9 and er < 1e-9
+                else f"this run differs from it by {et * 1000:.1f} mm, {math.degrees(er):.3f} deg "
+                "(its "
+                "parameters, guess or scans changed)"
+            )
         return "  \n".join(lines)
 
     def pair_label(self) -> str:
@@ -373,7 +465,11 @@ class DebugState:
         run shows it at the current iteration."""
         run = self.runs[0]
         ev = self.event(run)
-        moved = ev.moved_points if ev is not None else run.start.initial_guess.apply(run.start.obj_points[run.start.used])
+        moved = (
+            ev.moved_points
+            if ev is not None
+            else run.start.initial_guess.apply(run.start.obj_points[run.start.used])
+        )
         return int(run.start.used[int(np.argmin(np.hypot(*(moved - np.asarray(xy)).T)))])
 
     def session_rrd(self) -> bytes:
@@ -385,9 +481,18 @@ class DebugState:
 
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "session.rrd"
-            runs = [Run(n, self.ref, self.obj, self.guess, self.params[n], self.truth()) for n in self.algorithms]
-            record(runs, str(path), teaching=True, recording_id="mbicp-viz/session",
-                   about=f"# mbicp-viz session\n\n{', '.join(filter(None, (self.source.label, self.pair_label())))}"
-                         f"; initial guess "
-                         f"{self.guess} ({self.guess_source})\n")
+            runs = [
+                Run(n, self.ref, self.obj, self.guess, self.params[n], self.truth())
+                for n in self.algorithms
+            ]
+            record(
+                runs,
+                str(path),
+                teaching=True,
+                recording_id="mbicp-viz/session",
+                about="# mbicp-viz "
+                f"session\n\n{', '.join(filter(None, (self.source.label, self.pair_label())))}"
+                f"; initial guess "
+                f"{self.guess} ({self.guess_source})\n",
+            )
             return path.read_bytes()

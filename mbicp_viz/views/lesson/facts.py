@@ -25,28 +25,44 @@ def scan_facts(scan: Scan) -> dict[str, object]:
     """A laser scan as the sensor reports it: beams, valid and invalid readings, field of view,
     angular step and the ranges of its valid readings."""
     r = scan.ranges[scan.valid]
-    return {"beams": len(scan.ranges), "valid": scan.n_valid, "invalid": len(scan.ranges) - scan.n_valid,
-            "fov_deg": math.degrees(scan.angular_span()),
-            "step_deg": math.degrees(scan.angular_span() / max(len(scan.ranges) - 1, 1)),
-            "nearest_m": float(r.min()), "farthest_m": float(r.max()), "median_m": float(np.median(r))}
+    return {
+        "beams": len(scan.ranges),
+        "valid": scan.n_valid,
+        "invalid": len(scan.ranges) - scan.n_valid,
+        "fov_deg": math.degrees(scan.angular_span()),
+        "step_deg": math.degrees(scan.angular_span() / max(len(scan.ranges) - 1, 1)),
+        "nearest_m": float(r.min()),
+        "farthest_m": float(r.max()),
+        "median_m": float(np.median(r)),
+    }
 
 
 def pose_facts(pose: Pose2) -> dict[str, object]:
     """A pose (the guess, the known answer): x, y, heading, and how far it is from the origin."""
-    return {"x_m": pose.x, "y_m": pose.y, "theta_deg": math.degrees(pose.theta),
-            "distance_m": math.hypot(pose.x, pose.y)}
+    return {
+        "x_m": pose.x,
+        "y_m": pose.y,
+        "theta_deg": math.degrees(pose.theta),
+        "distance_m": math.hypot(pose.x, pose.y),
+    }
 
 
 def iteration_facts(ev: IterationEvent) -> dict[str, object]:
     """One iteration's pairs by kind and status, its threshold and its step."""
     p = ev.pairs
     kept = p.count(status=PairStatus.KEPT)
-    return {"number": ev.iteration, "pairs": len(p.kind), "point": p.count(kind=PairKind.POINT),
-            "interpolated": p.count(kind=PairKind.INTERPOLATED), "kept": kept, "rejected": len(p.kind) - kept,
-            "threshold_m": ev.threshold if ev.threshold is not None else float("nan"),
-            "median_m": float(np.median(p.distance)) if len(p.distance) else float("nan"),
-            "step_mm": 1000.0 * math.hypot(ev.increment.x, ev.increment.y),
-            "step_deg": math.degrees(ev.increment.theta)}
+    return {
+        "number": ev.iteration,
+        "pairs": len(p.kind),
+        "point": p.count(kind=PairKind.POINT),
+        "interpolated": p.count(kind=PairKind.INTERPOLATED),
+        "kept": kept,
+        "rejected": len(p.kind) - kept,
+        "threshold_m": ev.threshold if ev.threshold is not None else float("nan"),
+        "median_m": float(np.median(p.distance)) if len(p.distance) else float("nan"),
+        "step_mm": 1000.0 * math.hypot(ev.increment.x, ev.increment.y),
+        "step_deg": math.degrees(ev.increment.theta),
+    }
 
 
 def run_facts(run: Run, truth: Pose2 | None, shown: int) -> dict[str, object]:
@@ -55,24 +71,40 @@ def run_facts(run: Run, truth: Pose2 | None, shown: int) -> dict[str, object]:
     grid and its degeneracy indicator when it has them."""
     r = run.result
     out: dict[str, object] = {
-        "iterations": r.iterations, "status": "converged" if r.converged else f"stopped ({r.reason.value})",
-        "kept": r.pairs_kept, "rejected": r.pairs_rejected,
-        "x_m": r.pose.x, "y_m": r.pose.y, "theta_deg": math.degrees(r.pose.theta)}
+        "iterations": r.iterations,
+        "status": "converged" if r.converged else f"stopped ({r.reason.value})",
+        "kept": r.pairs_kept,
+        "rejected": r.pairs_rejected,
+        "x_m": r.pose.x,
+        "y_m": r.pose.y,
+        "theta_deg": math.degrees(r.pose.theta),
+    }
     if truth is not None:
         et, er = pose_error(r.pose, truth)
         out |= {"error_mm": 1000.0 * et, "error_deg": math.degrees(er)}
     if run.iterations:
-        out |= {"first": iteration_facts(run.iterations[0]), "last": iteration_facts(run.iterations[-1]),
-                "shown": iteration_facts(run.iterations[min(max(shown, 1), len(run.iterations)) - 1])}
+        out |= {
+            "first": iteration_facts(run.iterations[0]),
+            "last": iteration_facts(run.iterations[-1]),
+            "shown": iteration_facts(run.iterations[min(max(shown, 1), len(run.iterations)) - 1]),
+        }
         polar = run.iterations[-1].polar
         if polar is not None and polar.metric_weight is not None:
             out["metric_weight"] = polar.metric_weight
     if r.degeneracy is not None:
-        out |= {"condition": r.degeneracy.condition_number, "weakest_deg": r.degeneracy.weakest_heading_deg}
+        out |= {
+            "condition": r.degeneracy.condition_number,
+            "weakest_deg": r.degeneracy.weakest_heading_deg,
+        }
     rs = run.start.resampling
     if rs is not None:
-        out["grid"] = {"cells": len(rs.cells), "before": int(rs.count.sum()), "after": int(rs.kept_count.sum()),
-                       "thinned_cells": int(np.count_nonzero(rs.kept_count < rs.count)), "cell_m": rs.cell_size}
+        out["grid"] = {
+            "cells": len(rs.cells),
+            "before": int(rs.count.sum()),
+            "after": int(rs.kept_count.sum()),
+            "thinned_cells": int(np.count_nonzero(rs.kept_count < rs.count)),
+            "cell_m": rs.cell_size,
+        }
     return out
 
 
@@ -97,10 +129,19 @@ def distance_facts(d: np.ndarray, k: float) -> dict[str, object]:
     thr = run(mad_threshold, d, k)
     median = float(np.median(d))
     sigma = float(d.mean() + 2.0 * d.std())
-    return {"n": len(d), "median": median, "mad": float(np.median(np.abs(d - median))), "k": k, "threshold": thr,
-            "rejected": int(np.count_nonzero(d > thr)), "rejected_values": _listed(d[d > thr]),
-            "mean": float(d.mean()), "sigma_threshold": sigma, "sigma_rejected": int(np.count_nonzero(d > sigma)),
-            "sigma_rejected_values": _listed(d[d > sigma])}
+    return {
+        "n": len(d),
+        "median": median,
+        "mad": float(np.median(np.abs(d - median))),
+        "k": k,
+        "threshold": thr,
+        "rejected": int(np.count_nonzero(d > thr)),
+        "rejected_values": _listed(d[d > thr]),
+        "mean": float(d.mean()),
+        "sigma_threshold": sigma,
+        "sigma_rejected": int(np.count_nonzero(d > sigma)),
+        "sigma_rejected_values": _listed(d[d > sigma]),
+    }
 
 
 class _Lookup(string.Formatter):
@@ -129,7 +170,10 @@ def render(template: str, facts: Facts, path: str, field: str) -> str:
     try:
         return _Lookup().vformat(template, (), facts)
     except KeyError as e:
-        raise InputError(f"no number called {{{e.args[0]}}} in this step; it has: {', '.join(names(facts))}",
-                         path, field=field) from None
+        raise InputError(
+            f"no number called {{{e.args[0]}}} in this step; it has: {', '.join(names(facts))}",
+            path,
+            field=field,
+        ) from None
     except (ValueError, IndexError, TypeError) as e:
         raise InputError(f"cannot format: {e}", path, field=field) from None
