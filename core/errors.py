@@ -1,5 +1,5 @@
-"""Errors of the core and where a scan came from (no numpy: the command line imports these at "
-"once)."""
+"""Errors of the core and where a scan came from (no numpy: the command line imports these at
+once)."""
 
 from __future__ import annotations
 

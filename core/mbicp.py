@@ -350,8 +350,8 @@ def _extrapolate(x, y, th, ix, iy, ith, d_prev, have_prev, L, most):
 def _record(
     trace, k, poses_k, vis, rows, target, kind, ref_index, dist, status, thr, error, held, factor
 ):
-    """Iteration ``k`` into the trace, element by element (slice assignments are slow to "
-    "compile)."""
+    """Iteration ``k`` into the trace, element by element (slice assignments are slow to
+    compile)."""
     (
         poses,
         visible,
@@ -387,8 +387,8 @@ def _record(
 
 
 def _trace(iterations: int, n: int):
-    """Buffers for ``iterations`` recorded iterations of ``n`` object points (none: nothing "
-    "recorded)."""
+    """Buffers for ``iterations`` recorded iterations of ``n`` object points (none: nothing
+    recorded)."""
     return (
         np.zeros((iterations, 9)),
         np.zeros((iterations, n), np.bool_),

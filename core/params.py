@@ -442,8 +442,8 @@ class ImprovedParams(MbicpParams):
 
 @dataclass(frozen=True)
 class PolarParams(Params):
-    """Preprocessing, projection and stopping shared by PSM and PMWN (Diosi's published values, in "
-    "metres)."""
+    """Preprocessing, projection and stopping shared by PSM and PMWN (Diosi's published values, in
+    metres)."""
 
     median_window: int = param(
         5, unit="count", lo=1, hi=21, help="median filter window on ranges (PSM §3.1)"
@@ -553,8 +553,8 @@ class PsmParams(PolarParams):
 
 @dataclass(frozen=True)
 class PmwnParams(PolarParams):
-    """Polar Metric-Weighted Norm (Huo et al. 2016, paper 003); equations reconstructed, see "
-    "core/pmwn.py."""
+    """Polar Metric-Weighted Norm (Huo et al. 2016, paper 003); equations reconstructed, see
+    core/pmwn.py."""
 
     lambda0: float = param(
         0.0,

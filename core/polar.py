@@ -37,8 +37,8 @@ from .uncertainty import DEGENERACY_LENGTH_M, degeneracy, surface_tangents
 
 @dataclass(frozen=True, eq=False)
 class PolarScan:
-    """A preprocessed scan: median-filtered ranges, validity, and segment ids (-1: not in a "
-    "segment)."""
+    """A preprocessed scan: median-filtered ranges, validity, and segment ids (-1: not in a
+    segment)."""
 
     ranges: np.ndarray
     bearings: np.ndarray
@@ -298,8 +298,8 @@ def refine_v(a: float, b: float, c: float) -> float:
 
 
 def least(cost: np.ndarray) -> int | None:
-    """Index of the smallest cost, NaN meaning "too few pairs at that shift"; None if all are "
-    "NaN."""
+    """Index of the smallest cost, NaN meaning "too few pairs at that shift"; None if all are
+    NaN."""
     j = run(_least_kernel, cost)
     return j if j >= 0 else None
 
@@ -470,8 +470,8 @@ def polar_pairs(
     used: np.ndarray,
     ref_point_of: np.ndarray,
 ) -> Correspondences:
-    """The range comparisons as point pairs: projected surface point -> reference point, one "
-    "bearing each."""
+    """The range comparisons as point pairs: projected surface point -> reference point, one
+    bearing each."""
     u = ref.rays[i]
     src = proj_r[i, None] * u
     tgt = ref.ranges[i, None] * u

@@ -20,8 +20,8 @@ class Termination(enum.Enum):
 
     @property
     def converged(self) -> bool:
-        """Whether the estimate settled: a short cycle below the thresholds settles as well as a "
-        "fixed point."""
+        """Whether the estimate settled: a short cycle below the thresholds settles as well as a
+        fixed point."""
         return self in (Termination.CONVERGED, Termination.CYCLE)
 
 
@@ -51,8 +51,8 @@ class Degeneracy:
 
 @dataclass(frozen=True)
 class MatchResult:
-    """``pose`` is the pose of the object frame in the reference frame (maps object points into "
-    "it)."""
+    """``pose`` is the pose of the object frame in the reference frame (maps object points into
+    it)."""
 
     algorithm: str
     pose: Pose2

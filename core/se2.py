@@ -79,8 +79,8 @@ class Pose2:
 
 
 def relative(a: Pose2, b: Pose2) -> Pose2:
-    """``a^-1 @ b``: pose of frame ``b`` seen from frame ``a`` when both are given in a common "
-    "frame."""
+    """``a^-1 @ b``: pose of frame ``b`` seen from frame ``a`` when both are given in a common
+    frame."""
     return a.inverse() @ b
 
 

@@ -98,8 +98,8 @@ class _Tiers:
         return self.lock is not None and held(self.lock)
 
     def start(self, k) -> bool:
-        """Start the background compile (unless one already runs for this cache); whether one "
-        "runs."""
+        """Start the background compile (unless one already runs for this cache); whether one
+        runs."""
         self.tried = True
         try:
             self.lock = lock_path(k)
@@ -169,8 +169,8 @@ def wait_unlocked(lock: Path) -> None:
 
 
 def lock_path(k) -> Path:
-    """The background compile's lock, beside numba's cache of the kernels (they share one "
-    "folder)."""
+    """The background compile's lock, beside numba's cache of the kernels (they share one
+    folder)."""
     return Path(function_cache(k).cache_path) / LOCK_NAME
 
 

@@ -129,8 +129,8 @@ def build_result(
     full_circle: bool,
     L: float,
 ) -> MatchResult:
-    """The MatchResult of a finished loop (``ref_points``: the reference scan's points in scan "
-    "order)."""
+    """The MatchResult of a finished loop (``ref_points``: the reference scan's points in scan
+    order)."""
     if last is None:
         return MatchResult(name, est, False, reason, iterations, float("nan"), 0, 0, None, None)
     cov, has_cov, cond, w, v = run(

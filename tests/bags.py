@@ -209,8 +209,8 @@ def _as_humble(path: Path) -> None:
 def intel_robot(
     intel, first: int, count: int, mount: Pose2 | None, upside_down: bool = False, **kw
 ) -> Robot:
-    """Intel scans ``first`` .. ``first + count - 1`` driven by a robot whose laser sits at "
-    "``mount``."""
+    """Intel scans ``first`` .. ``first + count - 1`` driven by a robot whose laser sits at
+    ``mount``."""
     scans = [intel.scan(first + k) for k in range(count)]
     stamps = [100.0 + 0.5 * k for k in range(count)]
     odometry = None

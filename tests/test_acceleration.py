@@ -22,8 +22,8 @@ L = 3.0
 
 
 def _steps(x, y, th, ratio, dx, dy, dth):
-    """Two increments of a linear convergence along one direction: d, then ratio * d (in x, y, L "
-    "theta)."""
+    """Two increments of a linear convergence along one direction: d, then ratio * d (in x, y, L
+    theta)."""
     d_prev = np.array([dx, dy, L * dth])
     # the second step from the pose the first one reached, composed as the loop composes it
     x1, y1, th1 = x + dx, y + dy, th + dth

@@ -59,8 +59,8 @@ def open_tab(browser, app):
 
 
 def box(page, label):
-    """The input of the GUI row labelled ``label`` (viser's text boxes are not tied to their "
-    "labels)."""
+    """The input of the GUI row labelled ``label`` (viser's text boxes are not tied to their
+    labels)."""
     return page.locator(
         f"xpath=//label[normalize-space(.)='{label}']"
         "/ancestor::div[contains(@class, 'mantine-Flex-root')][1]//*[self::input or self::textarea]"

@@ -19,8 +19,8 @@ from .conftest import DATA
 
 
 def brute_force_nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, L: float) -> np.ndarray:
-    """Smallest squared metric distance over every reference point within +/-Bw of each point's "
-    "bearing."""
+    """Smallest squared metric distance over every reference point within +/-Bw of each point's
+    bearing."""
     alpha = np.arctan2(moved[:, 1], moved[:, 0])
     gap = np.abs((ref.bearings[None, :] - alpha[:, None] + np.pi) % (2 * np.pi) - np.pi)
     d2 = metric_distance_sq(moved[:, None, :], ref.points[None, :, :], L)

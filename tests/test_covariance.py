@@ -1,5 +1,5 @@
-"""``eval covariance``: NEES of real matches against the truth, split along and across the weakest "
-"direction."""
+"""``eval covariance``: NEES of real matches against the truth, split along and across the weakest
+direction."""
 
 import numpy as np
 import pytest

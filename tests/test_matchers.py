@@ -1,5 +1,5 @@
-"""The three matchers on real scans: identity, equivariance, known displacements, MbICP's "
-"protocol."""
+"""The three matchers on real scans: identity, equivariance, known displacements, MbICP's
+protocol."""
 
 import math
 
@@ -33,8 +33,8 @@ PROTOCOL_PARAMS = "mbicp-protocol"
 
 
 def moved_scan(scan, T: Pose2):
-    """The same scan seen from a sensor whose pose in the original sensor frame is T (same "
-    "beams)."""
+    """The same scan seen from a sensor whose pose in the original sensor frame is T (same
+    beams)."""
     pts = T.inverse().apply(scan.points())
     b = np.arctan2(pts[:, 1], pts[:, 0])
     order = np.argsort(b)
@@ -131,8 +131,8 @@ def test_mbicp_protocol_icp_fails_on_large_rotations():
 
 
 def test_mbicp_protocol_improved():
-    """Improved MbICP on the same protocol; what it misses are large turns (README: full-log "
-    "figures)."""
+    """Improved MbICP on the same protocol; what it misses are large turns (README: full-log
+    figures)."""
     rate, cases = protocol("improved")
     assert rate >= 0.99
     failures = [c for c in cases if c.error_m >= 0.01 or c.error_rad >= math.radians(0.1)]

@@ -1,5 +1,5 @@
-"""MbICP's metric distance and least squares; paper 000's MAD rejection; CSM's exact pose solver "
-"(GPC)."""
+"""MbICP's metric distance and least squares; paper 000's MAD rejection; CSM's exact pose solver
+(GPC)."""
 
 import numpy as np
 import pytest

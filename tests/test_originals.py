@@ -196,8 +196,8 @@ def test_mbicp_returns_the_original_c_codes_pose(logs, name, k, guess, original)
     ids=[f"icp-{c[0]}-{c[1]}" for c in ICP_CSM] + [f"plicp-{c[0]}-{c[1]}" for c in PLICP_CSM],
 )
 def test_icp_and_plicp_return_csms_pose(logs, params, name, k, guess, original, iterations):
-    """Within 0.01 mm and 0.001 deg, in as many iterations (CSM computes in double precision "
-    "too)."""
+    """Within 0.01 mm and 0.001 deg, in as many iterations (CSM computes in double precision
+    too)."""
     scans = logs[name].scans
     result = match(scans[k], scans[k + 1], Pose2(*guess), params)
     et, er = pose_error(result.pose, Pose2(*original))

@@ -1,5 +1,5 @@
-"""``eval overlap``: paper 000's partial-overlap protocol, tables, CSV, plot, determinism, "
-"interruption."""
+"""``eval overlap``: paper 000's partial-overlap protocol, tables, CSV, plot, determinism,
+interruption."""
 
 import numpy as np
 from mbicp_viz.core import ImprovedParams, MbicpParams

@@ -78,8 +78,8 @@ def displaced_cases(log: str, n: int = 40, seed: int = 7):
 @pytest.mark.parametrize("algo", ["psm", "pmwn"])
 @pytest.mark.parametrize("log", list(LOGS))
 def test_known_small_displacements_are_recovered(algo, log):
-    """Within 1 cm and 0.2 deg (issue 3), on at least 95 % of 40 seeded cases per log; the rest "
-    "close."""
+    """Within 1 cm and 0.2 deg (issue 3), on at least 95 % of 40 seeded cases per log; the rest
+    close."""
     errors = []
     for ref, truth in displaced_cases(log):
         r = match(ref, seen_from(ref, truth), Pose2(), algorithm=algo)
@@ -324,8 +324,8 @@ def test_projection_turns_with_the_scan(intel, k, m, x, y):
 
 
 def _held_from_the_truth(params) -> int:
-    """How many of the Intel excerpt's consecutive pairs, started at their corrected poses, stay "
-    "there."""
+    """How many of the Intel excerpt's consecutive pairs, started at their corrected poses, stay
+    there."""
     ss = scans("intel")
     truths = [relative(a.pose, b.pose) for a, b in zip(ss, ss[1:])]
     return sum(

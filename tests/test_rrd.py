@@ -251,8 +251,8 @@ WANTED = {"/improved/scene/reference", "/improved/scene/pairs/point", "/improved
 
 
 def _saved_paths(path) -> set[str]:
-    """Entity paths in a file a live server is still writing (no footer yet; maybe cut "
-    "mid-chunk)."""
+    """Entity paths in a file a live server is still writing (no footer yet; maybe cut
+    mid-chunk)."""
     import warnings
 
     try:

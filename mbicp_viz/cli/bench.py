@@ -45,8 +45,8 @@ def matches(
     seed: Annotated[int, typer.Option("--seed", help="seed of --perturb")] = 0,
     topic: TopicOpt = None,
 ):
-    """Time per match on consecutive pairs: mean, median, p90, matches per second; events off and "
-    "on."""
+    """Time per match on consecutive pairs: mean, median, p90, matches per second; events off and
+    on."""
     import numpy as np
 
     from mbicp_viz.evaluation.bench import bench, machine_line, speed_probe_us
@@ -176,8 +176,8 @@ def gui(
 
 
 def startup(repeat: Annotated[int, typer.Option("--repeat", min=3, help="runs of --help")] = 10):
-    """How soon the tool answers: --help, the first match with an empty kernel cache, the "
-    "debugger."""
+    """How soon the tool answers: --help, the first match with an empty kernel cache, the
+    debugger."""
     from mbicp_viz.evaluation.bench import machine_line
     from mbicp_viz.evaluation.bench import startup as startup_times
 

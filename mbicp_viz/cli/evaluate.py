@@ -95,8 +95,8 @@ def sequence(
     upside_down: UpsideDownOpt = False,
     deskew: DeskewOpt = None,
 ):
-    """Match every consecutive pair of a log (initial guess from its poses or odometry, else "
-    "identity)."""
+    """Match every consecutive pair of a log (initial guess from its poses or odometry, else
+    identity)."""
     from mbicp_viz.evaluation.sequence import match_sequence, odometry_summary, truth_summary
     from mbicp_viz.readers.params_toml import load_search, make_params
 
@@ -305,8 +305,8 @@ def ceiling(
     workers: WorkersOpt = None,
     topic: TopicOpt = None,
 ):
-    """How well any guess could do on a log: each matcher started at the truth, and the search "
-    "alone."""
+    """How well any guess could do on a log: each matcher started at the truth, and the search
+    alone."""
     from mbicp_viz.evaluation.sequence import ceiling as ceiling_of
     from mbicp_viz.evaluation.sequence import ceiling_summary
 
@@ -349,8 +349,8 @@ def corridor(
     workers: WorkersOpt = None,
     topic: TopicOpt = None,
 ):
-    """Successes where the scene leaves a direction free (corridors) and elsewhere, from perturbed "
-    "guesses."""
+    """Successes where the scene leaves a direction free (corridors) and elsewhere, from perturbed
+    guesses."""
     from mbicp_viz.evaluation.corridor import corridor as corridor_of
     from mbicp_viz.evaluation.corridor import corridor_summary
 
@@ -390,8 +390,8 @@ def covariance(
     workers: WorkersOpt = None,
     topic: TopicOpt = None,
 ):
-    """Whether each matcher's reported covariance fits its errors against the truth (NEES, chi2 "
-    "bounds)."""
+    """Whether each matcher's reported covariance fits its errors against the truth (NEES, chi2
+    bounds)."""
     from mbicp_viz.evaluation.cases import cases_for
     from mbicp_viz.evaluation.covariance import consistency_lines, covariance_consistency, nees_png
     from mbicp_viz.readers.params_toml import load_search

@@ -45,8 +45,8 @@ def params(
         ),
     ] = False,
 ):
-    """Print (or write) the default parameters of a matcher and of the search, as a file for "
-    "--params."""
+    """Print (or write) the default parameters of a matcher and of the search, as a file for
+    --params."""
     from mbicp_viz.core import MATCHERS, SearchParams
     from mbicp_viz.readers.params_toml import (
         PRESETS,

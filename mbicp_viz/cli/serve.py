@@ -92,8 +92,8 @@ def serve(
 
 
 def demo(port: ServePortOpt = 8080, for_seconds: ForOpt = None):
-    """The debugger on a bundled real pair: a hand-held Hokuyo turning 17 degrees, from the "
-    "identity."""
+    """The debugger on a bundled real pair: a hand-held Hokuyo turning 17 degrees, from the
+    identity."""
     from mbicp_viz.views.debugger.sources import demo_source
 
     _serve(demo_source(str(DEMO_PAIR)), "127.0.0.1", port, (), for_seconds)

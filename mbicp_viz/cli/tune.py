@@ -1,5 +1,5 @@
-"""``tune``: search a matcher's parameters against ground truth (Optuna), check them on a held-out "
-"log."""
+"""``tune``: search a matcher's parameters against ground truth (Optuna), check them on a held-out
+log."""
 
 from __future__ import annotations
 
@@ -103,8 +103,8 @@ def tune(
     upside_down: UpsideDownOpt = False,
     deskew: DeskewOpt = None,
 ):
-    """Search a matcher's parameters on training logs against their truth; defaults and best side "
-    "by side."""
+    """Search a matcher's parameters on training logs against their truth; defaults and best side
+    by side."""
     from mbicp_viz.evaluation import tune as t
     from mbicp_viz.evaluation.cases import cases_for
     from mbicp_viz.readers.params_toml import load_search, make_params, params_to_toml

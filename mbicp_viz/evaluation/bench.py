@@ -1,5 +1,5 @@
-"""``bench``: time per match on consecutive pairs of a log, events off and with a recording "
-"observer."""
+"""``bench``: time per match on consecutive pairs of a log, events off and with a recording
+observer."""
 
 from __future__ import annotations
 

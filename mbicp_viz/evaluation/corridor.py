@@ -81,8 +81,8 @@ def corridor(
 
 
 def corridor_summary(rows: list[CorridorRow], limit: float) -> list[str]:
-    """Per matcher: successes on the degenerate pairs (condition above ``limit``) and on the "
-    "rest."""
+    """Per matcher: successes on the degenerate pairs (condition above ``limit``) and on the
+    rest."""
     degenerate = [r for r in rows if r.condition > limit]
     others = [r for r in rows if r.condition <= limit]
     lines = [

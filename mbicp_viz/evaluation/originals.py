@@ -121,8 +121,8 @@ def check_built(built: Path) -> None:
 
 
 def compare(built: Path, pairs: list[Pair], repeat: int) -> list[Comparison | Skipped]:
-    """Each original against this project's matcher of the same name, with both defaults (or why "
-    "not)."""
+    """Each original against this project's matcher of the same name, with both defaults (or why
+    not)."""
     out = []
     rays = max(len(a.bearings) for a, _, _ in pairs)
     for original in ORIGINALS:
@@ -162,8 +162,8 @@ def compare(built: Path, pairs: list[Pair], repeat: int) -> list[Comparison | Sk
 def improved_against_plicp(
     pairs: list[Pair], params: Params, label: str, plicp: Comparison, repeat: int
 ) -> str:
-    """Improved MbICP's time per match against CSM's PL-ICP's on the same pairs (issue 21's "
-    "ratio)."""
+    """Improved MbICP's time per match against CSM's PL-ICP's on the same pairs (issue 21's
+    ratio)."""
     runs = [time_ours(pairs, params) for _ in range(repeat)]
     ms, ok = min(r[1] for r in runs), successes(pairs, runs[0][0])
     return (
@@ -174,8 +174,8 @@ def improved_against_plicp(
 
 
 def successes(pairs: list[Pair], poses: list[Pose2]) -> int | None:
-    """Poses within paper 000's success bounds of the log's stored relative poses (None without "
-    "them)."""
+    """Poses within paper 000's success bounds of the log's stored relative poses (None without
+    them)."""
     truths = [stored_truth(a, b) for a, b, _ in pairs]
     if all(t is None for t in truths):
         return None
@@ -183,8 +183,8 @@ def successes(pairs: list[Pair], poses: list[Pose2]) -> int | None:
 
 
 def time_ours(pairs: list[Pair], params: Params) -> tuple[list[Pose2], float]:
-    """This project's poses and its mean time per match [ms], every call timed as a user makes "
-    "it."""
+    """This project's poses and its mean time per match [ms], every call timed as a user makes
+    it."""
     for a, b, g in pairs[:3]:  # compiled kernels loaded
         match(a, b, g, params)
     t0 = time.perf_counter()
@@ -193,8 +193,8 @@ def time_ours(pairs: list[Pair], params: Params) -> tuple[list[Pose2], float]:
 
 
 def run_driver(exe: Path, args: tuple[str, ...], text: str, n: int) -> tuple[list[Pose2], float]:
-    """The original's poses and its mean time per match [ms] (timed by the driver around its "
-    "call)."""
+    """The original's poses and its mean time per match [ms] (timed by the driver around its
+    call)."""
     try:
         out = subprocess.run(
             [str(exe), *args], input=text, capture_output=True, text=True, timeout=DRIVER_TIMEOUT_S

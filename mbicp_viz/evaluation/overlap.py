@@ -91,8 +91,8 @@ def make_cases(
 
 
 def scene_scans(log, per_log: int, picked: list[int] | None = None) -> list[Scan]:
-    """The scenes of one log: the scans numbered ``picked``, else ``per_log`` scans picked "
-    "evenly."""
+    """The scenes of one log: the scans numbered ``picked``, else ``per_log`` scans picked
+    evenly."""
     if picked:
         return [log.scan(i) for i in picked]
     return [log.scans[int(round(k))] for k in np.linspace(0, len(log.scans) - 1, per_log + 2)[1:-1]]

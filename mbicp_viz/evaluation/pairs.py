@@ -135,8 +135,8 @@ def displaced_pair(
 
 
 def block_mask(n: int, a: float, b: float) -> np.ndarray:
-    """Keep all of ``n`` readings but those from fraction ``a`` to ``b`` (an occlusion-like "
-    "block)."""
+    """Keep all of ``n`` readings but those from fraction ``a`` to ``b`` (an occlusion-like
+    block)."""
     keep = np.ones(n, dtype=bool)
     keep[int(round(a * n)) : int(round(b * n))] = False
     return keep

@@ -47,8 +47,8 @@ def displaced_self_matches(
 
 
 def protocol_summary(name: str, cases: list[DisplacedCase]) -> str:
-    """One line: how many cases met MbICP's criteria, how many were off grossly, the median "
-    "iterations."""
+    """One line: how many cases met MbICP's criteria, how many were off grossly, the median
+    iterations."""
     ok = sum(MBICP_PROTOCOL.correct(c.error_m, c.error_rad) for c in cases)
     gross = sum(not CONSECUTIVE.correct(c.error_m, c.error_rad) for c in cases)
     its = sorted(c.iterations for c in cases)

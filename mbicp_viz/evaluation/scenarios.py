@@ -45,8 +45,8 @@ def recordings_dir() -> Path:
 
 
 def is_checkout(directory: Path) -> bool:
-    """Whether ``directory`` is a checkout's ``recordings/`` (writable sources), not installed "
-    "data."""
+    """Whether ``directory`` is a checkout's ``recordings/`` (writable sources), not installed
+    data."""
     return (directory.parent / "pyproject.toml").is_file()
 
 

@@ -1,5 +1,5 @@
-"""``eval sequence``: match every consecutive pair of a log; ``eval ceiling``: what its truth "
-"allows."""
+"""``eval sequence``: match every consecutive pair of a log; ``eval ceiling``: what its truth
+allows."""
 
 from __future__ import annotations
 

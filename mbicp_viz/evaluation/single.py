@@ -95,8 +95,8 @@ def reported(result: MatchResult, frames: Frames, base: bool) -> MatchResult:
 
 
 def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
-    """The stable JSON record of one match (``match --json``, ``eval sequence``): scripts rely on "
-    "these keys."""
+    """The stable JSON record of one match (``match --json``, ``eval sequence``): scripts rely on
+    these keys."""
     return {
         "ref": ref,
         "obj": obj,

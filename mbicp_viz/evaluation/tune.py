@@ -81,8 +81,8 @@ def _start_worker(paths: list[str], options: ReadOptions | None, cases: list[Cas
 
 
 def _errors(job) -> np.ndarray:
-    """(translation, rotation) error of each case in [start, stop); a failed match counts as far "
-    "off."""
+    """(translation, rotation) error of each case in [start, stop); a failed match counts as far
+    off."""
     params, start, stop = job
     out = np.empty((stop - start, 2))
     for n, c in enumerate(_CASES[start:stop]):

@@ -1,5 +1,5 @@
-"""CSM's JSON ``laser_data``: one object per line (``nrays``, ``theta``, ``readings``, ``valid``, "
-"poses)."""
+"""CSM's JSON ``laser_data``: one object per line (``nrays``, ``theta``, ``readings``, ``valid``,
+poses)."""
 
 from __future__ import annotations
 

@@ -59,8 +59,8 @@ class Frames:
         )
 
     def reported(self, motion: Pose2, base: bool) -> Pose2:
-        """A motion of the laser as reported: the base's motion when ``base`` and the mount is "
-        "known."""
+        """A motion of the laser as reported: the base's motion when ``base`` and the mount is
+        known."""
         return self.mount.conjugate(motion) if self.reports_base(base) else motion
 
 
@@ -122,8 +122,8 @@ class ScanLog:
         return [r for r in range(self.records) if r not in self.unusable]
 
     def consecutive_pairs(self, limit: int | None = None) -> list[tuple[int, int]]:
-        """Record numbers of each usable scan and the next usable one (the first ``limit`` "
-        "pairs)."""
+        """Record numbers of each usable scan and the next usable one (the first ``limit``
+        pairs)."""
         n = len(self.scans) - 1 if limit is None else min(limit, len(self.scans) - 1)
         if n < 1:
             raise InputError("needs at least two usable scans", self.path)

@@ -46,8 +46,8 @@ def presets_for(algorithm: str) -> dict[str, Params]:
 
 
 def params_file(path: str | Path) -> Path:
-    """The file ``--params`` names: a path, or else a bare name (no folder, no suffix) of a "
-    "preset."""
+    """The file ``--params`` names: a path, or else a bare name (no folder, no suffix) of a
+    preset."""
     p = Path(path)
     if p.exists() or p.suffix or len(p.parts) > 1:
         return p
@@ -61,8 +61,8 @@ def params_file(path: str | Path) -> Path:
 def params_from_mapping(
     params_type: type, values: dict, path: str | None = None, table: str | None = None
 ) -> Params:
-    """``params_type`` from TOML keys (``_deg`` for radians); errors name the key "
-    "(``table.key``)."""
+    """``params_type`` from TOML keys (``_deg`` for radians); errors name the key
+    (``table.key``)."""
     specs = {s.name: s for s in field_specs(params_type)}
     kwargs = {}
     for key, value in values.items():

@@ -296,8 +296,8 @@ def _scan_topics(messages: list[Message]) -> dict[str, str]:
 def _scan_topic(
     topics: dict[str, str], messages: list[Message], topic: str | None, path: str
 ) -> str:
-    """The one scan topic to read: the one named, else the only one; several: an error listing "
-    "them."""
+    """The one scan topic to read: the one named, else the only one; several: an error listing
+    them."""
     listing = "; ".join(f"{t} ({d})" for t, d in topics.items())
     if topic is not None:
         if topic not in topics:

@@ -106,8 +106,8 @@ def lines(stream, path: str) -> Iterator[Line]:
 
 
 def token_lines(path: str, comment: str | None = "#") -> Iterator[Fields]:
-    """``Fields`` of every line of a text file that has tokens once ``comment`` and what follows "
-    "are cut."""
+    """``Fields`` of every line of a text file that has tokens once ``comment`` and what follows
+    are cut."""
     with open_text(path) as f:
         for line in lines(f, path):
             text = line.text.split(comment, 1)[0] if comment else line.text

@@ -63,8 +63,8 @@ class Mount:
 
 
 def mount_of(T: Transform3, source: str, base_frame: str, where: str) -> Mount:
-    """A planar mount from a 3-D T_base_laser: upright, or upside down (z axis down); refuses a "
-    "tilt."""
+    """A planar mount from a 3-D T_base_laser: upright, or upside down (z axis down); refuses a
+    tilt."""
     z = T.R[2, 2]
     if z >= UPRIGHT_TOLERANCE:
         return Mount(T.planar(), False, source, base_frame)
@@ -102,8 +102,8 @@ class TfTree:
         return out
 
     def chain(self, ancestor: str, frame: str) -> list[tuple[str, str]] | None:
-        """The edges from ``ancestor`` down to ``frame``, or None when ``frame`` does not hang "
-        "below it."""
+        """The edges from ``ancestor`` down to ``frame``, or None when ``frame`` does not hang
+        below it."""
         parents, edges, f = self.parents(), [], frame
         while f != ancestor:
             if f not in parents or len(edges) > 64:
@@ -113,16 +113,16 @@ class TfTree:
         return edges[::-1]
 
     def constant(self, edges: list[tuple[str, str]]) -> Transform3:
-        """The product along ``edges``, each static or its first timed value (a mount published on "
-        "/tf)."""
+        """The product along ``edges``, each static or its first timed value (a mount published on
+        /tf)."""
         T = Transform3(np.eye(3), np.zeros(3))
         for e in edges:
             T = T @ (self.static[e] if e in self.static else self.timed[e][0][1])
         return T
 
     def mount(self, laser_frame: str, where: str) -> Mount | None:
-        """The laser's mount below the first base frame it hangs from (None when it hangs below "
-        "none)."""
+        """The laser's mount below the first base frame it hangs from (None when it hangs below
+        none)."""
         for base in BASE_FRAMES:
             edges = self.chain(base, laser_frame)
             if edges is not None:

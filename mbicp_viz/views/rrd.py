@@ -370,8 +370,8 @@ def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
 def record_sequence(
     log, rows: list[dict], path: str, recording_id: str = "mbicp-viz/sequence"
 ) -> None:
-    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, "
-    "per-pair log."""
+    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map,
+    per-pair log."""
     from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
 
     stream = new_stream(recording_id)
@@ -445,8 +445,8 @@ def record_basin(atlas, path: str) -> None:
 
 
 def time_recordings(log, params: Params, limit: int | None, repeat: int, teaching: bool):
-    """Time for matching and writing each consecutive pair to an .rrd, and the file sizes "
-    "[bytes]."""
+    """Time for matching and writing each consecutive pair to an .rrd, and the file sizes
+    [bytes]."""
     import os
     import tempfile
     import time

@@ -243,8 +243,8 @@ def scene_scale(points: np.ndarray) -> float:
 
 
 def ratio_colors(ratio: np.ndarray) -> np.ndarray:
-    """RGBA cell colour by sampling ratio: faint grey for thinned near cells, blue for kept far "
-    "ones."""
+    """RGBA cell colour by sampling ratio: faint grey for thinned near cells, blue for kept far
+    ones."""
     r = np.clip(ratio, 0.0, 1.0)[:, None]
     rgb = (1 - r) * np.array([200, 200, 200]) + r * np.array(GRID.color)
     alpha = 40 + 100 * r
@@ -341,8 +341,8 @@ def initial_layers(start: StartEvent) -> list[Layer]:
 
 
 def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
-    """Layers of one iteration: where the object was, its pairs by kind and status, where it "
-    "went."""
+    """Layers of one iteration: where the object was, its pairs by kind and status, where it
+    went."""
     from .text import iteration_text
 
     s = scene_scale(start.ref_points)
@@ -411,8 +411,8 @@ def layers_at(
     chosen: int | None = None,
     odometry: Pose2 | None = None,
 ) -> list[Layer]:
-    """Every layer of a recorded run at iteration ``k`` (0: the initial guess; past the last: the "
-    "last)."""
+    """Every layer of a recorded run at iteration ``k`` (0: the initial guess; past the last: the
+    last)."""
     layers = static_layers(start, truth, odometry)
     if k == 0 or not iterations:
         return layers + initial_layers(start)
@@ -455,8 +455,8 @@ def has_content(layer: Layer) -> bool:
 
 
 def compared(layers: list[Layer], name: str) -> list[Layer]:
-    """A run's layers among several matchers' (compare mode): its object scan in the matcher's "
-    "colour."""
+    """A run's layers among several matchers' (compare mode): its object scan in the matcher's
+    colour."""
     return [
         replace(ly, style=run_style(name)) if ly.path == f"{SCANS}/object" else ly for ly in layers
     ]
@@ -701,8 +701,8 @@ def polar_step_deg(polar) -> float:
 
 
 def polar_layers(ev: IterationEvent, scale: float = 1.0) -> list[Layer]:
-    """Cost per shift with the chosen minimum and its fit; ranges vs bearing; PMWN's projected "
-    "circle."""
+    """Cost per shift with the chosen minimum and its fit; ranges vs bearing; PMWN's projected
+    circle."""
     P = ev.polar
     if P is None:
         return []

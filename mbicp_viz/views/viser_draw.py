@@ -20,8 +20,8 @@ Z_PER_ORDER = 0.002  # [m] height per unit of draw order: higher draws on top
 
 
 def in_scan_plane(layer: scene.Layer) -> bool:
-    """True for a layer the scan plane draws, False for one a panel shows; an error for anything "
-    "else."""
+    """True for a layer the scan plane draws, False for one a panel shows; an error for anything
+    else."""
     if isinstance(layer, (scene.Scalar, scene.Text)) or layer.path.startswith(PLOT_SPACES):
         return False
     if layer.path.startswith(f"{scene.SCANS}/") and isinstance(layer, scene.DRAWN):

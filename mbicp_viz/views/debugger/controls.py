@@ -62,8 +62,8 @@ class Playback:
         threading.Thread(target=self._play, daemon=True).start()
 
     def show(self, n: int) -> None:
-        """A new match of ``n`` iterations, shown where the model is (its end, or a lesson "
-        "step's)."""
+        """A new match of ``n`` iterations, shown where the model is (its end, or a lesson
+        step's)."""
         self.slider.max = max(n, 1)
         self.slider.value = self.s.state.iteration  # the model is there already: no second redraw
 
@@ -133,8 +133,8 @@ class Matchers:
         return [DEFAULTS, *presets_for(self.edited), TYPED]
 
     def _show_preset(self) -> None:
-        """The picker names what the edited matcher's parameters are (its choices: that "
-        "matcher's)."""
+        """The picker names what the edited matcher's parameters are (its choices: that
+        matcher's)."""
         self.preset.options = self._presets()
         self.preset.value = self.s.state.preset_of(self.edited)
 
@@ -160,13 +160,13 @@ class Matchers:
         self._show_preset()
 
     def _typed(self, name: str, text: str) -> None:
-        """Apply one parameter as typed, or say why not; the boxes then show what the matcher "
-        "uses."""
+        """Apply one parameter as typed, or say why not; the boxes then show what the matcher
+        uses."""
         self._applied(self.s.state.set_params(self.edited, {name: text}))
 
     def _preset(self) -> None:
-        """Load the picked preset (or the defaults); picking 'as typed' or what is loaded does "
-        "nothing."""
+        """Load the picked preset (or the defaults); picking 'as typed' or what is loaded does
+        nothing."""
         state = self.s.state
         if self.preset.value in (TYPED, state.preset_of(self.edited)):
             return

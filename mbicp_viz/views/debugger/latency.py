@@ -1,5 +1,5 @@
-"""``bench-gui``: the debugger's latency on a real pair, server side (a real ViserServer, no "
-"browser)."""
+"""``bench-gui``: the debugger's latency on a real pair, server side (a real ViserServer, no
+browser)."""
 
 from __future__ import annotations
 
@@ -23,8 +23,8 @@ def gui_latency(
     steps: int = 3,
     changes: int = 40,
 ) -> tuple[Timing, Timing]:
-    """Iteration step -> redraw, and parameter change -> re-match -> redraw, as a user drives "
-    "them."""
+    """Iteration step -> redraw, and parameter change -> re-match -> redraw, as a user drives
+    them."""
     log = read_log(path, options)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     s = Session(server, Source(path, log, pair=pair, guess=Pose2(), options=options))

@@ -135,8 +135,8 @@ def _line(label: str, scale: str, style: scene.Style, dash: bool = False) -> upl
 
 
 def _top(values) -> float:
-    """The top of a fixed y range: a little above the largest finite value (1 when there is "
-    "none)."""
+    """The top of a fixed y range: a little above the largest finite value (1 when there is
+    none)."""
     v = np.asarray([x for x in values if x is not None], dtype=float)
     v = v[np.isfinite(v)]
     return float(v.max()) * 1.08 if len(v) and v.max() > 0 else 1.0
@@ -153,8 +153,8 @@ class Plots:
             self.error = self.histogram = self.cost = None
 
     def show_runs(self, state: DebugState) -> None:
-        """Rebuild the plots when the runs (matchers, parameters, pair, guess) change; then fill "
-        "them."""
+        """Rebuild the plots when the runs (matchers, parameters, pair, guess) change; then fill
+        them."""
         key = tuple(id(r) for r in state.runs)
         if key != self.shown:
             self.shown = key
@@ -264,8 +264,8 @@ def error_legend(state: DebugState) -> tuple[uplot.Series, ...]:
 
 
 def error_series(state: DebugState) -> tuple[np.ndarray, ...]:
-    """Iteration, then error [m²] and threshold [m] of each run (NaN past its end or without "
-    "one)."""
+    """Iteration, then error [m²] and threshold [m] of each run (NaN past its end or without
+    one)."""
     n = max(state.max_iteration(), 1)
     out = [np.arange(1, n + 1, dtype=float)]
     for run in state.runs:
@@ -321,8 +321,8 @@ def histogram_series(state: DebugState) -> tuple[np.ndarray, ...]:
 
 
 def cost_series(state: DebugState) -> tuple[np.ndarray, ...] | None:
-    """PSM/PMWN: the orientation step's cost per shift and the fit at its minimum; None "
-    "otherwise."""
+    """PSM/PMWN: the orientation step's cost per shift and the fit at its minimum; None
+    otherwise."""
     run = polar_run(state)
     ev = state.event(run) if run is not None else None
     polar = ev.polar if ev is not None else None

@@ -57,8 +57,8 @@ class Session:
             self.say(COMPILING)
 
     def show_notes(self) -> None:
-        """What to look at, and how the log on screen was read (a scan stream picked is read "
-        "anew)."""
+        """What to look at, and how the log on screen was read (a scan stream picked is read
+        anew)."""
         src = self.state.source
         self.h_notes.content = "\n\n".join(
             filter(None, [src.note, *(f"*{n}*" for n in src.log.notes)])
@@ -141,8 +141,8 @@ class Session:
         self.guess.show()
 
     def open_row(self, row) -> None:
-        """Reopen an evaluated pair as it ran; the controls then show its matcher, pair and "
-        "guess."""
+        """Reopen an evaluated pair as it ran; the controls then show its matcher, pair and
+        guess."""
         error = self.state.open_row(row)
         if not error:
             self.matchers.show()

@@ -123,8 +123,8 @@ def parsed(params: Params, typed: dict[str, str]) -> Params:
 
 
 def shown_value(spec: FieldSpec, value) -> str:
-    """A parameter as its box shows it (degrees for radian fields), round-tripping "
-    "``parse_entry``."""
+    """A parameter as its box shows it (degrees for radian fields), round-tripping
+    ``parse_entry``."""
     if spec.type is bool:
         return "true" if value else "false"
     if spec.unit == "rad":
@@ -174,8 +174,8 @@ class DebugState:
         return self.source.log.scan(self.pair[1])
 
     def truth(self) -> Pose2 | None:
-        """The known answer: the source's, else the log's scan poses unless the guess came from "
-        "them."""
+        """The known answer: the source's, else the log's scan poses unless the guess came from
+        them."""
         if self.source.truth is not None:
             return self.source.truth
         return stored_truth(self.ref, self.obj) if self.guess_source != "scan poses" else None

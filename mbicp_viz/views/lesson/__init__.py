@@ -1,2 +1,2 @@
-"""The guided MbICP lesson: steps read from small TOML files, run, and told with their own "
-"numbers."""
+"""The guided MbICP lesson: steps read from small TOML files, run, and told with their own
+numbers."""

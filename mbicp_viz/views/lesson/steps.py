@@ -120,8 +120,8 @@ def _positive(value, path: Path, field: str) -> float:
 
 
 def _variant(spec: dict, path: Path) -> Variant | None:
-    """One more run of a step's matcher: its ``[params.MATCHER]`` table with the variant's keys "
-    "over it."""
+    """One more run of a step's matcher: its ``[params.MATCHER]`` table with the variant's keys
+    over it."""
     table = spec.get("variant")
     if table is None:
         return None
