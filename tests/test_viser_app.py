@@ -7,10 +7,10 @@ import re
 import numpy as np
 import pytest
 import viser
-from mbicp_viz.core import MATCHERS, Pose2, field_specs, pose_error
 
 import mbicp_viz.views.debugger.state as st
 from mbicp_viz.choices import Guess
+from mbicp_viz.core import MATCHERS, Pose2, field_specs, pose_error
 from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene
 from mbicp_viz.views.debugger.camera import TopDownCamera
@@ -397,6 +397,61 @@ def test_a_foreign_origin_is_refused():
         assert "http://evil.example" in app.refused.values() and not app.sessions
         # the debugger's own page
         assert asyncio.run(attempt(f"http://127.0.0.1:{app.port}")) == "data"
+    finally:
+        app.stop()
+
+
+def test_no_connection_is_accepted_before_the_origin_rule(monkeypatch):
+    """A foreign page that connects in a loop from the moment the port opens, while the server is
+    still starting, is refused every time: no window before the check is in place."""
+    import asyncio
+    import socket
+    import threading
+    import time
+
+    import websockets
+    from websockets.asyncio.client import connect
+
+    from mbicp_viz.views.debugger.app import App
+
+    with socket.socket() as s:  # a free port, known before the server opens it
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    connected, built, outcomes = threading.Event(), threading.Event(), []
+    fit = TopDownCamera.fit
+
+    def fit_once_a_probe_got_in(camera, points):  # a start slowed by a compile, deterministically
+        assert connected.wait(60)
+        return fit(camera, points)
+
+    monkeypatch.setattr(TopDownCamera, "fit", fit_once_a_probe_got_in)
+
+    async def probe():
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and not (built.is_set() and len(outcomes) >= 3):
+            try:
+                async with connect(
+                    f"ws://127.0.0.1:{port}",
+                    origin="http://evil.example",
+                    subprotocols=[f"viser-v{viser.__version__}"],
+                ) as ws:
+                    try:
+                        await asyncio.wait_for(ws.recv(), timeout=10)
+                        outcomes.append("data")
+                    except websockets.ConnectionClosed as e:
+                        outcomes.append(e.rcvd.code if e.rcvd else None)
+                connected.set()
+            except OSError:  # not listening yet
+                await asyncio.sleep(0)
+
+    prober = threading.Thread(target=lambda: asyncio.run(probe()))
+    prober.start()
+    app = App(Source("hokuyo pair", read_log(PAIR), guess=Pose2()), "127.0.0.1", port)
+    built.set()
+    prober.join(120)
+    try:
+        assert len(outcomes) >= 3 and set(outcomes) == {1008}, outcomes
+        assert not app.sessions
     finally:
         app.stop()
 

@@ -1,17 +1,21 @@
 """The interactive debugger in the browser (viser): one server, one ``Session`` per tab.
 
 Safe by default: the server binds 127.0.0.1, and a websocket whose ``Origin`` is not the
-debugger's own page is closed before anything is sent to it or read from it (viser itself
-accepts any origin, so a page open in the same browser could otherwise drive the debugger and
-read the scans). The matchers' kernels compile (or load from numba's cache) while the server
-starts; a tab that connects meanwhile says so. After an install they compile in a background
-process and the tabs match at once, interpreted, saying so until the compiled code is ready.
+debugger's own page is closed before anything is sent to it or read from it, from the first
+connection the port accepts (viser itself accepts any origin, so a page open in the same browser
+could otherwise drive the debugger and read the scans). The matchers' kernels compile (or load
+from numba's cache) while the server starts; a tab that connects meanwhile says so. After an
+install they compile in a background process and the tabs match at once, interpreted, saying so
+until the compiled code is ready.
 """
 
 from __future__ import annotations
 
+import functools
 import threading
 import traceback
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import viser
 
@@ -28,6 +32,30 @@ def local_origins(host: str, port: int) -> set[str]:
     return {f"http://{n}:{port}" for n in names}
 
 
+_START = threading.Lock()  # one server starting at a time: the guard below is put in place for it
+
+
+@contextmanager
+def checked_from_the_start(check) -> Iterator[None]:
+    """Every viser server started within the block runs ``check(websocket_server, connection)``
+    first of all its connect callbacks. viser (1.1) starts listening inside ``ViserServer()`` and
+    has no origin hook: a check added after the constructor leaves the port open without it (for
+    the whole kernel compile, once). Its websocket layer runs the connect callbacks, in the event
+    loop, before any message of the connection is sent or handled."""
+    start = viser.infra.WebsockServer.start
+
+    def guarded(ws) -> None:
+        ws._client_connect_cb.insert(0, functools.partial(check, ws))
+        start(ws)
+
+    with _START:
+        viser.infra.WebsockServer.start = guarded
+        try:
+            yield
+        finally:
+            viser.infra.WebsockServer.start = start
+
+
 class App:
     """A viser server with one Session per connected browser tab."""
 
@@ -40,19 +68,16 @@ class App:
     ):
         # a person waits on this page: never a compile stall (before any kernel runs)
         tiers.quick_start()
-        self.source = source
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        # where every tab starts
-        TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())
-        self.origins = local_origins(host, self.port) | set(allow_origins)
+        self.source, self.host, self.allow_origins = source, host, set(allow_origins)
         self.sessions: dict[int, Session] = {}
         self.refused: dict[int, str] = {}  # client id -> the origin whose websocket was closed
         self._lock = threading.Lock()
         self.ready = threading.Event()
+        with checked_from_the_start(self._check_origin):
+            self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        # where every tab starts
+        TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())
         threading.Thread(target=self._warm_up, daemon=True).start()
-        # viser has no origin hook of its own: the websocket layer's connect callbacks run, in the
-        # event loop, before any message of the connection is sent or handled (viser 1.1).
-        self.server._websock_server.on_client_connect(self._check_origin)
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
 
@@ -90,10 +115,13 @@ class App:
             for s in sessions:
                 s.compiled()
 
-    async def _check_origin(self, conn) -> None:
-        connection = self.server._websock_server._live_connections.get(conn.client_id)
-        origin = connection.request.headers.get("Origin") if connection is not None else None
-        if connection is not None and origin not in self.origins:
+    async def _check_origin(self, ws, conn) -> None:
+        connection = ws._live_connections.get(conn.client_id)
+        if connection is None:
+            return
+        origin = connection.request.headers.get("Origin")
+        # the port the connection came in on: the server's own, known here before get_port()
+        if origin not in local_origins(self.host, connection.local_address[1]) | self.allow_origins:
             self.refused[conn.client_id] = str(origin)
             await connection.close(1008, "origin not allowed")
 
