@@ -12,3 +12,12 @@ def pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_png(fig, path, dpi: float | None = None) -> None:
+    """Write ``fig`` to ``path`` whole (``outputs.written``) and free it."""
+    from mbicp_viz.outputs import written
+
+    with written(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
+    pyplot().close(fig)

@@ -1,4 +1,5 @@
 import contextlib
+import json
 import os
 import sys
 from pathlib import Path
@@ -145,3 +146,8 @@ def interpreted_kernels():
             yield
         finally:
             t.quick, t.lock, t.ready = saved
+
+
+def json_lines(path) -> list[dict]:
+    """The objects of a JSON lines file (rows files), in order."""
+    return [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]

@@ -8,9 +8,9 @@ import math
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from mbicp_viz.core import ImprovedParams, Pose2, Recorder, match, pose_error
 from mbicp_viz.core.mbicp import _extrapolate
-
 from mbicp_viz.evaluation.bench import bench_guesses
 from mbicp_viz.evaluation.pairs import stored_truth
 from mbicp_viz.readers.params_toml import load_params

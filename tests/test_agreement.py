@@ -1,20 +1,19 @@
 """core/agreement.py: judging a pose by the points alone."""
 
-import json
 import math
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mbicp_viz.core import Pose2
-from mbicp_viz.core.agreement import inlier_fraction
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import Pose2
+from mbicp_viz.core.agreement import inlier_fraction
 from mbicp_viz.evaluation.pairs import seen_from
 from mbicp_viz.evaluation.sequence import truth_doubted
 from mbicp_viz.readers import read_log
 
-from .conftest import INTEL
+from .conftest import INTEL, json_lines
 
 SCANS = read_log(INTEL).scans
 
@@ -59,7 +58,7 @@ def test_eval_sequence_reports_failures_the_points_doubt(tmp_path):
         ],
     )
     assert res.exit_code == 0, res.output
-    rows = json.loads(out.read_text())
+    rows = json_lines(out)
     failed = [r for r in rows if not r["success"]]
     assert failed and all(
         0.0 <= r["inliers_match"] <= 1.0 and 0.0 <= r["inliers_truth"] <= 1.0 for r in failed

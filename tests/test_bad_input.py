@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from mbicp_viz.core import Scan, ScanError, make_scan
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import Scan, ScanError, make_scan
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import read_log
 
@@ -323,7 +323,6 @@ def test_errors_raised_in_worker_processes_arrive_whole():
     """Evaluations run in a process pool, which sends exceptions back pickled: each error type
     must rebuild with its fields, else the user gets BrokenProcessPool instead of the message."""
     from mbicp_viz.core import ParamError
-
     from mbicp_viz.evaluation.pool import ordered_map
 
     for e in (

@@ -8,15 +8,15 @@ import math
 
 import numpy as np
 import pytest
-from mbicp_viz.core import Pose2, make_scan, pose_error, relative
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import Pose2, make_scan, pose_error, relative
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ReadOptions, read_log
 
 from .bags import Robot, Topic, intel_robot, write
-from .conftest import DATA
+from .conftest import DATA, json_lines
 
 MOUNT = Pose2(0.25, -0.1, math.pi)  # a laser looking backwards, like a Neato's
 
@@ -64,7 +64,7 @@ def test_matches_answer_in_the_base_frame_and_agree_with_the_odometry(tmp_path, 
         ["eval", "sequence", str(path), "--guess", "odometry", "--out", str(out), "--workers", "1"],
     )
     assert res.exit_code == 0, res.output
-    rows = json.loads(out.read_text())
+    rows = json_lines(out)
     assert all(r["frame"] == "base_link" for r in rows)
     assert "against the odometry: 7/7 within 5 cm and 1 deg" in res.output
     assert "motions of the robot's base_link" in res.output
@@ -91,7 +91,7 @@ def test_matches_answer_in_the_base_frame_and_agree_with_the_odometry(tmp_path, 
             "1",
         ],
     )
-    first = json.loads(laser_rows.read_text())[0]
+    first = json_lines(laser_rows)[0]
     assert first["frame"] == "laser"
     assert (
         pose_error(

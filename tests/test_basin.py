@@ -1,11 +1,11 @@
 """``eval basin``: the convergence atlas on a real pair, as numbers, PNG and .rrd."""
 
 import numpy as np
-from mbicp_viz.core import IcpParams, MbicpParams, Pose2
 from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import IcpParams, MbicpParams, Pose2
 from mbicp_viz.evaluation.basin import CORRECT, basin
 from mbicp_viz.readers import read_log
 

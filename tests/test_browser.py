@@ -5,9 +5,9 @@ import math
 
 import numpy as np
 import pytest
-from mbicp_viz.core import Pose2
 from playwright.sync_api import sync_playwright
 
+from mbicp_viz.core import Pose2
 from mbicp_viz.readers import read_log
 from mbicp_viz.views.debugger.app import App
 from mbicp_viz.views.debugger.state import Source

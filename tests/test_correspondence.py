@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error
 from mbicp_viz.core.correspondence import ReferenceIndex, nearest, point_line_pairs, polar
 from mbicp_viz.core.events import PairKind
 from mbicp_viz.core.mbicp import rejection_floor
 from mbicp_viz.core.metric import metric_distance_sq
-
 from mbicp_viz.evaluation.overlap import case_pair, make_cases
 from mbicp_viz.readers import read_log
 

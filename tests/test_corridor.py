@@ -4,10 +4,10 @@ says so in its events and both front ends draw it; ``eval corridor`` counts succ
 import math
 
 import numpy as np
-from mbicp_viz.core import ImprovedParams, Pose2, Recorder, match
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import ImprovedParams, Pose2, Recorder, match
 from mbicp_viz.evaluation.corridor import surface_condition
 from mbicp_viz.evaluation.pairs import stored_truth
 from mbicp_viz.readers import read_log

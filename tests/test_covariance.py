@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mbicp_viz.core import IcpParams, PlIcpParams, match
-from mbicp_viz.core.events import IterationEvent, PairStatus
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import IcpParams, PlIcpParams, match
+from mbicp_viz.core.events import IterationEvent, PairStatus
 from mbicp_viz.evaluation.covariance import chi2_mean_bounds, nees
 
 from .conftest import DATA

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from mbicp_viz.core import Pose2, Scan, deskew, make_scan, relative, twist
 from mbicp_viz.core.deskew import motion
-
 from mbicp_viz.readers import ReadOptions, read_log
 
 from .bags import Robot, Topic, intel_robot, write
@@ -166,7 +166,6 @@ def test_on_a_real_hand_held_recording_the_correction_makes_scans_agree(hokuyo):
     matches, scans three apart (whose velocities differ) agree better than as measured, and
     corrected with the opposite velocity, worse: the correction goes the right way."""
     from mbicp_viz.core import ImprovedParams, match
-
     from mbicp_viz.readers.deskew import velocities
 
     v = velocities(hokuyo, "velocity")

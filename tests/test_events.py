@@ -1,8 +1,9 @@
 """The event stream: what the observer receives is consistent with the result and the geometry."""
 
-import mbicp_viz.core.mbicp
 import numpy as np
 import pytest
+
+import mbicp_viz.core.mbicp
 from mbicp_viz.core import (
     MATCHERS,
     FinishEvent,

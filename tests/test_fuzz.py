@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
 from mbicp_viz.core import MATCHERS, Pose2
 from mbicp_viz.core.scan import ABSURD_RANGE_M
-
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.log import MIN_BEARING_STEP_RAD

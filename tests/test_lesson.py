@@ -11,9 +11,9 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from mbicp_viz.core import PairKind, PairStatus, Recorder, match, pose_error
 from rerun.chunk import RrdReader
 
+from mbicp_viz.core import PairKind, PairStatus, Recorder, match, pose_error
 from mbicp_viz.errors import InputError
 from mbicp_viz.views import scene
 from mbicp_viz.views.lesson.steps import load_lesson, run_step, step_paths

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from mbicp_viz.core import (
     MATCHERS,
     IcpParams,
@@ -21,7 +22,6 @@ from mbicp_viz.core import (
     match,
     pose_error,
 )
-
 from mbicp_viz.evaluation.protocols import displaced_self_matches
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.params_toml import load_params

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from mbicp_viz.core import PairStatus
 from mbicp_viz.core.gpc import normal_terms, solve
 from mbicp_viz.core.metric import (

@@ -16,8 +16,8 @@ Guesses: the log's relative pose perturbed uniformly within +/-0.2 m, +/-10 deg 
 import math
 
 import pytest
-from mbicp_viz.core import IcpParams, MbicpParams, PlIcpParams, Pose2, match, pose_error
 
+from mbicp_viz.core import IcpParams, MbicpParams, PlIcpParams, Pose2, match, pose_error
 from mbicp_viz.readers import read_log
 
 from .conftest import DATA, EXAMPLES

@@ -2,10 +2,10 @@
 interruption."""
 
 import numpy as np
-from mbicp_viz.core import ImprovedParams, MbicpParams
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import ImprovedParams, MbicpParams
 from mbicp_viz.evaluation.overlap import case_pair, classify, make_cases, run_overlap, tables
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.params_toml import load_params

@@ -6,6 +6,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from mbicp_viz.cli import app
 from mbicp_viz.core import (
     PmwnParams,
     Pose2,
@@ -18,9 +21,6 @@ from mbicp_viz.core import (
     relative,
 )
 from mbicp_viz.core.polar import refine_parabola, refine_v
-from typer.testing import CliRunner
-
-from mbicp_viz.cli import app
 from mbicp_viz.evaluation.criteria import CONSECUTIVE
 from mbicp_viz.evaluation.pairs import seen_from
 from mbicp_viz.readers import read_log
@@ -461,8 +461,9 @@ def test_least_is_the_first_smallest_finite_cost(cost):
 
 @given(st.lists(st.floats(0.0, 10.0), min_size=1, max_size=40), st.integers(1, 21))
 def test_median_filter_is_scipys_with_the_ends_repeated(x, window):
-    from mbicp_viz.core.polar import median_nearest
     from scipy.ndimage import median_filter
+
+    from mbicp_viz.core.polar import median_nearest
 
     x = np.array(x)
     assert np.array_equal(median_nearest(x, window), median_filter(x, size=window, mode="nearest"))

@@ -1,7 +1,5 @@
 """``eval relations``: Kümmerle et al. 2009 relations against real Intel scans."""
 
-import json
-
 import pytest
 from typer.testing import CliRunner
 
@@ -9,7 +7,7 @@ from mbicp_viz.cli import app
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers.relations import read_relations
 
-from .conftest import DATA
+from .conftest import DATA, json_lines
 
 OFFSET = "976052857.337"
 
@@ -33,7 +31,7 @@ def test_relations_are_matched_and_scored(tmp_path):
     )
     assert res.exit_code == 0, res.output
     assert "8 relations matched" in res.output and "median" in res.output
-    rows = json.loads(out.read_text())
+    rows = json_lines(out)
     assert len(rows) == 8 and all(r["ref"] != r["obj"] for r in rows)
     # these are mostly in-place turns: the matcher gets most of them within a few centimetres
     assert sorted(r["error_xy"] for r in rows)[4] < 0.05

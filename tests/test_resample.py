@@ -3,6 +3,7 @@
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
+
 from mbicp_viz.core.resample import grid_resample, regular_pick
 
 

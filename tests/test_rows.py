@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mbicp_viz.core import MATCHERS
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import MATCHERS
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.failures import failed, failure_reason, worst_first
 from mbicp_viz.readers.rows import read_rows
 from mbicp_viz.views.debugger.sources import files_source
 from mbicp_viz.views.debugger.state import DebugState
 
-from .conftest import DATA
+from .conftest import DATA, json_lines
 from .test_readers import two_lasers
 
 LOG = DATA / "intel-relations.log"
@@ -50,7 +50,7 @@ def rows_file(tmp_path_factory):
 
 
 def test_rows_read_back_as_written(rows_file):
-    written = json.loads(rows_file.read_text())
+    written = json_lines(rows_file)
     rows = read_rows(rows_file)
     assert [(r.ref, r.obj) for r in rows] == [(w["ref"], w["obj"]) for w in written]
     for r, w in zip(rows, written):
@@ -104,7 +104,7 @@ def test_every_failure_reopens_exactly_as_it_failed(rows_file):
 
 
 def test_rows_from_another_log_are_refused(rows_file, tmp_path):
-    rows = json.loads(rows_file.read_text())
+    rows = json_lines(rows_file)
     rows[2]["obj"] = 5000
     bad = tmp_path / "other.json"
     bad.write_text(json.dumps(rows, indent=1))
@@ -136,7 +136,7 @@ def test_rows_from_another_log_are_refused(rows_file, tmp_path):
     ],
 )
 def test_a_bad_field_names_its_line(rows_file, tmp_path, change, field):
-    rows = json.loads(rows_file.read_text())
+    rows = json_lines(rows_file)
     change(rows[3])
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(rows, indent=1))

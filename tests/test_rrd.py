@@ -5,9 +5,9 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
-from mbicp_viz.core import ImprovedParams, MbicpParams, PairKind, PairStatus, Pose2, Recorder
 from rerun.chunk import RrdReader
 
+from mbicp_viz.core import ImprovedParams, MbicpParams, PairKind, PairStatus, Pose2, Recorder
 from mbicp_viz.views.rrd import Run, record
 
 from .conftest import RERUN, free_port, viewer_screenshot, wait_for

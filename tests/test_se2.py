@@ -3,6 +3,7 @@
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
+
 from mbicp_viz.core import Pose2, pose_error, relative, wrap_angle
 
 coord = st.floats(-50, 50, allow_nan=False)

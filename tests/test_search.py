@@ -1,20 +1,19 @@
 """The correlative search that gives the local matchers a guess when there is none."""
 
-import json
 import math
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error, relative
-from mbicp_viz.core.search import SearchParams, correlative_search, likelihood_field
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error, relative
+from mbicp_viz.core.search import SearchParams, correlative_search, likelihood_field
 from mbicp_viz.evaluation.criteria import CONSECUTIVE
 from mbicp_viz.evaluation.pairs import seen_from
 
-from .conftest import INTEL
+from .conftest import INTEL, json_lines
 
 
 def success(pose: Pose2, truth: Pose2) -> bool:
@@ -105,7 +104,7 @@ def test_eval_sequence_with_a_searched_guess(tmp_path):
         ],
     )
     assert res.exit_code == 0, res.output
-    rows = json.loads(out.read_text())
+    rows = json_lines(out)
     assert len(rows) == 6 and all(r["guess"] == "search" and r["guess_ms"] > 0 for r in rows)
     assert sum(r["success"] for r in rows) >= 5
 

@@ -3,6 +3,7 @@
 import math
 
 import pytest
+
 from mbicp_viz.core import (
     ImprovedParams,
     PmwnParams,

@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 import pytest
-from mbicp_viz.core import MATCHERS, Pose2, Recorder, tiers
 
+from mbicp_viz.core import MATCHERS, Pose2, Recorder, tiers
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.params_toml import load_params
 

@@ -1,10 +1,10 @@
 """Sequence trajectories: accumulation, the odometry Kalman filter, TUM export, the map plot."""
 
 import numpy as np
-from mbicp_viz.core import Pose2, pose_error, relative
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
+from mbicp_viz.core import Pose2, pose_error, relative
 from mbicp_viz.evaluation.trajectory import accumulate, kalman
 from mbicp_viz.readers import read_log
 

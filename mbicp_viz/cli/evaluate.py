@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from pathlib import Path
@@ -12,6 +11,7 @@ import typer
 
 from mbicp_viz.choices import DEFAULT_TYPESTORE, Removal, Thin
 from mbicp_viz.errors import InputError
+from mbicp_viz.outputs import write_text
 
 from .options import (
     ALL_ALGOS,
@@ -53,6 +53,7 @@ from .options import (
     say,
     user_errors,
 )
+from .resume import log_identity, resumable_rows, stop_if_interrupted
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the first N pairs")]
@@ -60,7 +61,14 @@ LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the f
 
 def sequence(
     log: LogArg,
-    out: Annotated[Path, typer.Option("--out", help="JSON file: one object per consecutive pair")],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            help="rows file (JSON lines, one per consecutive pair), written as OUT.partial while "
+            "the pairs are matched; a stopped run resumes from it",
+        ),
+    ],
     algo: AlgoOpt = DEFAULT_ALGO,
     params: ParamsOpt = None,
     limit: LimitOpt = None,
@@ -104,31 +112,39 @@ def sequence(
         raise InputError("the only truth a log carries is 'pose'", field="--truth")
     p = make_params(algo.value, params)
     lg = read_log_saying(log, read_options(topic, typestore, mount, upside_down, deskew))
-    total = len(lg.consecutive_pairs(limit))
-    with Progress(total) as bar:
-        rows = match_sequence(
+    pairs = lg.consecutive_pairs(limit)
+    search = load_search(params)
+    run = {
+        "command": "eval sequence",
+        "log": log_identity(log),
+        "read": [lg.topic, typestore, mount, upside_down, deskew and deskew.value],
+        "algorithm": algo.value,
+        "params": p.as_dict(),
+        "search": search.as_dict(),
+        "guess": guess.value,
+        "truth": truth,
+        "frame": frame.value,
+    }
+    rows = resumable_rows(out, run, pairs)
+    with rows, Progress(len(pairs)) as bar:
+        bar.update(len(rows.rows))
+        match_sequence(
             lg,
             p,
             limit,
             guess,
             truth,
-            on_row=lambda _: bar.update(1),
+            on_row=lambda row: (rows.add(row), bar.update(1)),
             workers=workers,
-            search=load_search(params),
+            search=search,
             base=frame is Frame.base,
+            skip=len(rows.rows),
         )
-    if not rows:
-        raise InputError("interrupted before the first pair was matched", log)
-    out.write_text(json.dumps(rows, indent=1) + "\n")
+    stop_if_interrupted(rows, len(pairs))
+    rows.finish()
+    rows = rows.rows
     conv = sum(r["converged"] for r in rows)
-    cut = (
-        ""
-        if len(rows) == total
-        else f" (interrupted after {len(rows)} of {total}: the rows so far are kept)"
-    )
-    typer.echo(
-        f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}{cut}"
-    )
+    typer.echo(f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}")
     if truth:
         typer.echo("\n".join(truth_summary(rows)))
     if odometry := odometry_summary(rows):
@@ -163,11 +179,11 @@ def _trajectories(lg, rows, png, tum, tum_ref, fuse) -> None:
     main = list(tracks)[-1] if fuse else MATCHED
     times = stamps(lg, rows)
     if tum:
-        tum.write_text(tum_text(tracks[main], times))
+        write_text(tum, tum_text(tracks[main], times))
     if tum_ref:
         if STORED not in tracks:
             raise InputError("the log stores no scan poses to export", lg.path, field="--tum-ref")
-        tum_ref.write_text(tum_text(tracks[STORED], times))
+        write_text(tum_ref, tum_text(tracks[STORED], times))
     if png:
         plot_png(lg, rows, tracks, str(png), main)
 
@@ -290,7 +306,7 @@ def overlap(
         f"{len(scenes)} scenes, removal {removal.value} from the {thin.value}, seed {seed}"
     )
     if csv:
-        csv.write_text(csv_text(rows))
+        write_text(csv, csv_text(rows))
     if png:
         plot_png(tab, str(png))
 
@@ -443,7 +459,8 @@ def relations(
         ),
     ] = Guess.identity,
     out: Annotated[
-        Path | None, typer.Option("--out", help="JSON file: one object per matched relation")
+        Path | None,
+        typer.Option("--out", help="rows file (JSON lines, one per matched relation)"),
     ] = None,
     topic: TopicOpt = None,
 ):
@@ -451,6 +468,7 @@ def relations(
     from mbicp_viz.evaluation.relations import match_relations, stored_summary, summary
     from mbicp_viz.readers.params_toml import load_search, make_params
     from mbicp_viz.readers.relations import read_relations
+    from mbicp_viz.readers.rows import rows_text
 
     lg = read_log_saying(log, read_options(topic))
     rows, missing = match_relations(
@@ -463,7 +481,7 @@ def relations(
         load_search(params),
     )
     if out:
-        out.write_text(json.dumps(rows, indent=1) + "\n")
+        write_text(out, rows_text(rows))
     typer.echo(f"{algo.value}: {summary(rows)} ({missing} relations without a scan at both ends)")
     if stored := stored_summary(rows):
         typer.echo(stored)

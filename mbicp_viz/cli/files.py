@@ -7,6 +7,8 @@ from typing import Annotated
 
 import typer
 
+from mbicp_viz.outputs import write_text
+
 from .options import DEFAULT_ALGO, AlgoOpt, user_errors
 
 
@@ -63,7 +65,7 @@ def params(
         return
     text = params_to_toml(make_params(algo.value, None), SearchParams())
     if out:
-        out.write_text(text)
+        write_text(out, text)
     else:
         typer.echo(text, nl=False)
 

@@ -243,19 +243,64 @@ def check_perturb(perturb: tuple[float, float]) -> tuple[float, float]:
 OUTPUT_FILES = ("rrd", "out", "png", "tum", "tum_ref", "csv")
 
 
-def check_outputs(options: dict) -> None:
-    """Refuse an output file whose folder is missing or read-only before any work is done (a run
-    must not end in an error after its work); make ``--out-dir`` when missing."""
-    for name in OUTPUT_FILES:
-        path, field = options.get(name), "--" + name.replace("_", "-")
-        if not isinstance(path, Path):  # unset, or a flag (bench --rrd)
-            continue
+def _option(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def cli_name(fn, name: str) -> str:
+    """How the command line calls parameter ``name`` of command ``fn``: its option (``--params``)
+    or its argument (``LOG``)."""
+    import typing
+
+    hint = typing.get_type_hints(fn, include_extras=True).get(name)
+    for meta in getattr(hint, "__metadata__", ()):
+        if isinstance(meta, typer.models.OptionInfo) and meta.param_decls:
+            return meta.param_decls[0]
+        if isinstance(meta, typer.models.ArgumentInfo):
+            return meta.metavar or name.upper()
+    return _option(name)
+
+
+def _named_files(options: dict) -> dict[str, list[Path]]:
+    """The existing files each option names (a path, a name, or a list of them): what a command may
+    read."""
+    found: dict[str, list[Path]] = {}
+    for name, value in options.items():
+        for v in value if isinstance(value, (list, tuple)) else (value,):
+            if isinstance(v, (str, Path)) and str(v) and Path(v).is_file():
+                found.setdefault(name, []).append(Path(v))
+    return found
+
+
+def check_outputs(options: dict, name=_option) -> None:
+    """Before any work is done (a run must not end in an error after its work): refuse an output
+    file whose folder is missing or read-only, one that is also an input of the command (it would
+    be destroyed) or another of its outputs; make ``--out-dir`` when missing. ``name`` says how the
+    command line calls a parameter."""
+    outputs = {n: options[n] for n in OUTPUT_FILES if isinstance(options.get(n), Path)}
+    inputs = {n: p for n, p in _named_files(options).items() if n not in outputs}
+    seen: dict[Path, str] = {}
+    for option, path in outputs.items():  # unset options and flags (bench --rrd) are not paths
+        field = name(option)
         if path.is_dir():
             raise InputError(f"{path} is a folder; give a file name", field=field)
         if not path.parent.is_dir():
             raise InputError(f"folder {path.parent} does not exist", field=field)
         if not os.access(path.parent, os.W_OK):
             raise InputError(f"folder {path.parent} is not writable", field=field)
+        for other, files in inputs.items():
+            if path.exists() and any(os.path.samefile(path, f) for f in files):
+                raise InputError(
+                    f"{path} is also this command's input ({name(other)}): writing it would "
+                    "destroy it; give another file",
+                    field=field,
+                )
+        key = path.resolve()
+        if key in seen:
+            raise InputError(
+                f"{path} is also {seen[key]}: give each output its own file", field=field
+            )
+        seen[key] = field
     if isinstance(options.get("out_dir"), Path):
         try:
             options["out_dir"].mkdir(parents=True, exist_ok=True)
@@ -271,7 +316,7 @@ def user_errors(fn):
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
-            check_outputs(kwargs)
+            check_outputs(kwargs, functools.partial(cli_name, fn))
             return fn(*args, **kwargs)
         except (InputError, ScanError, ParamError) as e:
             typer.echo(f"mbicp-viz: error: {e}", err=True)

@@ -3,7 +3,6 @@ log."""
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Annotated
@@ -12,6 +11,7 @@ import typer
 
 from mbicp_viz.choices import DEFAULT_TYPESTORE
 from mbicp_viz.errors import InputError
+from mbicp_viz.outputs import write_text
 
 from .options import (
     DEFAULT_ALGO,
@@ -200,7 +200,7 @@ def tune(
     typer.echo(
         "best parameters: " + ", ".join(_shown(d.spec, getattr(best, d.spec.name)) for d in space)
     )
-    out.write_text(params_to_toml(best, search))
+    write_text(out, params_to_toml(best, search))
     typer.echo(f"written to {out} (read it back with --params {out})")
     shares = t.importance(st)
     if shares:
@@ -227,7 +227,7 @@ def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
     from mbicp_viz.evaluation.failures import worst_first
     from mbicp_viz.evaluation.sequence import pair_row
     from mbicp_viz.readers import read_log
-    from mbicp_viz.readers.rows import read_rows
+    from mbicp_viz.readers.rows import read_rows, rows_text
 
     rows_dir.mkdir(parents=True, exist_ok=True)
     for k, path in enumerate(logs):
@@ -251,7 +251,7 @@ def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
             if c.log == k
         ]
         target = rows_dir / f"{Path(path).name.split('.')[0]}-rows.json"
-        target.write_text(json.dumps(rows, indent=1) + "\n")
+        write_text(target, rows_text(rows))
         bad = worst_first(read_rows(target))
         typer.echo(
             f"{len(bad)} failures of {len(rows)} pairs in {target}: open them with "

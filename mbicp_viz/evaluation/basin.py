@@ -81,7 +81,7 @@ def basin(
 def plot_png(atlas: Atlas, path: str) -> None:
     from matplotlib.colors import ListedColormap
 
-    from mbicp_viz.pyplot import pyplot
+    from mbicp_viz.pyplot import pyplot, save_png
 
     plt = pyplot()
 
@@ -103,8 +103,7 @@ def plot_png(atlas: Atlas, path: str) -> None:
     handles = [plt.Rectangle((0, 0), 1, 1, color=np.array(c) / 255.0) for c in OUTCOME_COLORS]
     fig.legend(handles, OUTCOME_NAMES, loc="lower center", ncol=3, fontsize=8)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, 110)
 
 
 def summary(atlas: Atlas) -> str:

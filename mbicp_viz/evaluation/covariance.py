@@ -128,7 +128,7 @@ def nees_png(results: dict[str, Consistency], path: str) -> None:
     """Each matcher's NEES distribution against chi^2(3)."""
     from scipy.stats import chi2
 
-    from mbicp_viz.pyplot import pyplot
+    from mbicp_viz.pyplot import pyplot, save_png
 
     plt = pyplot()
 
@@ -149,5 +149,4 @@ def nees_png(results: dict[str, Consistency], path: str) -> None:
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_png(fig, path)

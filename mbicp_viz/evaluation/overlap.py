@@ -209,7 +209,7 @@ def csv_text(rows: list[OverlapRow]) -> str:
 
 
 def plot_png(tab: dict[str, list[dict]], path: str) -> None:
-    from mbicp_viz.pyplot import pyplot
+    from mbicp_viz.pyplot import pyplot, save_png
 
     plt = pyplot()
 
@@ -228,5 +228,4 @@ def plot_png(tab: dict[str, list[dict]], path: str) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, 110)

@@ -1,11 +1,21 @@
-"""Long evaluations spread over the machine's cores, interruptible without losing finished work."""
+"""Long evaluations spread over the machine's cores, interruptible without losing finished work.
+
+Ctrl-C only sets a flag, read between two jobs (``stopping``): a KeyboardInterrupt raised inside a
+compiled loop surfaces as numba's ``SystemError`` and loses the run, and one raised while a pool
+shuts down leaves its workers behind. Every press is taken alike, so pressing it again does not
+break the clean stop the first one started.
+"""
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
-from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+POLL_S = 0.1  # how often a waiting parent looks at the flag: a stop takes effect within this
 
 
 def ignore_interrupts() -> None:
@@ -13,30 +23,65 @@ def ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+@contextmanager
+def stopping(flag: threading.Event | None = None) -> Iterator[threading.Event]:
+    """Within the block Ctrl-C sets ``flag`` (a new one by default) instead of raising; outside
+    the main thread, where no handler can be set, the flag is only the caller's."""
+    flag = flag if flag is not None else threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+    previous = signal.signal(signal.SIGINT, lambda *_: flag.set())
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _chunk(job: tuple[Callable, list]) -> list:
+    fn, jobs = job
+    return [fn(j) for j in jobs]
+
+
 def ordered_map(
     fn: Callable, jobs: list, workers: int | None = None, on_result: Callable | None = None
 ) -> list:
     """``[fn(job) for job in jobs]``, in order, over ``workers`` processes (default: every core).
 
-    ``on_result`` sees each result as it arrives (progress). Ctrl-C stops the run and returns the
-    results finished so far; ``fn`` and the jobs must pickle (module-level function, plain data).
+    ``on_result`` sees each result as it arrives (progress). Ctrl-C stops the run within one job
+    (one process) or ``POLL_S`` (a pool, whose workers are ended) and returns the results
+    finished so far, in order; ``fn`` and the jobs must pickle (module-level function, plain data).
     """
     workers = workers or os.cpu_count() or 1
     out: list = []
-    pool = None
-    try:
+
+    def take(r) -> None:
+        out.append(r)
+        if on_result is not None:
+            on_result(r)
+
+    with stopping() as stop:
         if workers == 1 or len(jobs) <= 1:
-            results: Iterable = map(fn, jobs)
-        else:
-            pool = ProcessPoolExecutor(max_workers=workers, initializer=ignore_interrupts)
-            results = pool.map(fn, jobs, chunksize=max(1, min(16, len(jobs) // (8 * workers))))
-        for r in results:
-            out.append(r)
-            if on_result is not None:
-                on_result(r)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+            for job in jobs:
+                if stop.is_set():
+                    break
+                try:
+                    take(fn(job))
+                except KeyboardInterrupt:  # raised by the job itself (a handler of its own)
+                    break
+            return out
+        size = max(1, min(16, len(jobs) // (8 * workers)))
+        chunks = [(fn, jobs[k : k + size]) for k in range(0, len(jobs), size)]
+        pool = multiprocessing.get_context().Pool(workers, initializer=ignore_interrupts)
+        try:
+            results = pool.imap(_chunk, chunks)  # one chunk at a time: next() can time out
+            while len(out) < len(jobs) and not stop.is_set():
+                try:
+                    for r in results.next(timeout=POLL_S):
+                        take(r)
+                except multiprocessing.TimeoutError:
+                    continue
+        finally:
+            pool.terminate()  # a stop ends the jobs under way; their results are not waited for
+            pool.join()
     return out

@@ -63,12 +63,14 @@ def match_sequence(
     workers: int | None = None,
     search: SearchParams | None = None,
     base: bool = True,
+    skip: int = 0,
 ) -> list[dict]:
     """One row per consecutive pair of usable scans, in order: the match's motion (of the robot's
     base when ``base`` and the log knows the laser's mount), how well it lays the scans on each
     other, its distance from the log's odometry when the log has some, and with ``truth="pose"``
-    its error against the log's scan poses. Pairs are spread over ``workers`` processes (default:
-    every core); ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
+    its error against the log's scan poses. The first ``skip`` pairs are left out (a run resumed
+    from its rows). Pairs are spread over ``workers`` processes (default: every core); ``on_row``
+    sees each row as it arrives, and Ctrl-C keeps the rows so far."""
     guess = Guess(guess)
     if truth == "pose" and guess in (Guess.pose, Guess.stored):
         raise InputError(
@@ -91,7 +93,7 @@ def match_sequence(
             base,
             log.topic,
         )
-        for i, j in log.consecutive_pairs(limit)
+        for i, j in log.consecutive_pairs(limit)[skip:]
     ]
     return ordered_map(_match_row, jobs, workers, on_row)
 

@@ -132,7 +132,7 @@ def plot_png(
     log: ScanLog, rows: list[dict], tracks: dict[str, list[Pose2]], path: str, map_track: str
 ) -> None:
     """Trajectories, and the map: every scan drawn at its pose on ``map_track``."""
-    from mbicp_viz.pyplot import pyplot
+    from mbicp_viz.pyplot import pyplot, save_png
 
     plt = pyplot()
 
@@ -149,5 +149,4 @@ def plot_png(
     ax.legend()
     ax.set_title(f"{log.path}: map on the {map_track} trajectory")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, 110)

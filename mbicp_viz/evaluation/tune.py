@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 import os
-import signal
 import socket
 import threading
 import time
@@ -30,7 +29,7 @@ from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 
 from .cases import Case
 from .criteria import CONSECUTIVE
-from .pool import ignore_interrupts
+from .pool import ignore_interrupts, stopping
 
 
 @dataclass(frozen=True)
@@ -93,11 +92,7 @@ def _errors(job) -> np.ndarray:
             out[n] = pose_error(
                 match(log.scans[c.i], log.scans[c.j], c.guess, params).pose, c.truth
             )
-        # a scan error or a parameter set the matcher refuses
-        except (
-            ValueError,
-            FloatingPointError,
-        ):
+        except (ValueError, FloatingPointError):  # a scan error, or parameters it refuses
             out[n] = (math.inf, math.inf)
     return out
 
@@ -252,22 +247,14 @@ def optimise(
         if on_trial is not None:
             on_trial(trial)
 
-    # Ctrl-C only sets a flag, read between two matches: a KeyboardInterrupt raised inside a
-    # compiled loop would surface as a SystemError and fail the trial instead of stopping
     _STOP.clear()
-    previous = (
-        signal.signal(signal.SIGINT, lambda *_: _STOP.set())
-        if threading.current_thread() is threading.main_thread()
-        else None
-    )
     try:
-        study.optimize(objective, n_trials=trials, callbacks=[finished], catch=(ParamError,))
+        with stopping(_STOP):  # Ctrl-C: the trial under way is dropped between two matches
+            study.optimize(objective, n_trials=trials, callbacks=[finished], catch=(ParamError,))
     except KeyboardInterrupt:
         pass
     finally:
         _STOP.clear()  # the scores computed after the study (defaults, best, holdout) run in full
-        if previous is not None:
-            signal.signal(signal.SIGINT, previous)
     return done
 
 
@@ -278,7 +265,7 @@ def best_params(study, base: Params, space: list[Dimension]) -> Params:
 
 def history_png(study, path: str) -> None:
     """Each trial's success rate, and the best so far."""
-    from mbicp_viz.pyplot import pyplot
+    from mbicp_viz.pyplot import pyplot, save_png
 
     plt = pyplot()
 
@@ -294,8 +281,7 @@ def history_png(study, path: str) -> None:
     ax.legend(loc="lower right")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def importance(study) -> dict[str, float]:
@@ -306,7 +292,7 @@ def importance(study) -> dict[str, float]:
 
 
 def importance_png(shares: dict[str, float], study_name: str, path: str) -> None:
-    from mbicp_viz.pyplot import pyplot
+    from mbicp_viz.pyplot import pyplot, save_png
 
     plt = pyplot()
 
@@ -317,5 +303,4 @@ def importance_png(shares: dict[str, float], study_name: str, path: str) -> None
     ax.set_title(f"study {study_name}: parameter importance")
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_png(fig, path)

@@ -1,6 +1,9 @@
 """Rows files: what ``eval sequence --out`` (and ``tune``'s worst pairs) write, one JSON object per
 matched pair, read back so that a pair reopens exactly as it ran (``serve LOG --rows FILE``).
 
+Rows are JSON lines, one object per line, written as each pair finishes (``PartialRows``); files
+of earlier versions, one JSON array, still read.
+
 A row holds the pair (record numbers), the matcher and every one of its parameters, the initial
 guess in the laser frame, and what came out (pose, convergence, and with ``--truth`` the errors).
 Each object's line in the file is kept: an error names the file, the line and the field.
@@ -15,11 +18,13 @@ from pathlib import Path
 
 from mbicp_viz.core import MATCHERS, Params, Pose2
 from mbicp_viz.errors import InputError
+from mbicp_viz.outputs import write_text, written
 
 from .params_toml import params_from_mapping
 from .text import opening
 
 MAX_FILE_BYTES = 512_000_000  # ~300 000 rows; a rows file is read whole
+PARTIAL = ".partial"  # a stopped run's rows, beside the file they become
 
 
 @dataclass(frozen=True)
@@ -132,6 +137,36 @@ def parse_row(obj, path: str, line: int) -> EvalRow:
     )
 
 
+def rows_text(rows: list[dict]) -> str:
+    """Rows as JSON lines, in order."""
+    return "".join(json.dumps(r) + "\n" for r in rows)
+
+
+def _header(obj) -> dict | None:
+    """The run a partial file's first line names, else None."""
+    if isinstance(obj, dict) and len(obj) == 1 and isinstance(obj.get("partial"), dict):
+        return obj["partial"]
+    return None
+
+
+def _decoded(line: str, path: str, n: int):
+    try:
+        return json.loads(line)
+    except json.JSONDecodeError as e:
+        raise InputError(f"invalid JSON ({e.msg}, column {e.colno})", path, n) from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply", path, n) from None
+
+
+def _lines(text: str, path: str):
+    """(line, object) for each non-empty line of JSON lines; a partial file's header is skipped."""
+    for n, line in enumerate(text.split("\n"), 1):
+        if line.strip():
+            obj = _decoded(line, path, n)
+            if n > 1 or _header(obj) is None:
+                yield n, obj
+
+
 def _objects(text: str, path: str):
     """(line, object) for each element of the top-level JSON array, in order."""
     decoder, pos, line, n = json.JSONDecoder(), 0, 1, len(text)
@@ -189,7 +224,76 @@ def read_rows(path: str | Path) -> list[EvalRow]:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
         raise InputError(f"not UTF-8 text ({e.reason} at byte {e.start})", path) from None
-    rows = [parse_row(obj, path, line) for line, obj in _objects(text, path)]
+    objects = _objects if text.lstrip().startswith("[") else _lines
+    rows = [parse_row(obj, path, line) for line, obj in objects(text, path)]
     if not rows:
         raise InputError("no rows", path)
     return rows
+
+
+class PartialRows:
+    """A run's rows as they finish: JSON lines in ``OUT.partial`` beside ``out`` (never over a
+    complete earlier file), whose first line names the run; ``finish`` writes ``out`` whole and
+    removes them. A stopped or killed run leaves them, and the same run started again resumes
+    from them (``rows``); the rows of another run are refused, never mixed in."""
+
+    def __init__(self, out: Path, run: dict):
+        self.out = Path(out)
+        self.path = self.out.with_name(self.out.name + PARTIAL)
+        self.run = json.loads(json.dumps(run))  # as it reads back
+        self.rows: list[dict] = self._resumed() if self.path.exists() else []
+        self._file = None
+
+    def _resumed(self) -> list[dict]:
+        path = str(self.path)
+        with opening(self.path):
+            lines = self.path.read_bytes().decode("utf-8", "replace").split("\n")
+        theirs = _header(_decoded(lines[0], path, 1)) if lines[0].strip() else None
+        if theirs is None:
+            raise InputError(
+                "not the rows of a stopped run (no first line naming it): delete it or give "
+                "another --out",
+                path,
+                1,
+            )
+        for key in sorted(set(theirs) | set(self.run)):
+            if theirs.get(key) != self.run.get(key):
+                raise InputError(
+                    f"rows of another run ({json.dumps(theirs.get(key))[:60]}; this run: "
+                    f"{json.dumps(self.run.get(key))[:60]}): delete the file to start afresh, or "
+                    "give another --out",
+                    path,
+                    1,
+                    key,
+                )
+        body = [(n, line) for n, line in enumerate(lines[1:], 2) if line.strip()]
+        rows = []
+        for k, (n, line) in enumerate(body):
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:
+                if k < len(body) - 1:
+                    raise InputError("invalid JSON: not a row this tool wrote", path, n) from None
+                # the last line, cut short by a kill: that pair is matched again
+        return rows
+
+    def __enter__(self) -> PartialRows:
+        # the rows read, without a line a kill cut short
+        with written(self.path, say=False) as tmp:
+            tmp.write_text(json.dumps({"partial": self.run}) + "\n" + rows_text(self.rows))
+        self._file = open(self.path, "a")
+        return self
+
+    def add(self, row: dict) -> None:
+        """Append ``row``, on disk at once (a kill loses at most the row being written)."""
+        self.rows.append(row)
+        self._file.write(json.dumps(row) + "\n")
+        self._file.flush()
+
+    def __exit__(self, *exc) -> None:
+        self._file.close()
+
+    def finish(self) -> None:
+        """The run is complete: ``out`` written whole, the partial file gone."""
+        write_text(self.out, rows_text(self.rows))
+        self.path.unlink()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mbicp_viz.outputs import write_bytes, write_text
 from mbicp_viz.views.lesson.steps import StepRun
 
 from . import scene
@@ -87,8 +88,8 @@ def write_handout(step_runs: list[StepRun], out: Path) -> Path:
     pngs = []
     for sr in step_runs:
         name = f"step-{sr.step.number:02d}.png"
-        (out / name).write_bytes(step_png(sr))
+        write_bytes(out / name, step_png(sr))
         pngs.append(name)
     md = out / "lesson.md"
-    md.write_text(handout_markdown(step_runs, pngs))
+    write_text(md, handout_markdown(step_runs, pngs))
     return md

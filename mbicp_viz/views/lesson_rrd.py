@@ -18,7 +18,7 @@ from mbicp_viz.views.lesson.steps import StepRun
 
 from . import scene
 from .handout import panel_title, side_plot
-from .rrd import log_layer, log_y_up, new_stream, y_up_view
+from .rrd import log_layer, log_y_up, new_stream, saving, y_up_view
 
 ROOT = "lesson"
 SLOTS = ("first", "second")  # a step shows at most two matchers side by side (steps.MAX_MATCHERS)
@@ -83,43 +83,42 @@ def record_lesson(step_runs: list[StepRun], path: str) -> None:
         y_up_view(f"/{ROOT}/{slot}", f"{slot} matcher of the step: scans (reference frame, m)")
         for slot in SLOTS
     ]
-    stream.save(
-        path,
-        default_blueprint=rrb.Blueprint(
-            rrb.Horizontal(
-                rrb.Vertical(
-                    rrb.Horizontal(*scans),
-                    y_up_view(f"/{PLOT}", "plot beside the scans"),
-                    row_shares=[3, 2],
-                ),
-                rrb.TextDocumentView(origin=f"/{TEXT}", name="the step"),
-                column_shares=[3, 1],
+    bp = rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Horizontal(*scans),
+                y_up_view(f"/{PLOT}", "plot beside the scans"),
+                row_shares=[3, 2],
             ),
-            rrb.TimePanel(timeline="step", expanded=True, play_state="paused"),
-            collapse_panels=True,
+            rrb.TextDocumentView(origin=f"/{TEXT}", name="the step"),
+            column_shares=[3, 1],
         ),
+        rrb.TimePanel(timeline="step", expanded=True, play_state="paused"),
+        collapse_panels=True,
     )
-    for space in (*(f"{ROOT}/{slot}" for slot in SLOTS), PLOT):
-        log_y_up(stream, space)
-    shown = {"step": set(), ITERATIONS: set()}  # what each timeline's last tick showed
-    for sr in step_runs:
-        stream.disable_timeline(ITERATIONS)
-        stream.set_time("step", sequence=sr.step.number)
-        shown["step"] = _show(stream, _frame(sr, None), shown["step"])
-        stream.log(
-            TEXT,
-            rr.TextDocument(step_markdown(sr, len(step_runs)), media_type=rr.MediaType.MARKDOWN),
-        )
-        stream.disable_timeline("step")
-        for i in range(max(len(r.iterations) for r in sr.runs) + 1):
-            stream.set_time(ITERATIONS, sequence=sr.step.number * PER_STEP + i)
-            shown[ITERATIONS] = _show(stream, _frame(sr, i), shown[ITERATIONS])
-            if i == 0:
-                stream.log(
-                    TEXT,
-                    rr.TextDocument(
-                        step_markdown(sr, len(step_runs), True), media_type=rr.MediaType.MARKDOWN
-                    ),
-                )
-    stream.flush()
-    stream.disconnect()
+    with saving(stream, path, bp):
+        for space in (*(f"{ROOT}/{slot}" for slot in SLOTS), PLOT):
+            log_y_up(stream, space)
+        shown = {"step": set(), ITERATIONS: set()}  # what each timeline's last tick showed
+        for sr in step_runs:
+            stream.disable_timeline(ITERATIONS)
+            stream.set_time("step", sequence=sr.step.number)
+            shown["step"] = _show(stream, _frame(sr, None), shown["step"])
+            stream.log(
+                TEXT,
+                rr.TextDocument(
+                    step_markdown(sr, len(step_runs)), media_type=rr.MediaType.MARKDOWN
+                ),
+            )
+            stream.disable_timeline("step")
+            for i in range(max(len(r.iterations) for r in sr.runs) + 1):
+                stream.set_time(ITERATIONS, sequence=sr.step.number * PER_STEP + i)
+                shown[ITERATIONS] = _show(stream, _frame(sr, i), shown[ITERATIONS])
+                if i == 0:
+                    stream.log(
+                        TEXT,
+                        rr.TextDocument(
+                            step_markdown(sr, len(step_runs), True),
+                            media_type=rr.MediaType.MARKDOWN,
+                        ),
+                    )

@@ -12,6 +12,8 @@ upright, and the values a user hovers over are the logged ones.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +34,7 @@ from mbicp_viz.core import (
     match,
 )
 from mbicp_viz.errors import InputError
+from mbicp_viz.outputs import written
 
 from . import scene
 
@@ -50,6 +53,19 @@ def new_stream(recording_id: str, live: bool = False) -> rr.RecordingStream:
     return rr.RecordingStream(
         APP_ID, recording_id=recording_id, send_properties=False, batcher_config=batching
     )
+
+
+@contextmanager
+def saving(stream: rr.RecordingStream, path: str, blueprint) -> Iterator[None]:
+    """What the block logs to ``stream``, saved to ``path`` whole: into a temporary beside it,
+    renamed over ``path`` once the stream is flushed and closed (``outputs.written``)."""
+    with written(path) as tmp:
+        stream.save(str(tmp), default_blueprint=blueprint)
+        try:
+            yield
+        finally:
+            stream.flush()
+            stream.disconnect()
 
 
 # The debugger's light background: black correspondences (paper 000's colour) stay visible.
@@ -316,26 +332,21 @@ def record(
     stream = new_stream(recording_id, live=connect is not None)
     polar = {r.root for r in runs if matcher_for(r.params).module in ("psm", "pmwn")}
     bp = blueprint([r.root for r in runs], teaching, about is not None, polar)
-    if path is not None:
-        stream.save(path, default_blueprint=bp)
-    if connect is not None:
-        stream.connect_grpc(connect, default_blueprint=bp)
-    if about is not None:
-        stream.log(ABOUT, rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
     results = []
-    for r in runs:
-        obs = RerunObserver(stream, r.root, teaching, r.truth, stored_odometry(r.ref, r.obj))
-        results.append(
-            match(
-                r.ref,
-                r.obj,
-                r.guess,
-                r.params,
-                obs if extra_observer is None else broadcast(obs, extra_observer),
-            )
-        )
-    stream.flush()
-    stream.disconnect()
+    with ExitStack() as stack:
+        if path is not None:
+            stack.enter_context(saving(stream, path, bp))
+        else:
+            stack.callback(stream.disconnect)
+        if connect is not None:
+            stream.connect_grpc(connect, default_blueprint=bp)
+        if about is not None:
+            stream.log(ABOUT, rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
+        for r in runs:
+            obs = RerunObserver(stream, r.root, teaching, r.truth, stored_odometry(r.ref, r.obj))
+            observer = obs if extra_observer is None else broadcast(obs, extra_observer)
+            results.append(match(r.ref, r.obj, r.guess, r.params, observer))
+        stream.flush()
     return results
 
 
@@ -389,20 +400,20 @@ def record_sequence(
         rrb.TimePanel(timeline="scan", expanded=True),
         collapse_panels=True,
     )
-    stream.save(path, default_blueprint=bp)
-    log_y_up(stream, space)
-    poses, stored = accumulate(rows), log_poses(log, rows)
-    by_obj = {row["obj"]: row for row in rows}
-    for n, k in enumerate(scan_indices(rows)):
-        stream.set_time("scan", sequence=k)
-        traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
-        stored_traj = None if stored is None else np.array([[p.x, p.y] for p in stored[: n + 1]])
-        for layer in scene.sequence_layers(
-            k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k)
-        ):
-            log_layer(stream, root, layer)
-    stream.flush()
-    stream.disconnect()
+    with saving(stream, path, bp):
+        log_y_up(stream, space)
+        poses, stored = accumulate(rows), log_poses(log, rows)
+        by_obj = {row["obj"]: row for row in rows}
+        for n, k in enumerate(scan_indices(rows)):
+            stream.set_time("scan", sequence=k)
+            traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
+            stored_traj = (
+                None if stored is None else np.array([[p.x, p.y] for p in stored[: n + 1]])
+            )
+            for layer in scene.sequence_layers(
+                k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k)
+            ):
+                log_layer(stream, root, layer)
 
 
 def record_basin(atlas, path: str) -> None:
@@ -413,35 +424,31 @@ def record_basin(atlas, path: str) -> None:
 
     stream = new_stream("mbicp-viz/basin")
     names = list(atlas.outcome)
-    stream.save(
-        path,
-        default_blueprint=rrb.Blueprint(
-            rrb.Horizontal(
-                *[
-                    y_up_view(f"/basin/{n}", f"{n}: outcome per initial offset (dx, dy) [m]")
-                    for n in names
-                ]
-            ),
-            rrb.TimePanel(timeline="theta_offset", expanded=True),
-            collapse_panels=True,
+    bp = rrb.Blueprint(
+        rrb.Horizontal(
+            *[
+                y_up_view(f"/basin/{n}", f"{n}: outcome per initial offset (dx, dy) [m]")
+                for n in names
+            ]
         ),
+        rrb.TimePanel(timeline="theta_offset", expanded=True),
+        collapse_panels=True,
     )
-    for n in names:
-        log_y_up(stream, f"basin/{n}")
-    for t, th in enumerate(atlas.thetas):
-        stream.set_time("theta_offset", sequence=t)
+    with saving(stream, path, bp):
         for n in names:
-            for layer in scene.basin_layers(
-                n,
-                atlas.offsets_xy,
-                atlas.outcome[n][t],
-                OUTCOME_NAMES,
-                OUTCOME_COLORS,
-                math.degrees(th),
-            ):
-                log_layer(stream, "", layer)
-    stream.flush()
-    stream.disconnect()
+            log_y_up(stream, f"basin/{n}")
+        for t, th in enumerate(atlas.thetas):
+            stream.set_time("theta_offset", sequence=t)
+            for n in names:
+                for layer in scene.basin_layers(
+                    n,
+                    atlas.offsets_xy,
+                    atlas.outcome[n][t],
+                    OUTCOME_NAMES,
+                    OUTCOME_COLORS,
+                    math.degrees(th),
+                ):
+                    log_layer(stream, "", layer)
 
 
 def time_recordings(log, params: Params, limit: int | None, repeat: int, teaching: bool):

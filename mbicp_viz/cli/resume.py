@@ -1,0 +1,44 @@
+"""Rows of a long run kept across a stop: Ctrl-C, a kill or a crash loses at most the pair under
+way, and the same command started again goes on from the rows already written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers.rows import PartialRows
+
+from .options import say
+
+INTERRUPTED = 130  # the shell's code for a command ended by Ctrl-C
+
+
+def log_identity(path: str) -> dict:
+    """What names a log's content for a resumed run: its full path, size and modification time."""
+    st = Path(path).stat()
+    return {"path": str(Path(path).resolve()), "bytes": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]]) -> PartialRows:
+    """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left."""
+    rows = PartialRows(out, run)
+    done = [(r.get("ref"), r.get("obj")) for r in rows.rows]
+    if done != [tuple(p) for p in pairs[: len(done)]]:
+        raise InputError(
+            "its rows are not this run's first pairs: delete it to start afresh", str(rows.path)
+        )
+    if done:
+        say(f"resuming from {rows.path}: {len(done)} of {len(pairs)} pairs already matched")
+    return rows
+
+
+def stop_if_interrupted(rows: PartialRows, total: int) -> None:
+    """A run stopped before its last pair ends here: where its rows are and how to go on."""
+    if len(rows.rows) < total:
+        say(
+            f"interrupted after {len(rows.rows)} of {total} pairs: the rows so far are in "
+            f"{rows.path}; the same command goes on from them"
+        )
+        raise typer.Exit(INTERRUPTED)

@@ -1,0 +1,165 @@
+"""Nothing a user has is lost: outputs are written whole or not at all, never over an input, and
+a stopped run keeps its rows beside (never over) an earlier file and goes on from them."""
+
+import hashlib
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from mbicp_viz.cli import app
+from mbicp_viz.outputs import written
+
+from .conftest import HOKUYO_BAG, LASERAZOS, json_lines
+
+runner = CliRunner()
+
+
+def run(*args):
+    res = runner.invoke(app, [str(a) for a in args])
+    return res.exit_code, res.stdout, res.stderr
+
+
+def digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_a_failed_write_leaves_the_earlier_file_and_no_temporary(tmp_path):
+    out = tmp_path / "rows.json"
+    out.write_text("the earlier file\n")
+    with pytest.raises(RuntimeError), written(out) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("the writer fails midway")
+    assert out.read_text() == "the earlier file\n" and os.listdir(tmp_path) == ["rows.json"]
+    with written(out) as tmp:
+        tmp.write_text("new")
+    assert out.read_text() == "new" and os.listdir(tmp_path) == ["rows.json"]
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("eval", "sequence", "{log}", "--out", "{log}", "--limit", "2"),
+        ("match", "{log}", "--pair", "0", "1", "--rrd", "{log}"),
+        ("eval", "sequence", "{log}", "--out", "{log}", "--params", "{log}"),
+    ],
+)
+def test_an_output_that_is_an_input_is_refused(tmp_path, args):
+    log = tmp_path / "a.log"
+    log.write_bytes(LASERAZOS.read_bytes())
+    before = digest(log)
+    code, _, err = run(*(a.format(log=log) for a in args))
+    assert code == 2 and "is also this command's input" in err and "Traceback" not in err, err
+    assert digest(log) == before and os.listdir(tmp_path) == ["a.log"]
+
+
+def test_two_outputs_in_one_file_are_refused(tmp_path):
+    out = tmp_path / "r.json"
+    code, _, err = run("eval", "sequence", LASERAZOS, "--out", out, "--tum", out)
+    assert code == 2 and "--tum: " in err and "is also --out" in err and not out.exists()
+
+
+def interrupt_the_fourth_match(monkeypatch):
+    """A real SIGINT to this process while the fourth pair is matched (one worker: the pair runs
+    in this process, the signal's handler is the command's own)."""
+    import mbicp_viz.evaluation.sequence as seq
+
+    real, calls = seq._match_row, []
+
+    def row(job):
+        calls.append(job)
+        if len(calls) == 4:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(job)
+
+    monkeypatch.setattr(seq, "_match_row", row)
+
+
+def test_ctrl_c_keeps_the_rows_beside_a_complete_file_and_the_same_command_resumes(
+    tmp_path, monkeypatch
+):
+    out = tmp_path / "seq.json"
+    args = ("eval", "sequence", LASERAZOS, "--out", out, "--limit", 10, "--workers", 1)
+    assert run(*args)[0] == 0
+    complete = digest(out)
+    fresh = [(r["ref"], r["x"], r["y"], r["theta"]) for r in json_lines(out)]
+
+    with monkeypatch.context() as m:
+        interrupt_the_fourth_match(m)
+        code, _, err = run(*args)
+    partial = tmp_path / "seq.json.partial"
+    assert code == 130 and "interrupted after 4 of 10 pairs" in err and str(partial) in err, err
+    assert "Traceback" not in err and "SystemError" not in err
+    assert digest(out) == complete  # the earlier, complete file is untouched
+    kept = json_lines(partial)
+    assert "partial" in kept[0] and [r["ref"] for r in kept[1:]] == [0, 1, 2, 3]
+
+    code, _, err = run(*args)
+    assert code == 0 and "resuming from" in err and "4 of 10 pairs already matched" in err, err
+    assert f"replaced {out}" in err and not partial.exists()
+    assert [(r["ref"], r["x"], r["y"], r["theta"]) for r in json_lines(out)] == fresh
+
+
+def test_a_row_cut_short_by_a_kill_is_matched_again(tmp_path, monkeypatch):
+    out = tmp_path / "seq.json"
+    args = ("eval", "sequence", LASERAZOS, "--out", out, "--limit", 6, "--workers", 1)
+    with monkeypatch.context() as m:
+        interrupt_the_fourth_match(m)
+        assert run(*args)[0] == 130
+    partial = tmp_path / "seq.json.partial"
+    text = partial.read_text()
+    partial.write_text(text[: len(text) - 40])  # what a kill -9 while writing the fourth row leaves
+    code, _, err = run(*args)
+    assert code == 0 and "3 of 6 pairs already matched" in err, err
+    assert [r["ref"] for r in json_lines(out)] == list(range(6))
+
+
+def test_the_rows_of_another_run_are_refused(tmp_path, monkeypatch):
+    out = tmp_path / "seq.json"
+    args = ["eval", "sequence", LASERAZOS, "--out", out, "--limit", 10, "--workers", 1]
+    with monkeypatch.context() as m:
+        interrupt_the_fourth_match(m)
+        assert run(*args)[0] == 130
+    code, _, err = run(*args, "--algo", "icp")
+    assert code == 2 and "seq.json.partial:1: algorithm: rows of another run" in err, err
+    assert len(json_lines(tmp_path / "seq.json.partial")) == 5 and not out.exists()
+
+
+def children_of(pid: int) -> list[int]:
+    out = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout
+    return [int(p) for p in out.split()]
+
+
+def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(tmp_path):
+    """Real SIGINTs to a real process running the pool: the parent ends within 2 s with the
+    finished rows kept, its workers ended with it, no traceback."""
+    out = tmp_path / "seq.json"
+    cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess"]
+    cmd += ["search", "--out", str(out), "--workers", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # interrupt once the first pairs are finished (the progress line of a run whose stderr is not
+    # a terminal); a fixed delay raced the run's own length, which varies with the machine's speed
+    seen, deadline = "", time.monotonic() + 120
+    while "matching: 1/359" not in seen and time.monotonic() < deadline and proc.poll() is None:
+        if select.select([proc.stderr], [], [], 1.0)[0]:
+            seen += os.read(proc.stderr.fileno(), 4096).decode()
+    workers = children_of(proc.pid)
+    assert len(workers) == 2
+    t0 = time.monotonic()
+    for _ in range(3):
+        proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert time.monotonic() - t0 < 2.0
+    stderr = seen + stderr
+    assert proc.returncode == 130, stderr
+    rows = json_lines(out.with_name("seq.json.partial"))[1:]
+    assert 0 < len(rows) < 359 and [r["ref"] for r in rows] == list(range(len(rows)))
+    assert f"interrupted after {len(rows)} of 359 pairs" in stderr and not out.exists()
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
+    assert not [w for w in workers if Path(f"/proc/{w}").exists()]
