@@ -123,6 +123,56 @@ def test_ctrl_c_keeps_the_finished_trials(tmp_path):
 
 
 @pytest.mark.parametrize(
+    "other, field",
+    [
+        (["--limit", "4"], "--limit"),
+        (["--perturb", "0.2", "10"], "--perturb"),
+        (["--fields", "L"], "--fields"),
+    ],
+)
+def test_a_study_refuses_to_resume_on_another_objective(tmp_path, other, field):
+    assert tune(tmp_path, "--trials", "1", "--study", "s", "--limit", "3").exit_code == 0
+    res = tune(tmp_path, "--trials", "1", "--study", "s", "--limit", "3", *other)
+    assert res.exit_code == 2 and f"{field}: study 's' was scored with" in res.stderr, res.output
+    assert "would mix objectives" in res.stderr and "Traceback" not in res.output
+
+
+def test_a_trial_killed_mid_run_is_failed_on_resume_and_the_defaults_are_scored(tmp_path):
+    db = tmp_path / "tune.db"
+    cmd = [sys.executable, "-m", "mbicp_viz", "tune", LOG, "--trials", "100000", "--workers", "1"]
+    cmd += ["--storage", f"sqlite:///{db}", "--out", str(tmp_path / "tuned.toml")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def states() -> list[str]:
+        try:
+            with closing(sqlite3.connect(db)) as con:
+                return [r[0] for r in con.execute("select state from trials order by number")]
+        except sqlite3.Error:
+            return []
+
+    def scoring() -> bool:  # the first trial (the defaults) is under way, its worker recorded
+        try:
+            with closing(sqlite3.connect(db)) as con:
+                attrs = con.execute("select key from trial_user_attributes").fetchall()
+        except sqlite3.Error:
+            return False
+        return states() == ["RUNNING"] and ("worker",) in attrs
+
+    try:  # kill -9 while the defaults are scored
+        assert wait_for(scoring, 120.0), states()
+    finally:
+        proc.kill()
+        proc.wait()
+    res = tune(tmp_path, "--trials", "1")
+    assert res.exit_code == 0, res.output
+    assert "1 trial(s) left running by a stopped run marked failed" in res.stderr
+    assert "the defaults were never scored in this study" in res.stderr
+    assert states() == ["FAIL", "COMPLETE"]
+    train = next(ln for ln in res.stdout.splitlines() if ln.startswith("training"))
+    assert train.split()[3:11] == train.split()[11:19]  # the best is the defaults, scored
+
+
+@pytest.mark.parametrize(
     "args, field",
     [
         (["--fields", "nope"], "--fields"),

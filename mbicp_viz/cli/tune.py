@@ -37,6 +37,7 @@ from .options import (
     say,
     user_errors,
 )
+from .resume import log_identity
 
 
 def tune(
@@ -143,6 +144,25 @@ def tune(
     cases = cases_of(logs)
     name = study or f"{algo.value}-{Path(logs[0]).name.split('.')[0]}"
     st = t.open_study(storage, name)
+    settings = {
+        "logs": [log_identity(p) for p in logs],
+        "limit": limit,
+        "truth": truth,
+        "relations": relations and log_identity(relations),
+        "offset": offset,
+        "tolerance": tolerance,
+        "guess": guess,
+        "perturb": list(perturb),
+        "seed": seed,
+        "fields": [d.spec.name for d in space],
+        "algo": algo.value,
+        "params": base.as_dict(),
+        "read": [topic, typestore, mount, upside_down, deskew and deskew.value],
+    }
+    if t.check_settings(st, settings) and st.trials:
+        say(f"study {name!r} recorded no settings (an earlier version): it takes this run's")
+    if stale := t.fail_stale_trials(st):
+        say(f"{stale} trial(s) left running by a stopped run marked failed")
     before = len(st.trials)
     guesses = (
         f"the stored pose moved within +/-{perturb[0]:g} m, +/-{perturb[1]:g} deg (seed {seed})"
@@ -157,9 +177,8 @@ def tune(
         f"searching {', '.join(d.spec.name for d in space)}; study {name!r} in {storage} "
         f"({before} trials before)"
     )
-    # the defaults are the first trial: the best is never worse on the training pairs
-    if before == 0:
-        st.enqueue_trial({d.spec.name: getattr(base, d.spec.name) for d in space})
+    if t.enqueue_defaults(st, {d.spec.name: getattr(base, d.spec.name) for d in space}) and before:
+        say("the defaults were never scored in this study: they are its next trial")
     scorer = t.Scorer(logs, reading, cases, workers)
     try:
         with Progress(trials, "trials") as bar:

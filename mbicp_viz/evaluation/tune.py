@@ -13,11 +13,13 @@ way to distribute), and a study is resumed by its name.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import socket
 import threading
 import time
+import warnings
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
@@ -173,6 +175,9 @@ def suggested(trial, base: Params, space: list[Dimension]) -> Params:
 
 
 SQLITE_WAIT_S = 60.0
+# A trial's process says it is alive this often; a RUNNING trial silent for GRACE_S is a stopped
+# run's (kill -9, power loss) and is failed, so that a study never holds a trial RUNNING forever.
+HEARTBEAT_S, GRACE_S = 10, 60
 # PostgreSQL's errors for an object another worker created first: duplicate type, duplicate table
 RACED = {"42710", "42P07"}
 
@@ -192,7 +197,14 @@ def open_study(storage: str, name: str):
             engine = (
                 {"connect_args": {"timeout": SQLITE_WAIT_S}} if storage.startswith("sqlite") else {}
             )
-            rdb = optuna.storages.RDBStorage(storage, engine_kwargs=engine)
+            with warnings.catch_warnings():  # heartbeats are "experimental" since Optuna 2.9
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                rdb = optuna.storages.RDBStorage(
+                    storage,
+                    engine_kwargs=engine,
+                    heartbeat_interval=HEARTBEAT_S,
+                    grace_period=GRACE_S,
+                )
             return optuna.create_study(
                 storage=rdb, study_name=name, direction="maximize", load_if_exists=True
             )
@@ -209,9 +221,8 @@ def open_study(storage: str, name: str):
                     field="--storage",
                 ) from None
             time.sleep(0.2 * (attempt + 1))
-        except (
-            Exception
-        ) as e:  # a URL nothing answers at, a driver missing, a file that is no database
+        # a URL nothing answers at, a driver missing, a file that is no database
+        except Exception as e:
             raise InputError(
                 f"cannot open the study {name!r} there: {type(e).__name__}: "
                 f"{str(e).splitlines()[0][:200]}",
@@ -220,6 +231,76 @@ def open_study(storage: str, name: str):
     raise InputError(
         f"cannot open the study {name!r} there: other workers kept creating it", field="--storage"
     )
+
+
+SETTINGS = "objective"  # the study's user attribute: what its trials were scored on
+
+
+def check_settings(study, settings: dict) -> bool:
+    """Refuse to add trials scored on other settings than the study's own (logs, pairs, truth,
+    guesses, searched fields ...): its best would compare different objectives. A new study, or one
+    made before the settings were recorded, takes these; returns whether it had none."""
+    settings = json.loads(json.dumps(settings))  # as the storage gives it back
+    theirs = study.user_attrs.get(SETTINGS)
+    if theirs is None:
+        study.set_user_attr(SETTINGS, settings)
+        return True
+    for key in sorted(set(theirs) | set(settings)):
+        if theirs.get(key) != settings.get(key):
+            raise InputError(
+                f"study {study.study_name!r} was scored with {key} {json.dumps(theirs.get(key))}, "
+                f"this run with {json.dumps(settings.get(key))}: resuming would mix objectives; "
+                "give another --study (or the same settings)",
+                field=f"--{key.replace('_', '-')}",
+            )
+    return False
+
+
+def _dead_here(trial) -> bool:
+    """A trial this machine ran whose process is gone."""
+    host, _, pid = str(trial.user_attrs.get("worker", "")).rpartition(":")
+    if host != socket.gethostname() or not pid.isdigit() or int(pid) == os.getpid():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        return False
+    return False
+
+
+def fail_stale_trials(study) -> int:
+    """Fail the RUNNING trials of stopped runs: those of a process of this machine that is gone,
+    and those whose heartbeat stopped more than ``GRACE_S`` ago. Returns how many."""
+    import optuna
+
+    running = optuna.trial.TrialState.RUNNING
+    gone = [t for t in study.get_trials(deepcopy=False, states=(running,)) if _dead_here(t)]
+    for t in gone:
+        study._storage.set_trial_state_values(t._trial_id, optuna.trial.TrialState.FAIL)
+    before = len(study.get_trials(deepcopy=False, states=(running,)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        optuna.storages.fail_stale_trials(study)
+    return len(gone) + before - len(study.get_trials(deepcopy=False, states=(running,)))
+
+
+def enqueue_defaults(study, defaults: dict) -> bool:
+    """Queue the defaults unless a trial holds them already (scored, queued or running): the best
+    is then never worse on the training pairs, whatever stopped an earlier run. Returns whether it
+    queued them."""
+    import optuna
+
+    states = (
+        optuna.trial.TrialState.COMPLETE,
+        optuna.trial.TrialState.WAITING,
+        optuna.trial.TrialState.RUNNING,
+    )
+    if any(t.params == defaults for t in study.get_trials(deepcopy=False, states=states)):
+        return False
+    study.enqueue_trial(defaults)
+    return True
 
 
 def optimise(
@@ -233,12 +314,12 @@ def optimise(
     done = 0
 
     def objective(trial) -> float:
+        trial.set_user_attr("worker", worker)  # first: a stopped run's trial is known by it
         params = suggested(trial, base, space)
         score = Score.of(scorer.errors(params))
         trial.set_user_attr("successes", score.successes)
         trial.set_user_attr("pairs", score.n)
         trial.set_user_attr("median_xy", score.median_xy)
-        trial.set_user_attr("worker", worker)
         return score.value
 
     def finished(study, trial) -> None:
