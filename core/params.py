@@ -591,10 +591,11 @@ class SearchParams(Params):
     cell: float = param(
         0.1, unit="m", lo=0.01, hi=1.0, help="grid step in x and y (and of the likelihood field)"
     )
+    # as low as fine_angle_step's: the fine pass runs with angle_step = fine_angle_step
     angle_step: float = param(
         math.radians(1.0),
         unit="rad",
-        lo=math.radians(0.05),
+        lo=math.radians(0.01),
         hi=math.radians(10.0),
         help="grid step in rotation",
     )

@@ -58,6 +58,22 @@ def params_file(path: str | Path) -> Path:
     )
 
 
+def _radians(spec, value, path: str | None, where: str) -> float:
+    """A ``_deg`` key's value in radians, its bounds checked in the degrees the user typed."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"expected a number of degrees, got {value!r}", path, field=where)
+    rad = math.radians(value)
+    if spec.lo is not None and rad < spec.lo:
+        raise InputError(
+            f"{value!r} is below the minimum {math.degrees(spec.lo):g} deg", path, field=where
+        )
+    if spec.hi is not None and rad > spec.hi:
+        raise InputError(
+            f"{value!r} is above the maximum {math.degrees(spec.hi):g} deg", path, field=where
+        )
+    return rad
+
+
 def params_from_mapping(
     params_type: type, values: dict, path: str | None = None, table: str | None = None
 ) -> Params:
@@ -75,9 +91,7 @@ def params_from_mapping(
         if name not in specs:
             raise InputError(f"unknown parameter; known: {', '.join(specs)}", path, field=where)
         if name != key:
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise InputError(f"expected a number of degrees, got {value!r}", path, field=where)
-            value = math.radians(value)
+            value = _radians(specs[name], value, path, where)
         kwargs[name] = value
     try:
         return params_type(**kwargs)
