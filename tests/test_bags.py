@@ -288,3 +288,24 @@ def test_the_debugger_switches_topics_and_shows_the_odometry(tmp_path, intel, la
     assert same_scan(state.ref, laserazos.scan(0)) and same_scan(state.obj, laserazos.scan(1))
     # refused, kept
     assert state.set_topic("/nope") is not None and state.source.log.topic == "/rear/scan"
+
+
+@pytest.mark.parametrize("plugin", ["SQLITE3", "MCAP"])
+def test_a_ros2_bag_without_laser_scans_says_so_and_lists_its_topics(tmp_path, plugin):
+    """No message is decoded to find that out: rosbags reads every topic when asked for none."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    string = ts.types["std_msgs/msg/String"]
+    path = tmp_path / "chatter"
+    with Writer(path, version=8, storage_plugin=getattr(StoragePlugin, plugin)) as w:
+        conn = w.add_connection("/chatter", "std_msgs/msg/String", typestore=ts)
+        for k in range(3):
+            w.write(conn, k, ts.serialize_cdr(string(data=f"hi {k}"), "std_msgs/msg/String"))
+    res = CliRunner().invoke(app, ["match", str(path), "--pair", "0", "1"])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert (
+        "no sensor_msgs/msg/LaserScan topic; the bag has: /chatter (std_msgs/msg/String, 3 "
+        "messages)" in res.stderr
+    )

@@ -83,6 +83,12 @@ def _messages(p: Path, typestore: str, notes: list[str]) -> list[Message]:
             wanted = [
                 c for c in reader.connections if _normalise(c.msgtype) in (LASER_SCAN, ODOMETRY, TF)
             ]
+            if not any(_normalise(c.msgtype) == LASER_SCAN for c in wanted):
+                # said before any message is decoded (rosbags reads every topic for no connection)
+                has = "; ".join(
+                    f"{c.topic} ({c.msgtype}, {c.msgcount} messages)" for c in reader.connections
+                )
+                raise InputError(f"no {LASER_SCAN} topic; the bag has: {has or 'none'}", str(p))
             return [
                 Message(
                     conn.topic,
