@@ -12,8 +12,9 @@ from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error, relative
 from mbicp_viz.core.search import SearchParams, correlative_search, likelihood_field
 from mbicp_viz.evaluation.criteria import CONSECUTIVE
 from mbicp_viz.evaluation.pairs import seen_from
+from mbicp_viz.readers import read_log
 
-from .conftest import INTEL, json_lines
+from .conftest import EXAMPLES, INTEL, json_lines
 
 
 def success(pose: Pose2, truth: Pose2) -> bool:
@@ -117,3 +118,41 @@ def test_the_likelihood_field_peaks_at_the_points_and_ignores_those_outside():
     assert field[5, 5] == 1.0 and math.isclose(field[5, 7], math.exp(-((0.2 / sigma) ** 2)))
     assert math.isclose(field[0, 10], math.exp(-((math.hypot(0.5, 0.5) / sigma) ** 2)))
     assert not likelihood_field(np.array([[5.0, 5.0]]), origin, (11, 11), cell, sigma).any()
+
+
+def test_a_field_built_tile_by_tile_finds_what_the_whole_field_finds(monkeypatch):
+    """The tiled field (long-range scans) against the dense one on real pairs: the same poses, the
+    same scores but for the order of the sums."""
+    import mbicp_viz.core.search as search
+
+    log = read_log(INTEL)
+    pairs = [(log.scan(i), log.scan(j)) for i, j in log.consecutive_pairs(8)]
+    dense = [correlative_search(a, b) for a, b in pairs]
+    monkeypatch.setattr(search, "DENSE_CELLS", 0)
+    monkeypatch.setattr(search, "TILE", 64)  # many tiles, windows across their borders
+    for (a, b), d in zip(pairs, dense):
+        t = correlative_search(a, b)
+        assert t.pose == d.pose and t.coarse == d.coarse
+        assert np.allclose(t.best_per_angle, d.best_per_angle, rtol=1e-12, atol=0)
+
+
+def test_the_search_memory_is_bounded_whatever_the_range():
+    """A real scan pair stretched to 150 m (the guess search held 4.3 GB at that range)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import resource, numpy as np\n"
+        "from mbicp_viz.core import make_scan\n"
+        "from mbicp_viz.core.search import correlative_search\n"
+        "from mbicp_viz.readers import read_log\n"
+        f"log = read_log({str(EXAMPLES / 'hokuyo-125-130.npz')!r})\n"
+        "a, b = log.scan(0), log.scan(1)\n"
+        "k = 150.0 / np.nanmax(a.ranges[a.valid])\n"
+        "far = [make_scan(s.ranges * k, s.bearings, valid=s.valid) for s in (a, b)]\n"
+        "correlative_search(*far)\n"
+        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert int(out.stdout.split()[-1]) < 1_000_000  # kB: under 1 GB
