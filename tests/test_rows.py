@@ -58,8 +58,8 @@ def test_rows_read_back_as_written(rows_file):
         assert [r.guess.x, r.guess.y, r.guess.theta] == w["guess_pose"] and r.success == w[
             "success"
         ]
-        # the line its object starts on
-        assert rows_file.read_text().split("\n")[r.line - 1].strip() == "{"
+        # the line it is on
+        assert json.loads(rows_file.read_text().split("\n")[r.line - 1]) == w
 
 
 def test_failures_worst_first_with_a_reason(rows_file):
@@ -218,3 +218,18 @@ def test_rows_remember_the_scan_stream_and_reopen_only_on_it(tmp_path, intel):
         "RAWLASER2 (6 scans): --topic (in the debugger: scan stream) reads another" in res.stderr
     )
     assert {r.stream for r in read_rows(out)} == {"FLASER"}
+
+
+def test_a_bad_field_of_a_json_lines_file_names_its_line(rows_file, tmp_path):
+    rows = json_lines(rows_file)
+    rows[3]["converged"] = "yes"
+    path = tmp_path / "bad.json"
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    with pytest.raises(InputError) as e:
+        read_rows(path)
+    assert (e.value.line, e.value.field) == (4, "converged")
+    rows[3]["converged"] = True
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows)[:-30])  # cut short
+    with pytest.raises(InputError) as e:
+        read_rows(path)
+    assert e.value.line == len(rows) and "invalid JSON" in e.value.message

@@ -4,13 +4,16 @@ way, and the same command started again goes on from the rows already written.""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from mbicp_viz.errors import InputError
-from mbicp_viz.readers.rows import PartialRows
 
 from .options import say
+
+if TYPE_CHECKING:  # the rows reader loads the core (numpy): only once a command runs
+    from mbicp_viz.readers.rows import PartialRows
 
 INTERRUPTED = 130  # the shell's code for a command ended by Ctrl-C
 
@@ -23,6 +26,8 @@ def log_identity(path: str) -> dict:
 
 def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]]) -> PartialRows:
     """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left."""
+    from mbicp_viz.readers.rows import PartialRows
+
     rows = PartialRows(out, run)
     done = [(r.get("ref"), r.get("obj")) for r in rows.rows]
     if done != [tuple(p) for p in pairs[: len(done)]]:

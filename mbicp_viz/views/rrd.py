@@ -350,6 +350,49 @@ def record(
     return results
 
 
+def _record_to(path: str, runs: list[Run], kw: dict) -> None:
+    record(runs, path, **kw)
+
+
+# One recording process for a server's exports, replaced after RECORDINGS_PER_PROCESS of them.
+RECORDINGS_PER_PROCESS = 25
+_recorder = None
+
+
+def recorded_bytes(runs: list[Run], **kw) -> bytes:
+    """``record(runs, path, **kw)``'s file as bytes, recorded in another process: rerun-sdk (0.41)
+    keeps about 2.5 MB of every recording stream until its process ends, so a server recording on
+    demand (the debugger's "export .rrd") would grow with every export. The process is started
+    (spawned: the server's threads are not forked along) at the first export and replaced after
+    ``RECORDINGS_PER_PROCESS``; ``stop_recorder`` ends it."""
+    import multiprocessing
+    import tempfile
+    from concurrent.futures import ProcessPoolExecutor
+    from pathlib import Path
+
+    global _recorder
+    if _recorder is None:
+        import atexit
+
+        atexit.register(stop_recorder)  # ended before the interpreter's own teardown
+        spawn = multiprocessing.get_context("spawn")
+        _recorder = ProcessPoolExecutor(
+            1, mp_context=spawn, max_tasks_per_child=RECORDINGS_PER_PROCESS
+        )
+    with tempfile.TemporaryDirectory() as tmp:
+        path = str(Path(tmp) / "session.rrd")
+        _recorder.submit(_record_to, path, runs, kw).result()
+        return Path(path).read_bytes()
+
+
+def stop_recorder() -> None:
+    """End the recording process of ``recorded_bytes``, if one runs."""
+    global _recorder
+    if _recorder is not None:
+        _recorder.shutdown(cancel_futures=True)
+        _recorder = None
+
+
 def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
     """Serve ``path`` in rerun's web viewer from the wheel's own CLI, bound to ``host`` (loopback).
 

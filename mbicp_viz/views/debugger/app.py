@@ -140,6 +140,9 @@ class App:
             s.close()
 
     def stop(self) -> None:
+        from ..rrd import stop_recorder
+
         for s in list(self.sessions.values()):
             s.close()
         self.server.stop()
+        stop_recorder()

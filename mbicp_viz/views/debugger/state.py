@@ -474,25 +474,18 @@ class DebugState:
 
     def session_rrd(self) -> bytes:
         """The session (data, parameters, all iterations of every shown matcher) as an .rrd."""
-        import tempfile
-        from pathlib import Path
+        from ..rrd import Run, recorded_bytes
 
-        from ..rrd import Run, record
-
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "session.rrd"
-            runs = [
-                Run(n, self.ref, self.obj, self.guess, self.params[n], self.truth())
-                for n in self.algorithms
-            ]
-            record(
-                runs,
-                str(path),
-                teaching=True,
-                recording_id="mbicp-viz/session",
-                about="# mbicp-viz "
-                f"session\n\n{', '.join(filter(None, (self.source.label, self.pair_label())))}"
-                f"; initial guess "
-                f"{self.guess} ({self.guess_source})\n",
-            )
-            return path.read_bytes()
+        runs = [
+            Run(n, self.ref, self.obj, self.guess, self.params[n], self.truth())
+            for n in self.algorithms
+        ]
+        return recorded_bytes(
+            runs,
+            teaching=True,
+            recording_id="mbicp-viz/session",
+            about="# mbicp-viz "
+            f"session\n\n{', '.join(filter(None, (self.source.label, self.pair_label())))}"
+            f"; initial guess "
+            f"{self.guess} ({self.guess_source})\n",
+        )
