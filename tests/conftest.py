@@ -28,6 +28,15 @@ HOKUYO_BAG = DATA / "hokuyo-demo.bag"
 RERUN = str(Path(sys.executable).parent / "rerun")
 
 
+def rerun_binary() -> str:
+    """The viewer's own binary: the ``rerun`` on PATH is a Python wrapper that starts it as a child,
+    which a kill of the wrapper leaves running (~290 MB each)."""
+    import rerun_cli
+
+    binary = Path(rerun_cli.__file__).parent / "rerun"
+    return str(binary) if binary.is_file() else RERUN
+
+
 def wait_for(cond, timeout: float = 30.0) -> bool:
     """Whether ``cond()`` becomes true within ``timeout`` seconds (polled, never a fixed sleep)."""
     import time
@@ -52,16 +61,22 @@ def free_port() -> int:
 def rerun_viewer(size: str = "1400x900"):
     """rerun's own viewer, headless, on a free loopback port, driven through its (experimental)
     ViewerClient: open a file, move the time cursor, screenshot a view. Stopped on the way out."""
+    import os
+    import signal
     import subprocess
+    import tempfile
     import time
 
     from rerun.experimental import ViewerClient
 
     port = free_port()
+    log = tempfile.TemporaryFile()
     proc = subprocess.Popen(
-        [RERUN, "--headless", "--port", str(port), "--bind", "127.0.0.1", "--window-size", size],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+        [rerun_binary(), "--headless", "--port", str(port), "--bind", "127.0.0.1"]
+        + ["--window-size", size],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,  # its own process group: killed whole, whatever it starts
     )
     try:
         deadline = time.monotonic() + 60
@@ -70,14 +85,28 @@ def rerun_viewer(size: str = "1400x900"):
                 client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
                 client.get_state()
                 break
-            except Exception:  # not listening yet
-                if time.monotonic() > deadline or proc.poll() is not None:
-                    raise
+            except Exception as e:  # not listening yet
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError(viewer_failure(log, proc.poll())) from e
                 time.sleep(0.2)
         yield client
     finally:
-        proc.kill()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
+        log.close()
+
+
+def viewer_failure(log, code) -> str:
+    """Why rerun's headless viewer did not answer: the driver it lacks, else its output."""
+    log.seek(0)
+    text = log.read().decode(errors="replace")
+    if any(w in text.lower() for w in ("vulkan", "no suitable adapter", "wgpu")):
+        hint = "rerun's headless viewer needs a Vulkan driver (Debian: mesa-vulkan-drivers)"
+    else:
+        hint = "rerun's headless viewer did not answer"
+    state = "running" if code is None else f"exit code {code}"
+    return f"{hint} ({state}); its output ends: {text[-600:]}"
 
 
 def settled_screenshot(client, path, view_id=None, timeout: float = 30.0):

@@ -302,3 +302,18 @@ def test_rerun_viewer_shows_scenes_y_up_as_the_debugger(tmp_path, intel):
     }
     assert len(rows["red"]) > 5 and len(rows["blue"]) > 5
     assert rows["red"].mean() < rows["blue"].mean()  # image rows grow downwards: red is drawn above
+
+
+def test_a_tests_viewer_leaves_no_process_behind():
+    """rerun's wrapper starts the real viewer as a child: every viewer a test starts is ended."""
+    from .conftest import rerun_viewer
+
+    def viewers() -> set[str]:
+        out = subprocess.run(["pgrep", "-f", "rerun --headless"], capture_output=True, text=True)
+        return set(out.stdout.split())
+
+    before = viewers()
+    with rerun_viewer("320x240") as client:
+        assert not client.get_state().loading
+        assert viewers() - before  # the viewer runs
+    assert wait_for(lambda: viewers() <= before, 10.0), viewers() - before
