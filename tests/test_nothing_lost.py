@@ -163,3 +163,20 @@ def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(t
     assert f"interrupted after {len(rows)} of 359 pairs" in stderr and not out.exists()
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
     assert not [w for w in workers if Path(f"/proc/{w}").exists()]
+
+
+def test_ctrl_c_ends_any_command_in_one_line_without_a_traceback():
+    """A real SIGINT to a command that keeps no rows (here while it matches, compiled or not): one
+    line and exit code 130, never numba's SystemError."""
+    cmd = [sys.executable, "-m", "mbicp_viz", "bench", "matches", str(HOKUYO_BAG), "--repeat", "50"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen, deadline = "", time.monotonic() + 120
+    while "681 beams" not in seen and time.monotonic() < deadline and proc.poll() is None:
+        if select.select([proc.stdout], [], [], 1.0)[0]:
+            seen += os.read(proc.stdout.fileno(), 4096).decode()
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert time.monotonic() - t0 < 2.0
+    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "mbicp-viz: interrupted", err
+    assert "Traceback" not in err

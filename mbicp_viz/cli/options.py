@@ -310,8 +310,23 @@ def check_outputs(options: dict, name=_option) -> None:
             ) from None
 
 
+INTERRUPTED = 130  # the shell's code for a command ended by Ctrl-C
+
+
+def _from_interrupt(e: BaseException | None) -> bool:
+    """Whether a KeyboardInterrupt is ``e`` or among its causes."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 def user_errors(fn):
-    """Bad input ends in one readable line on stderr and exit code 2, never a traceback."""
+    """Bad input ends in one readable line on stderr and exit code 2, Ctrl-C in ``interrupted``
+    and 130, never a traceback."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
@@ -321,6 +336,11 @@ def user_errors(fn):
         except (InputError, ScanError, ParamError) as e:
             typer.echo(f"mbicp-viz: error: {e}", err=True)
             raise typer.Exit(2) from None
+        except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C where no run keeps rows
+            if not _from_interrupt(e):  # numba's SystemError: an interrupt in a compiled loop
+                raise
+            typer.echo("mbicp-viz: interrupted", err=True)
+            raise typer.Exit(INTERRUPTED) from None
 
     return wrapper
 

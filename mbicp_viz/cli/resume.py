@@ -10,12 +10,10 @@ import typer
 
 from mbicp_viz.errors import InputError
 
-from .options import say
+from .options import INTERRUPTED, say
 
 if TYPE_CHECKING:  # the rows reader loads the core (numpy): only once a command runs
     from mbicp_viz.readers.rows import PartialRows
-
-INTERRUPTED = 130  # the shell's code for a command ended by Ctrl-C
 
 
 def log_identity(path: str) -> dict:
