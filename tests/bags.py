@@ -36,6 +36,7 @@ class Robot:
     mount: Pose2 | None = None  # T_base_laser of the first topic's frame
     upside_down: bool = False
     odometry: list[Pose2] | None = None  # base poses at the stamps
+    odometry_from: int = 0  # the first stamp with an odometry message (a driver that starts late)
     odometry_on: str = "/odom"  # "/odom" (nav_msgs/Odometry) or "/tf" (odom -> base_link)
     mount_on: str = "/tf_static"
     extra: list = field(default_factory=list)
@@ -124,7 +125,7 @@ def write(path: Path, robot: Robot, kind: str) -> Path:
         out.append(
             (robot.mount_on, "tf2_msgs/msg/TFMessage", robot.stamps[0] - 1e-3, tf(transforms=[tr]))
         )
-    for t, pose in zip(robot.stamps, robot.odometry or []):
+    for t, pose in list(zip(robot.stamps, robot.odometry or []))[robot.odometry_from :]:
         if robot.odometry_on == "/tf":
             out.append(
                 (

@@ -309,3 +309,20 @@ def test_a_ros2_bag_without_laser_scans_says_so_and_lists_its_topics(tmp_path, p
         "no sensor_msgs/msg/LaserScan topic; the bag has: /chatter (std_msgs/msg/String, 3 "
         "messages)" in res.stderr
     )
+
+
+def test_a_bag_whose_odometry_starts_after_its_first_scan_is_matched_whole(tmp_path, intel):
+    """The first scan precedes the first odometry message (a driver that starts late): that pair
+    is matched from the identity and said so, the others from the odometry."""
+    robot = intel_robot(intel, 10, 6, MOUNT, odometry_from=1)
+    path = write(tmp_path / "late.bag", robot, "ros1")
+    out = tmp_path / "rows.json"
+    args = ["eval", "sequence", str(path), "--guess", "odometry", "--out", str(out)]
+    res = CliRunner().invoke(app, [*args, "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    rows = json_lines(out)
+    assert len(rows) == 5 and rows[0]["guess"] == "identity: no odometry at one of the scans"
+    assert {r["guess"] for r in rows[1:]} == {"odometry"}
+    assert "1 pair(s) with no odometry at one of their scans: matched from the identity" in (
+        res.stderr
+    )

@@ -83,6 +83,14 @@ def test_bags_carry_beam_times_and_odometry_corrects_them(tmp_path, intel):
         assert np.abs(c.points() - log.scans[k].points()).max() > 1e-4
 
 
+def test_a_scan_without_odometry_is_left_as_measured_and_counted(tmp_path, intel):
+    robot = intel_robot(intel, 20, 5, Pose2(), odometry_on="/odom", odometry_from=1)
+    robot.topics[0].time_increment = 1e-4
+    fixed = read_log(write(tmp_path / "r.bag", robot, "ros1"), ReadOptions(deskew="odometry"))
+    assert fixed.scans[0].raw is None and all(s.raw is not None for s in fixed.scans[1:])
+    assert any("1 scan(s) left as measured" in n for n in fixed.notes)
+
+
 def test_velocity_from_the_matches_without_odometry(tmp_path, hokuyo):
     scans = [hokuyo.scan(0), hokuyo.scan(1)]
     path = write(

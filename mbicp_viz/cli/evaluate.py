@@ -105,6 +105,7 @@ def sequence(
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else
     identity)."""
+    from mbicp_viz.evaluation.pairs import MISSING
     from mbicp_viz.evaluation.sequence import match_sequence, odometry_summary, truth_summary
     from mbicp_viz.readers.params_toml import load_search, make_params
 
@@ -150,6 +151,11 @@ def sequence(
     if odometry := odometry_summary(rows):
         typer.echo(odometry)
     say(f"poses: motions of {lg.frames.frame_text(frame is Frame.base)}")
+    if without := sum(r["guess"] == MISSING.format(guess.value) for r in rows):
+        say(
+            f"{without} pair(s) with no {guess.value} at one of their scans: matched from the "
+            f"identity (their rows' guess says '{MISSING.format(guess.value)}')"
+        )
     if png or tum or tum_ref or kalman:
         _trajectories(lg, rows, png, tum, tum_ref, kalman)
     if rrd:

@@ -57,11 +57,22 @@ def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:
     return Pose2(), "identity"
 
 
+# Where the guess of a pair came from when the source asked for is missing at one of its scans
+# (a bag's first scans before its first odometry message): a run goes on from the identity.
+MISSING = "identity: no {} at one of the scans"
+
+
 def pair_guess(
-    ref: Scan, obj: Scan, kind: Guess | str, search: SearchParams | None = None
+    ref: Scan,
+    obj: Scan,
+    kind: Guess | str,
+    search: SearchParams | None = None,
+    missing_ok: bool = False,
 ) -> tuple[Pose2, str]:
     """The initial guess of a pair and where it came from: ``stored`` (poses, else odometry, else
-    identity), one stored source explicitly, the identity, or the correlative search around it."""
+    identity), one stored source explicitly, the identity, or the correlative search around it.
+    A source asked for and missing is refused, or with ``missing_ok`` (a run over a whole log)
+    the identity, with ``MISSING`` as where it came from."""
     kind = Guess(kind)
     if kind is Guess.stored:
         return stored_guess(ref, obj)
@@ -72,6 +83,8 @@ def pair_guess(
 
         return correlative_search(ref, obj, Pose2(), search).pose, "search"
     a, b = (ref.pose, obj.pose) if kind is Guess.pose else (ref.odometry, obj.odometry)
+    if (a is None or b is None) and missing_ok:
+        return Pose2(), MISSING.format(kind.value)
     if a is None or b is None:
         raise InputError(
             f"the log stores no {kind.value} for scans {ref.source.index} and {obj.source.index}",

@@ -101,7 +101,7 @@ def match_sequence(
 def _match_row(job) -> dict:
     path, i, j, ref, obj, params, guess, truth, search, frames, base, stream = job
     t0 = time.perf_counter()
-    g, source = pair_guess(ref, obj, guess, search)
+    g, source = pair_guess(ref, obj, guess, search, missing_ok=True)
     guess_ms = 1000.0 * (time.perf_counter() - t0)
     answer = None
     if truth == "pose":

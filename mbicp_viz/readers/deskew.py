@@ -48,9 +48,9 @@ def _check(log: ScanLog, mode: Deskew) -> None:
                 log.path,
                 field="--deskew",
             )
-    if mode is Deskew.odometry and any(s.odometry is None for s in log.scans):
+    if mode is Deskew.odometry and all(s.odometry is None for s in log.scans):
         raise InputError(
-            "no odometry at every scan's stamp: use --deskew velocity (from the matches)",
+            "the log stores no odometry: use --deskew velocity (from the matches)",
             log.path,
             field="--deskew",
         )
@@ -62,8 +62,9 @@ def _motions(log: ScanLog, mode: Deskew) -> list[Pose2 | None]:
 
     out: list[Pose2 | None] = []
     for a, b in zip(log.scans[:-1], log.scans[1:]):
-        if mode is Deskew.odometry:
-            out.append(relative(a.odometry, b.odometry))
+        if mode is Deskew.odometry:  # a scan without odometry is left as measured (counted)
+            have = a.odometry is not None and b.odometry is not None
+            out.append(relative(a.odometry, b.odometry) if have else None)
             continue
         guess = (
             relative(a.odometry, b.odometry)
