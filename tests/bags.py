@@ -11,7 +11,7 @@ import math
 import re
 import shutil
 import sqlite3
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +39,7 @@ class Robot:
     odometry_from: int = 0  # the first stamp with an odometry message (a driver that starts late)
     odometry_on: str = "/odom"  # "/odom" (nav_msgs/Odometry) or "/tf" (odom -> base_link)
     mount_on: str = "/tf_static"
-    extra: list = field(default_factory=list)
+    mount_again: Pose2 | None = None  # a second static publisher of the mount, with this value
 
 
 def _quat(yaw: float, roll: float = 0.0):
@@ -125,6 +125,16 @@ def write(path: Path, robot: Robot, kind: str) -> Path:
         out.append(
             (robot.mount_on, "tf2_msgs/msg/TFMessage", robot.stamps[0] - 1e-3, tf(transforms=[tr]))
         )
+        if robot.mount_again is not None:
+            again = transform(robot.stamps[0], "base_link", laser, robot.mount_again)
+            out.append(
+                (
+                    robot.mount_on,
+                    "tf2_msgs/msg/TFMessage",
+                    robot.stamps[0] - 5e-4,
+                    tf(transforms=[again]),
+                )
+            )
     for t, pose in list(zip(robot.stamps, robot.odometry or []))[robot.odometry_from :]:
         if robot.odometry_on == "/tf":
             out.append(

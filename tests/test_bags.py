@@ -326,3 +326,35 @@ def test_a_bag_whose_odometry_starts_after_its_first_scan_is_matched_whole(tmp_p
     assert "1 pair(s) with no odometry at one of their scans: matched from the identity" in (
         res.stderr
     )
+
+
+def test_odometry_on_tf_is_read_where_tf_does_not_link_the_laser(tmp_path, intel):
+    """A TurtleBot-like bag: odom -> base_link on /tf, the laser's mount published nowhere the
+    reader looks. Its odometry is read; --mount puts it onto the laser; without, a note says the
+    base's odometry stands for the laser's."""
+    robot = intel_robot(intel, 10, 6, MOUNT, odometry_on="/tf", mount_on="/elsewhere")
+    path = write(tmp_path / "tb.bag", robot, "ros1")
+    log = read_log(path)
+    assert all(s.odometry is not None for s in log.scans)
+    assert any("no mount of the laser 'laser' is known" in n for n in log.notes)
+    mounted = read_log(path, ReadOptions(mount=MOUNT))
+    assert mounted.frames.mount_source == "--mount"
+    for k in range(5):  # the laser's motion by the odometry: the log's own scan poses
+        laser = relative(intel.scan(10 + k).pose, intel.scan(11 + k).pose)
+        by_odometry = relative(mounted.scans[k].odometry, mounted.scans[k + 1].odometry)
+        assert pose_error(by_odometry, laser)[0] < 1e-6
+
+
+def test_two_static_mounts_that_disagree_are_said(tmp_path, intel):
+    robot = intel_robot(intel, 10, 3, MOUNT, mount_again=Pose2(0.1, 0.0, 0.0))
+    log = read_log(write(tmp_path / "two.bag", robot, "ros1"))
+    assert log.frames.mount == Pose2(0.1, 0.0, 0.0)  # the last published
+    assert any(
+        "/tf_static gives base_link -> laser several different values" in n for n in log.notes
+    )
+    assert not any(
+        "several" in n
+        for n in read_log(
+            write(tmp_path / "one.bag", intel_robot(intel, 10, 3, MOUNT), "ros1")
+        ).notes
+    )

@@ -81,7 +81,7 @@ def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
     fn = getattr(importlib.import_module(f".{module}", __name__), name)
     # the readers whose files hold several
     streams = {
-        "rosbag": (o.topic, o.typestore),
+        "rosbag": (o.topic, o.typestore, o.mount),
         "carmen": (o.topic,),
     }
     if o.topic is not None and module not in streams:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import bz2
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +34,7 @@ from mbicp_viz.core import Pose2, ScanSource
 from mbicp_viz.errors import InputError
 
 from .log import Frames, ScanLog, scan_or_reason
-from .tf import Mount, TfTree, interpolate
+from .tf import BASE_FRAMES, Mount, TfTree, interpolate
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -52,13 +52,20 @@ class Message:
     msg: object
 
 
-def read_rosbag(path: str, topic: str | None = None, typestore: str = DEFAULT_TYPESTORE) -> ScanLog:
+def read_rosbag(
+    path: str,
+    topic: str | None = None,
+    typestore: str = DEFAULT_TYPESTORE,
+    mount: Pose2 | None = None,
+) -> ScanLog:
+    """The scans of one LaserScan topic, with the laser's mount from tf (``mount``, --mount, wins)
+    and the odometry of the robot's base moved onto the laser through that mount."""
     p = Path(path)
     if not p.exists():
         raise InputError("no such file or folder", str(path))
     notes: list[str] = []
     messages = _messages(p, typestore, notes)
-    return _to_log(str(path), messages, topic, notes)
+    return _to_log(str(path), messages, topic, notes, mount)
 
 
 def _typestore(name: str):
@@ -328,7 +335,9 @@ def _scan_topic(
 
 
 def _odometry(messages: list[Message], tf: TfTree, mount: Mount | None):
-    """(source, stamps, base poses) from an Odometry topic (``/odom`` first), else from /tf."""
+    """(source, stamps, base poses) from an Odometry topic (``/odom`` first), else from /tf: the
+    track of the base the laser hangs from, or where tf does not link the laser, of the first
+    base frame below odom."""
     topics = sorted(
         {m.topic for m in messages if m.msgtype == ODOMETRY}, key=lambda t: (t != "/odom", t)
     )
@@ -338,7 +347,10 @@ def _odometry(messages: list[Message], tf: TfTree, mount: Mount | None):
         poses = np.array([_planar(o.pose.pose) for o in msgs])
         order = np.argsort(stamps, kind="stable")
         return f"{topics[0]} (nav_msgs/Odometry)", stamps[order], poses[order]
-    return tf.odometry_track(mount.base_frame) if mount is not None else None
+    for base in [mount.base_frame] if mount is not None else BASE_FRAMES:
+        if (track := tf.odometry_track(base)) is not None:
+            return track
+    return None
 
 
 def _planar(pose) -> tuple[float, float, float]:
@@ -350,7 +362,9 @@ def _planar(pose) -> tuple[float, float, float]:
     )
 
 
-def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[str]) -> ScanLog:
+def _to_log(
+    path: str, messages: list[Message], topic: str | None, notes: list[str], given: Pose2 | None
+) -> ScanLog:
     try:
         topics = _scan_topics(messages)
         chosen = _scan_topic(topics, messages, topic, path)
@@ -364,6 +378,11 @@ def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[s
     for m in messages:
         if m.msgtype == TF and m.topic.lstrip("/") in ("tf", "tf_static"):
             tf.add(m.msg, m.stamp, m.topic.lstrip("/") == "tf_static")
+    for parent, child in sorted(tf.conflicts):
+        notes.append(
+            f"/tf_static gives {parent} -> {child} several different values: the last one "
+            "published is used"
+        )
     scans = [m for m in messages if m.topic == chosen]
     frame_id = scans[0].msg.header.frame_id.lstrip("/")
     mount = tf.mount(frame_id, path) if frame_id else None
@@ -373,6 +392,14 @@ def _to_log(path: str, messages: list[Message], topic: str | None, notes: list[s
         if mount
         else Frames(frame_id=frame_id)
     )
+    if given is not None:  # --mount: the laser's pose on the base, whatever tf says
+        frames = replace(frames, mount=given, mount_source="--mount")
+    elif mount is None and odometry is not None:
+        notes.append(
+            f"the odometry ({odometry[0]}) is the robot base's and no mount of the laser "
+            f"{frame_id!r} is known: the laser's odometry is taken as the base's (give --mount "
+            "X Y THETA_DEG)"
+        )
     log = ScanLog(path, [], frames=frames, topic=chosen, scan_topics=topics, notes=notes)
     if odometry is not None:
         log.odometry_source = odometry[0]

@@ -81,16 +81,21 @@ def mount_of(T: Transform3, source: str, base_frame: str, where: str) -> Mount:
 
 @dataclass
 class TfTree:
-    """Every transform a bag publishes: static ones (latest wins) and timed ones per edge."""
+    """Every transform a bag publishes: static ones (latest wins, and ``conflicts`` names the
+    edges published static with different values) and timed ones per edge."""
 
     static: dict[tuple[str, str], Transform3] = field(default_factory=dict)  # (parent, child) -> T
     timed: dict[tuple[str, str], list[tuple[float, Transform3]]] = field(default_factory=dict)
+    conflicts: set[tuple[str, str]] = field(default_factory=set)
 
     def add(self, msg, stamp: float | None, is_static: bool) -> None:
         for tr in msg.transforms:
             key = (tr.header.frame_id.lstrip("/"), tr.child_frame_id.lstrip("/"))
             T = Transform3.from_msg(tr.transform.translation, tr.transform.rotation)
             if is_static:
+                old = self.static.get(key)
+                if old is not None and not (np.allclose(old.R, T.R) and np.allclose(old.t, T.t)):
+                    self.conflicts.add(key)
                 self.static[key] = T
             else:
                 t = tr.header.stamp.sec + 1e-9 * tr.header.stamp.nanosec
