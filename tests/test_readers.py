@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from mbicp_viz.core import Pose2, pose_error
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ReadOptions, read_log
 from mbicp_viz.readers.plain import read_npz, write_npz
@@ -296,3 +297,34 @@ def test_flaser_bearings_follow_the_beam_count_as_carmen_guesses_them(tmp_path, 
         any("FLASER stores no field of view" in note and str(n) in note for note in log.notes)
         == noted
     )
+
+
+def test_carmen_laser_poses_are_the_lasers_and_odometry_moves_onto_the_laser(tmp_path, intel):
+    """FLASER's x y theta is the laser's pose (the offset is in it), its odom_* the robot's; a
+    ROBOTLASER1 line's laser and robot poses imply the mount."""
+    offset, mount = Pose2(0.2, 0.0, 0.0), Pose2(0.2, 0.05, 0.1)
+    flaser, robot = ["PARAM robot_frontlaser_offset 0.2 host 0"], []
+    for s in intel.scans[:3]:
+        n, ranges = len(s.ranges), " ".join(str(float(v)) for v in s.ranges)
+        base = s.odometry  # the robot's odometry
+        p = base @ offset  # what CARMEN's logger writes as the laser's pose
+        flaser.append(
+            f"FLASER {n} {ranges} {p.x!r} {p.y!r} {p.theta!r} {base.x!r} {base.y!r} "
+            f"{base.theta!r} {s.stamp} host {s.stamp}"
+        )
+        q = base @ mount
+        head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n} {ranges}"
+        robot.append(
+            f"ROBOTLASER1 {head} 0 {q.x!r} {q.y!r} {q.theta!r} {base.x!r} {base.y!r} "
+            f"{base.theta!r} 0 0 0 0 0 {s.stamp} host {s.stamp}"
+        )
+    (tmp_path / "f.log").write_text("\n".join(flaser) + "\n")
+    (tmp_path / "r.log").write_text("\n".join(robot) + "\n")
+    f, r = read_log(tmp_path / "f.log"), read_log(tmp_path / "r.log")
+    for k, s in enumerate(intel.scans[:3]):
+        laser = s.odometry @ offset
+        assert pose_error(f.scans[k].pose, laser)[0] < 1e-9  # not the offset twice
+        assert pose_error(f.scans[k].odometry, laser)[0] < 1e-9
+        assert pose_error(r.scans[k].odometry, s.odometry @ mount)[0] < 1e-9
+    assert r.frames.mount_source == "ROBOTLASER1 laser_pose against robot_pose"
+    assert np.abs((r.frames.mount.inverse() @ mount).as_array()).max() < 1e-9

@@ -59,6 +59,7 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
     log = ScanLog(str(path), [])  # odometry, frames and the messages read past
     streams: dict[str, ScanLog] = {}
     laser_offset = 0.0
+    mounts: list[Pose2] = []  # what each ROBOTLASER1 line's two poses imply
     for fields in token_lines(path, comment=None):
         kind = fields.t[0]
         if kind.startswith("#"):
@@ -81,7 +82,7 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
             stream.add(_flaser(fields, stream.records, laser_offset))
         elif kind == "ROBOTLASER1" or _RAWLASER.fullmatch(kind):
             stream = streams.setdefault(kind, ScanLog(str(path), []))
-            stream.add(_rawlaser(fields, stream.records, kind))
+            stream.add(_rawlaser(fields, stream.records, kind, mounts))
         else:
             log.skipped[kind] = log.skipped.get(kind, 0) + 1
     if not streams:
@@ -101,6 +102,10 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
     log.scans, log.unusable = streams[kind].scans, streams[kind].unusable
     if kind not in FRONT_LASER:  # robot_frontlaser_offset is not this laser's mount
         log.frames = Frames()
+    if kind == "ROBOTLASER1" and mounts:
+        log.frames, note = _implied_mount(mounts, log.frames, path)
+        if note:
+            log.notes.append(note)
     beams = {len(s.ranges) for s in log.scans}
     if kind == "FLASER" and not beams <= set(SICK_180_DEG + SICK_100_DEG):
         log.notes.append(
@@ -111,6 +116,29 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
     if len(streams) > 1:
         log.topic, log.scan_topics = kind, {k: f"{v.records} scans" for k, v in streams.items()}
     return log
+
+
+def _implied_mount(mounts: list[Pose2], frames: Frames, path: str) -> tuple[Frames, str | None]:
+    """The laser's mount that ROBOTLASER1's laser and robot poses imply (the first line's), and a
+    note where the lines, or the log's PARAM, say otherwise."""
+    first = mounts[0]
+    implied = Frames(first, "ROBOTLASER1 laser_pose against robot_pose")
+    spread = max(
+        max(abs(d.x), abs(d.y), abs(d.theta)) for d in (first.inverse() @ m for m in mounts)
+    )
+    if spread > 1e-6:
+        return implied, (
+            f"{path}: ROBOTLASER1 lines imply laser mounts up to {spread:.3g} apart (m or rad): "
+            "the first line's is used"
+        )
+    param = frames.mount if frames.mount_source else None
+    if param is not None and max(abs(v) for v in (param.inverse() @ first).as_array()) > 1e-6:
+        return implied, (
+            f"{path}: PARAM robot_frontlaser_offset ({param.x:g} m) differs from the mount the "
+            f"ROBOTLASER1 poses imply ({first.x:g} m, {first.y:g} m, "
+            f"{math.degrees(first.theta):g} deg): the lines' is used"
+        )
+    return implied, None
 
 
 def _stream(streams: dict[str, ScanLog], message: str | None, path: str) -> str:
@@ -164,15 +192,18 @@ def _flaser(fields: Fields, index: int, laser_offset: float):
     stamp = _trailer(
         fields, "FLASER num_readings range[num_readings] x y theta odom_x odom_y odom_theta"
     )
+    # x y theta is the laser's pose (CARMEN's laser_pose: the offset is in it already), odom_* the
+    # robot's: moved onto the laser
     if laser_offset:
-        pose = pose @ Pose2(laser_offset, 0.0, 0.0)
         odom = odom @ Pose2(laser_offset, 0.0, 0.0)
     fov = math.radians(100.0 if n in SICK_100_DEG else 180.0)
     bearings = uniform_bearings(n, -fov / 2, fov / (n - 1) if n > 1 else 0.0)
     return _make(fields, index, ranges, bearings, pose=pose, odometry=odom, stamp=stamp)
 
 
-def _rawlaser(fields: Fields, index: int, kind: str):
+def _rawlaser(fields: Fields, index: int, kind: str, mounts: list[Pose2]):
+    """A RAWLASER or ROBOTLASER1 scan; a ROBOTLASER1 line's laser and robot poses (both in the
+    odometry frame) add the mount they imply to ``mounts``, and the laser's is its odometry."""
     robot = kind == "ROBOTLASER1"
     fields.take_int("laser_type", -1000, 1000)
     start = fields.take("start_angle")
@@ -197,8 +228,8 @@ def _rawlaser(fields: Fields, index: int, kind: str):
         "remission_mode num_readings range[num_readings] num_remissions remission[num_remissions]"
     )
     if robot:
-        pose = _pose(fields, "laser_pose")
-        odom = _pose(fields, "robot_pose")
+        pose = odom = _pose(fields, "laser_pose")
+        mounts.append(_pose(fields, "robot_pose").inverse() @ pose)
         for name in ("tv", "rv", "forward_safety_dist", "side_safety_dist", "turn_axis"):
             fields.take(name)
         layout += " laser_pose robot_pose tv rv forward_safety_dist side_safety_dist turn_axis"
