@@ -1,5 +1,6 @@
 """Every reader on real files (excerpts shipped in tests/data and the package examples)."""
 
+import json
 import math
 
 import numpy as np
@@ -328,3 +329,18 @@ def test_carmen_laser_poses_are_the_lasers_and_odometry_moves_onto_the_laser(tmp
         assert pose_error(r.scans[k].odometry, s.odometry @ mount)[0] < 1e-9
     assert r.frames.mount_source == "ROBOTLASER1 laser_pose against robot_pose"
     assert np.abs((r.frames.mount.inverse() @ mount).as_array()).max() < 1e-9
+
+
+def test_a_csm_log_with_uneven_bearings_skips_those_scans_and_counts_them(tmp_path):
+    """CSM's JSON of MIT CSAIL's data: some scans have two bearings under 1e-4 rad apart. Those
+    are skipped and counted; the file was refused whole."""
+    one = json.loads((DATA / "stallo2.jsonl").read_text().splitlines()[0])
+    real = [json.loads(json.dumps(one)) for _ in range(6)]  # a real scan, six times
+    for k in (1, 4):
+        th = real[k]["theta"]
+        th[10] = th[9] + 5e-5
+    path = tmp_path / "uneven.jsonl"
+    path.write_text("".join(json.dumps(o) + "\n" for o in real))
+    log = read_log(path)
+    assert len(log.scans) == 4 and sorted(log.unusable) == [1, 4]
+    assert "below the finest scanner's step" in log.unusable[1].reason

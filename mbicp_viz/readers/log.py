@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mbicp_viz.core import Pose2, Scan, ScanError, UnusableScan, make_scan
+from mbicp_viz.core import Pose2, Scan, ScanError, ScanSource, UnusableScan, make_scan
 from mbicp_viz.errors import InputError
 
 # The finest 2-D scanners step by about 0.04 degrees; steps this small are damaged bearings.
@@ -148,16 +148,16 @@ def scan_or_reason(
     ranges, bearings, path: str, line: int | None, field: str, **kw
 ) -> Scan | UnusableScan:
     """A reader's scan (``make_scan``'s keywords), or the reason it is unusable, which the log keeps
-    and skips. Malformed beams are an error naming the file, line (or message) and field."""
+    and skips: no valid reading, or bearings closer than any scanner steps (a scan of a log that
+    writes its bearings unevenly). Malformed beams are an error naming the file, line (or message)
+    and field."""
     b = np.asarray(bearings, dtype=float)
     steps = np.abs(np.diff(b))
     if len(steps) and np.all(np.isfinite(steps)) and steps.min() < MIN_BEARING_STEP_RAD:
-        raise InputError(
+        return UnusableScan(
+            kw.get("source") or ScanSource(path, 0, line),
             f"bearings {steps.min():.3g} rad apart: below the finest scanner's step "
             f"({MIN_BEARING_STEP_RAD} rad)",
-            path,
-            line,
-            field,
         )
     try:
         return make_scan(ranges, bearings, **kw)
