@@ -199,6 +199,13 @@ def held(lock: Path) -> bool:
         return True
 
 
+def _package_path() -> str:
+    """PYTHONPATH for a child that imports this process's package first: the folder holding it."""
+    package = sys.modules[__name__.split(".")[0]]
+    root = str(Path(package.__file__).resolve().parent.parent)
+    return os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)
+
+
 def start_background(lock: Path) -> bool:
     """Start ``python -m mbicp_viz.core.warmup`` holding ``lock`` (taken here, so that two front
     ends starting at once start one compile); False if the lock is taken already."""
@@ -211,13 +218,16 @@ def start_background(lock: Path) -> bool:
         return False
     try:  # the child inherits the locked file (the lock ends when the child does), which names it
         child = subprocess.Popen(
-            [sys.executable, "-m", "mbicp_viz.core.warmup"],
+            # -P: not the working folder first, which `-m` would put there: run from a checkout
+            # after `pip install .`, the child compiled the checkout's kernels into the checkout's
+            # cache and left the installed package's empty. It imports this process's package.
+            [sys.executable, "-P", "-m", "mbicp_viz.core.warmup"],
             pass_fds=(fd,),
             start_new_session=True,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
-            env=os.environ | {"MBICP_VIZ_JIT": "eager"},
+            env=os.environ | {"MBICP_VIZ_JIT": "eager", "PYTHONPATH": _package_path()},
         )
         os.ftruncate(fd, 0)
         os.write(fd, f"{child.pid}\n".encode())

@@ -170,3 +170,29 @@ def test_the_debugger_after_an_install_compiles_nothing_in_its_own_process(tmp_p
         if pid is not None:
             os.killpg(pid, signal.SIGTERM)
             wait_for(lambda: _background_pid(tmp_path) is None, timeout=30)
+
+
+def test_the_background_compile_imports_the_package_of_its_parent(tmp_path):
+    """Run from a folder that holds another mbicp_viz (a checkout, after `pip install .`), the
+    background compile compiled that one into its cache instead of the one running."""
+    decoy = tmp_path / "checkout" / "mbicp_viz"
+    decoy.mkdir(parents=True)
+    marker = tmp_path / "the decoy was imported"
+    (decoy / "__init__.py").write_text(f"open({str(marker)!r}, 'w').close()\n")
+    code = (
+        "from pathlib import Path\n"
+        "from mbicp_viz.core import tiers\n"
+        f"lock = Path({str(tmp_path / 'compile.lock')!r})\n"
+        "assert tiers.start_background(lock)\n"
+        "tiers.wait_unlocked(lock)\n"  # until the child has ended
+    )
+    # -P: this parent imports the package under test, as the console script does from any folder
+    res = subprocess.run(
+        [sys.executable, "-P", "-c", code],
+        cwd=decoy.parent,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert res.returncode == 0, res.stderr
+    assert not marker.exists()
