@@ -53,7 +53,7 @@ from .options import (
     say,
     user_errors,
 )
-from .resume import log_identity, resumable_rows, stop_if_interrupted
+from .resume import log_identity, resumable_rows, settings_of, stop_if_interrupted
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the first N pairs")]
@@ -112,13 +112,14 @@ def sequence(
     if truth not in (None, "pose"):
         raise InputError("the only truth a log carries is 'pose'", field="--truth")
     p = make_params(algo.value, params)
-    lg = read_log_saying(log, read_options(topic, typestore, mount, upside_down, deskew))
+    reading = read_options(topic, typestore, mount, upside_down, deskew)
+    lg = read_log_saying(log, reading)
     pairs = lg.consecutive_pairs(limit)
     search = load_search(params)
     run = {
         "command": "eval sequence",
         "log": log_identity(log),
-        "read": [lg.topic, typestore, mount, upside_down, deskew and deskew.value],
+        "read": settings_of(reading),
         "algorithm": algo.value,
         "params": p.as_dict(),
         "search": search.as_dict(),

@@ -22,6 +22,13 @@ def log_identity(path: str) -> dict:
     return {"path": str(Path(path).resolve()), "bytes": st.st_size, "mtime_ns": st.st_mtime_ns}
 
 
+def settings_of(reading) -> dict:
+    """How a run read its logs (``ReadOptions``), as its rows or study record it."""
+    from dataclasses import asdict
+
+    return {k: getattr(v, "value", v) for k, v in asdict(reading).items()}
+
+
 def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]]) -> PartialRows:
     """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left."""
     from mbicp_viz.readers.rows import PartialRows

@@ -37,7 +37,7 @@ from .options import (
     say,
     user_errors,
 )
-from .resume import log_identity
+from .resume import log_identity, settings_of
 
 
 def tune(
@@ -157,7 +157,7 @@ def tune(
         "fields": [d.spec.name for d in space],
         "algo": algo.value,
         "params": base.as_dict(),
-        "read": [topic, typestore, mount, upside_down, deskew and deskew.value],
+        "read": settings_of(reading),
     }
     if t.check_settings(st, settings) and st.trials:
         say(f"study {name!r} recorded no settings (an earlier version): it takes this run's")
