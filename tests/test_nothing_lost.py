@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from mbicp_viz.cli import app
 from mbicp_viz.outputs import written
 
-from .conftest import HOKUYO_BAG, LASERAZOS, json_lines
+from .conftest import HOKUYO_BAG, INTEL, LASERAZOS, json_lines
 
 runner = CliRunner()
 
@@ -180,3 +180,22 @@ def test_ctrl_c_ends_any_command_in_one_line_without_a_traceback():
     assert time.monotonic() - t0 < 2.0
     assert proc.returncode == 130 and err.strip().splitlines()[-1] == "mbicp-viz: interrupted", err
     assert "Traceback" not in err
+
+
+def test_ctrl_c_in_a_command_of_several_runs_stops_them_all(monkeypatch):
+    """eval covariance runs one pass per matcher: a Ctrl-C in the first ended that pass only, and
+    the command went on with the five others."""
+    import mbicp_viz.evaluation.covariance as cov
+
+    real, calls = cov._pair, []
+
+    def pair(job):
+        calls.append(job)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(job)
+
+    monkeypatch.setattr(cov, "_pair", pair)
+    code, _, err = run("eval", "covariance", INTEL, "--workers", 1)
+    assert code == 130 and err.strip().splitlines()[-1] == "mbicp-viz: interrupted", err
+    assert len(calls) == 2  # no pair of any later matcher's pass

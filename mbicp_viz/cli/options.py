@@ -310,7 +310,7 @@ def check_outputs(options: dict, name=_option) -> None:
             ) from None
 
 
-INTERRUPTED = 130  # the shell's code for a command ended by Ctrl-C
+INTERRUPTED_CODE = 130  # the shell's code for a command ended by Ctrl-C
 
 
 def _from_interrupt(e: BaseException | None) -> bool:
@@ -330,17 +330,25 @@ def user_errors(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        try:
-            check_outputs(kwargs, functools.partial(cli_name, fn))
-            return fn(*args, **kwargs)
-        except (InputError, ScanError, ParamError) as e:
-            typer.echo(f"mbicp-viz: error: {e}", err=True)
-            raise typer.Exit(2) from None
-        except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C where no run keeps rows
-            if not _from_interrupt(e):  # numba's SystemError: an interrupt in a compiled loop
-                raise
-            typer.echo("mbicp-viz: interrupted", err=True)
-            raise typer.Exit(INTERRUPTED) from None
+        from mbicp_viz.evaluation.pool import one_command
+
+        result = None
+        with one_command() as interrupted:
+            try:
+                check_outputs(kwargs, functools.partial(cli_name, fn))
+                result = fn(*args, **kwargs)
+            except (InputError, ScanError, ParamError) as e:
+                if not interrupted.is_set():  # else: a result of the stop, said below
+                    typer.echo(f"mbicp-viz: error: {e}", err=True)
+                    raise typer.Exit(2) from None
+            except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C where no run keeps rows
+                if not _from_interrupt(e):  # numba's SystemError: an interrupt in compiled code
+                    raise
+                interrupted.set()
+            if interrupted.is_set():  # what was printed is of the part finished before Ctrl-C
+                typer.echo("mbicp-viz: interrupted", err=True)
+                raise typer.Exit(INTERRUPTED_CODE) from None
+        return result
 
     return wrapper
 

@@ -10,7 +10,7 @@ import typer
 
 from mbicp_viz.errors import InputError
 
-from .options import INTERRUPTED, say
+from .options import INTERRUPTED_CODE, say
 
 if TYPE_CHECKING:  # the rows reader loads the core (numpy): only once a command runs
     from mbicp_viz.readers.rows import PartialRows
@@ -51,4 +51,4 @@ def stop_if_interrupted(rows: PartialRows, total: int) -> None:
             f"interrupted after {len(rows.rows)} of {total} pairs: the rows so far are in "
             f"{rows.path}; the same command goes on from them"
         )
-        raise typer.Exit(INTERRUPTED)
+        raise typer.Exit(INTERRUPTED_CODE)

@@ -16,6 +16,22 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 POLL_S = 0.1  # how often a waiting parent looks at the flag: a stop takes effect within this
+# Set by Ctrl-C during a run: the run stops; within ``one_command`` later runs start no job (a
+# command that runs several, one per matcher, ends instead of going on with the next).
+INTERRUPTED = threading.Event()
+_IN_COMMAND = threading.Event()
+
+
+@contextmanager
+def one_command() -> Iterator[threading.Event]:
+    """A command's runs: a Ctrl-C during one stops the others too; yields ``INTERRUPTED``.
+    Outside, every run starts afresh (a script calling the evaluations)."""
+    INTERRUPTED.clear()
+    _IN_COMMAND.set()
+    try:
+        yield INTERRUPTED
+    finally:
+        _IN_COMMAND.clear()
 
 
 def ignore_interrupts() -> None:
@@ -25,9 +41,9 @@ def ignore_interrupts() -> None:
 
 @contextmanager
 def stopping(flag: threading.Event | None = None) -> Iterator[threading.Event]:
-    """Within the block Ctrl-C sets ``flag`` (a new one by default) instead of raising; outside
-    the main thread, where no handler can be set, the flag is only the caller's."""
-    flag = flag if flag is not None else threading.Event()
+    """Within the block Ctrl-C sets ``flag`` (``INTERRUPTED`` by default) instead of raising;
+    outside the main thread, where no handler can be set, the flag is only the caller's."""
+    flag = flag if flag is not None else INTERRUPTED
     if threading.current_thread() is not threading.main_thread():
         yield flag
         return
@@ -60,7 +76,11 @@ def ordered_map(
         if on_result is not None:
             on_result(r)
 
+    if not _IN_COMMAND.is_set():
+        INTERRUPTED.clear()
     with stopping() as stop:
+        if stop.is_set():  # an earlier run of this command was stopped
+            return out
         if workers == 1 or len(jobs) <= 1:
             for job in jobs:
                 if stop.is_set():
@@ -68,6 +88,7 @@ def ordered_map(
                 try:
                     take(fn(job))
                 except KeyboardInterrupt:  # raised by the job itself (a handler of its own)
+                    stop.set()
                     break
             return out
         size = max(1, min(16, len(jobs) // (8 * workers)))
