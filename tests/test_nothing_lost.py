@@ -3,6 +3,7 @@ a stopped run keeps its rows beside (never over) an earlier file and goes on fro
 
 import hashlib
 import os
+import re
 import select
 import signal
 import subprocess
@@ -199,3 +200,16 @@ def test_ctrl_c_in_a_command_of_several_runs_stops_them_all(monkeypatch):
     code, _, err = run("eval", "covariance", INTEL, "--workers", 1)
     assert code == 130 and err.strip().splitlines()[-1] == "mbicp-viz: interrupted", err
     assert len(calls) == 2  # no pair of any later matcher's pass
+
+
+def test_a_long_run_says_its_rate_and_time_left_and_where_it_resumed(tmp_path, monkeypatch):
+    out = tmp_path / "seq.json"
+    args = ("eval", "sequence", LASERAZOS, "--out", out, "--limit", 10, "--workers", 1)
+    with monkeypatch.context() as m:
+        interrupt_the_fourth_match(m)
+        code, _, err = run(*args)
+    assert code == 130 and re.search(r"matching: 1/10 \([\d.e+]+/s, \d+ s left\)", err), err
+    code, _, err = run(*args)
+    # the first line after resuming is the first pair matched now, the rate of this run's own
+    assert code == 0 and re.search(r"matching: 5/10 \([\d.e+]+/s, \d+ s left\)", err), err
+    assert re.search(r"matching: 10/10 \([\d.e+]+/s, 0 s left\)", err), err

@@ -129,7 +129,7 @@ def sequence(
     }
     rows = resumable_rows(out, run, pairs)
     with rows, Progress(len(pairs)) as bar:
-        bar.update(len(rows.rows))
+        bar.resumed(len(rows.rows))
         match_sequence(
             lg,
             p,

@@ -393,15 +393,18 @@ def params_for(algos: str, params_file: Path | None) -> dict:
 
 
 class Progress:
-    """A progress bar on a terminal; elsewhere (a log, a pipe) a line after the first item and
-    then every tenth, so that a log shows the run moving as well."""
+    """A progress bar on a terminal (position and time left); elsewhere (a log, a pipe) a line
+    after the first item and then every tenth, with the rate and the time left, so that a log shows
+    the run moving as well. ``resumed`` counts items done by an earlier run (not in the rate)."""
 
     def __init__(self, total: int, label: str = "matching"):
         import sys
+        import time
 
-        self.total, self.label, self.done, self.shown = total, label, 0, 0
+        self.total, self.label, self.done, self.shown, self.before = total, label, 0, 0, 0
+        self.t0 = time.monotonic()
         self.bar = (
-            typer.progressbar(length=total, label=label, file=sys.stderr)
+            typer.progressbar(length=total, label=label, file=sys.stderr, show_pos=True)
             if sys.stderr.isatty()
             else None
         )
@@ -411,17 +414,35 @@ class Progress:
             self.bar.__enter__()
         return self
 
+    def resumed(self, n: int) -> None:
+        self.before += n
+        self.done += n
+        self.shown = self.done
+        if self.bar is not None and n:
+            self.bar.update(n)
+
+    def rate_text(self) -> str:
+        """'12.5/s, 40 s left' from the items done here, or '' before any."""
+        import time
+
+        done, spent = self.done - self.before, time.monotonic() - self.t0
+        if done <= 0 or spent <= 0:
+            return ""
+        rate = done / spent
+        return f"{rate:.3g}/s, {(self.total - self.done) / rate:.0f} s left"
+
     def update(self, n: int = 1) -> None:
         self.done += n
         if self.bar is not None:
             self.bar.update(n)
         elif (
-            self.done == 1
+            self.done == self.before + 1
             or self.done >= self.shown + max(1, self.total // 10)
             or self.done == self.total
         ):
             self.shown = self.done
-            say(f"{self.label}: {self.done}/{self.total}")
+            rate = self.rate_text()
+            say(f"{self.label}: {self.done}/{self.total}" + (f" ({rate})" if rate else ""))
 
     def __exit__(self, *exc):
         if self.bar is not None:
