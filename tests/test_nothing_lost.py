@@ -213,3 +213,28 @@ def test_a_long_run_says_its_rate_and_time_left_and_where_it_resumed(tmp_path, m
     # the first line after resuming is the first pair matched now, the rate of this run's own
     assert code == 0 and re.search(r"matching: 5/10 \([\d.e+]+/s, \d+ s left\)", err), err
     assert re.search(r"matching: 10/10 \([\d.e+]+/s, 0 s left\)", err), err
+
+
+def test_eval_relations_keeps_its_rows_on_ctrl_c_and_resumes(tmp_path, monkeypatch):
+    import mbicp_viz.evaluation.relations as rel
+
+    from .conftest import DATA
+
+    out = tmp_path / "rel.json"
+    args = ["eval", "relations", DATA / "intel-relations.log", DATA / "intel-relations.relations"]
+    args += ["--offset", "976052857.337", "--out", out, "--workers", 1]
+    real, calls = rel._relation_row, []
+
+    def row(job):
+        calls.append(job)
+        if len(calls) == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(job)
+
+    with monkeypatch.context() as m:
+        m.setattr(rel, "_relation_row", row)
+        code, _, err = run(*args)
+    assert code == 130 and "interrupted after 3 of 8 pairs" in err and not out.exists(), err
+    code, std, err = run(*args)
+    assert code == 0 and "3 of 8 pairs already matched" in err and "8 relations matched" in std
+    assert len(json_lines(out)) == 8 and not (tmp_path / "rel.json.partial").exists()

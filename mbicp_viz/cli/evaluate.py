@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from pathlib import Path
@@ -467,28 +468,58 @@ def relations(
     ] = Guess.identity,
     out: Annotated[
         Path | None,
-        typer.Option("--out", help="rows file (JSON lines, one per matched relation)"),
+        typer.Option(
+            "--out",
+            help="rows file (JSON lines, one per matched relation), written as OUT.partial while "
+            "they are matched; a stopped run resumes from it",
+        ),
     ] = None,
     topic: TopicOpt = None,
+    workers: WorkersOpt = None,
 ):
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""
-    from mbicp_viz.evaluation.relations import match_relations, stored_summary, summary
+    from mbicp_viz.evaluation.relations import (
+        match_relations,
+        relation_pairs,
+        stored_summary,
+        summary,
+    )
     from mbicp_viz.readers.params_toml import load_search, make_params
     from mbicp_viz.readers.relations import read_relations
-    from mbicp_viz.readers.rows import rows_text
 
-    lg = read_log_saying(log, read_options(topic))
-    rows, missing = match_relations(
-        lg,
-        read_relations(relations_file),
-        make_params(algo.value, params),
-        offset,
-        tolerance,
-        guess,
-        load_search(params),
+    reading = read_options(topic)
+    lg = read_log_saying(log, reading)
+    p, search = make_params(algo.value, params), load_search(params)
+    found, missing = relation_pairs(lg, read_relations(relations_file), offset, tolerance)
+    records = lg.record_numbers()
+    run = {
+        "command": "eval relations",
+        "log": log_identity(log),
+        "relations": log_identity(relations_file),
+        "read": settings_of(reading),
+        "offset": offset,
+        "tolerance": tolerance,
+        "algorithm": algo.value,
+        "params": p.as_dict(),
+        "search": search.as_dict(),
+        "guess": guess.value,
+    }
+    # with --out, each row is on disk as it is finished and a stopped run resumes from them
+    kept = (
+        resumable_rows(out, run, [(records[i], records[j]) for i, j, _ in found]) if out else None
     )
-    if out:
-        write_text(out, rows_text(rows))
+    rows: list[dict] = kept.rows if kept else []
+    with kept or contextlib.nullcontext(), Progress(len(found)) as bar:
+        bar.resumed(len(rows))
+
+        def take(row: dict) -> None:
+            kept.add(row) if kept else rows.append(row)
+            bar.update(1)
+
+        match_relations(lg, found, p, guess, search, on_row=take, skip=len(rows), workers=workers)
+    if kept:
+        stop_if_interrupted(kept, len(found))
+        kept.finish()
     typer.echo(f"{algo.value}: {summary(rows)} ({missing} relations without a scan at both ends)")
     if stored := stored_summary(rows):
         typer.echo(stored)

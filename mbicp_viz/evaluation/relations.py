@@ -17,6 +17,7 @@ from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.relations import Relation
 
 from .pairs import Guess, pair_guess, stored_truth
+from .pool import ordered_map
 
 
 def nearest_scan(stamps: np.ndarray, t: float, tolerance: float) -> int | None:
@@ -42,46 +43,53 @@ def relation_pairs(
 
 def match_relations(
     log: ScanLog,
-    relations: list[Relation],
+    found: list[tuple[int, int, Relation]],
     params: Params,
-    offset: float,
-    tolerance: float,
     guess: Guess | str = Guess.identity,
     search: SearchParams | None = None,
-) -> tuple[list[dict], int]:
-    """Rows for the relations whose both ends have a scan; and how many relations had none.
-    ``ref`` and ``obj`` of a row are scan record numbers."""
+    on_row=None,
+    skip: int = 0,
+    workers: int | None = None,
+) -> list[dict]:
+    """A row per relation of ``found`` (``relation_pairs``) but the first ``skip`` (a run resumed
+    from its rows), in order; ``ref`` and ``obj`` of a row are scan record numbers. Spread over
+    ``workers`` processes; ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so
+    far."""
     records = log.record_numbers()
-    found, missing = relation_pairs(log, relations, offset, tolerance)
-    rows = []
-    for i, j, rel in found:
-        ref, obj = log.scans[i], log.scans[j]
-        g, _ = pair_guess(ref, obj, guess, search)
-        t0 = time.perf_counter()
-        r = match(ref, obj, g, params)
-        et, er = pose_error(r.pose, rel.pose)
-        row = {
-            "ref": records[i],
-            "obj": records[j],
-            "t1": rel.t1,
-            "t2": rel.t2,
-            "x": r.pose.x,
-            "y": r.pose.y,
-            "theta": r.pose.theta,
-            "error_xy": et,
-            "error_theta": er,
-            "converged": r.converged,
-            "iterations": r.iterations,
-            "time_ms": 1000.0 * (time.perf_counter() - t0),
-        }
-        stored = stored_truth(ref, obj)
-        if stored is not None:
-            # the log's own poses judged by the same relation: how good a truth they are for --truth
-            # pose
-            st, sr = pose_error(stored, rel.pose)
-            row |= {"stored_error_xy": st, "stored_error_theta": sr}
-        rows.append(row)
-    return rows, missing
+    jobs = [
+        (records[i], records[j], log.scans[i], log.scans[j], rel, params, guess, search)
+        for i, j, rel in found[skip:]
+    ]
+    return ordered_map(_relation_row, jobs, workers, on_row)
+
+
+def _relation_row(job) -> dict:
+    ref_record, obj_record, ref, obj, rel, params, guess, search = job
+    g, _ = pair_guess(ref, obj, guess, search)
+    t0 = time.perf_counter()
+    r = match(ref, obj, g, params)
+    et, er = pose_error(r.pose, rel.pose)
+    row = {
+        "ref": ref_record,
+        "obj": obj_record,
+        "t1": rel.t1,
+        "t2": rel.t2,
+        "x": r.pose.x,
+        "y": r.pose.y,
+        "theta": r.pose.theta,
+        "error_xy": et,
+        "error_theta": er,
+        "converged": r.converged,
+        "iterations": r.iterations,
+        "time_ms": 1000.0 * (time.perf_counter() - t0),
+    }
+    stored = stored_truth(ref, obj)
+    if stored is not None:
+        # the log's own poses judged by the same relation: how good a truth they are for --truth
+        # pose
+        st, sr = pose_error(stored, rel.pose)
+        row |= {"stored_error_xy": st, "stored_error_theta": sr}
+    return row
 
 
 def summary(rows: list[dict]) -> str:
