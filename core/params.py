@@ -138,6 +138,15 @@ class Params:
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
+    # What the front ends show of a matcher's per-iteration threshold (IterationEvent.threshold)
+    # and of the distance beyond which it never pairs: each matcher's parameters say it.
+    def threshold_label(self) -> str:
+        return "threshold [m]"
+
+    def hard_cut(self) -> tuple[str, float] | None:
+        """(legend label, distance [m]) beyond which no pair is made, or None."""
+        return None
+
 
 @dataclass(frozen=True)
 class StopParams(Params):
@@ -248,6 +257,19 @@ class IcpParams(Params):
         1000.0, unit="m", lo=0.0, hi=1000.0, help="readings beyond this are not used"
     )
 
+    def threshold_label(self) -> str:
+        return (
+            f"trim limit: the {100 * self.outliers_maxPerc:g} % quantile or "
+            f"{self.outliers_adaptive_mult:g} x the {100 * self.outliers_adaptive_order:g} % "
+            "quantile of the segment distances, the smaller [m]"
+        )
+
+    def hard_cut(self) -> tuple[str, float] | None:
+        return (
+            f"max_correspondence_dist, {self.max_correspondence_dist:g} m",
+            self.max_correspondence_dist,
+        )
+
 
 @dataclass(frozen=True)
 class PlIcpParams(IcpParams):
@@ -347,6 +369,12 @@ class MbicpParams(StopParams):
         help="stop after more than this many consecutive converged iterations",
     )
 
+    def threshold_label(self) -> str:
+        return f"trim cut: the best {100 * self.filter:g} % of the pairs kept [m]"
+
+    def hard_cut(self) -> tuple[str, float] | None:
+        return f"Br: radial window, {self.Br:g} m", self.Br
+
 
 @dataclass(frozen=True)
 class ImprovedParams(MbicpParams):
@@ -438,6 +466,11 @@ class ImprovedParams(MbicpParams):
         "after Besl & McKay's accelerated ICP (1992); fewer iterations along slowly converging "
         "directions",
     )
+
+    def threshold_label(self) -> str:
+        if not self.mad_rejection:
+            return super().threshold_label()
+        return f"MAD threshold: median + {self.mad_k:g} MAD, at least {self.mad_floor:g} m [m]"
 
 
 @dataclass(frozen=True)
@@ -534,6 +567,9 @@ class PolarParams(Params):
     def weight_constant(self, iteration: int) -> float:
         """C of the translation weights at an iteration (counted from 1)."""
         return self.C if iteration <= self.C_switch else self.C_late
+
+    def threshold_label(self) -> str:
+        return "max_error: residuals beyond are not used [m]"
 
 
 @dataclass(frozen=True)

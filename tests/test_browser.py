@@ -201,7 +201,8 @@ def test_arrow_keys_on_the_slider_leave_the_view_top_down(browser, app):
 def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, tmp_path):
     from PIL import Image
 
-    from mbicp_viz.views.scene import RUN_COLORS, run_style
+    from mbicp_viz.core import MATCHERS
+    from mbicp_viz.views.scene import run_style
 
     page, session = open_tab(browser, app)
     page.locator(
@@ -222,7 +223,7 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
         # the view, not the panel
         img = np.asarray(Image.open(shot).convert("RGB")).astype(int)[:, :1000]
         near = lambda rgb: int(np.count_nonzero(np.abs(img - np.array(rgb)).max(axis=2) < 30))  # noqa: E731
-        return near(RUN_COLORS["icp"]) > 100 and near(RUN_COLORS["improved"]) > 100
+        return near(MATCHERS["icp"].colour) > 100 and near(MATCHERS["improved"].colour) > 100
 
     assert wait_for(both_drawn)
     page.close()

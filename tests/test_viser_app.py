@@ -186,7 +186,7 @@ def test_compare_chosen_matchers_each_in_its_colour(session):
     for name in ("icp", "improved"):
         assert scene.run_style(name).label in legend
         colors = np.asarray(session.nodes[f"/{name}/scene/object"].colors)
-        assert (colors == np.array(scene.RUN_COLORS[name])).all()
+        assert (colors == np.array(MATCHERS[name].colour)).all()
     assert (
         "**icp**" in session.playback.text.content
         and "**improved**" in session.playback.text.content

@@ -330,7 +330,7 @@ def record(
     from mbicp_viz.evaluation.pairs import stored_odometry
 
     stream = new_stream(recording_id, live=connect is not None)
-    polar = {r.root for r in runs if matcher_for(r.params).module in ("psm", "pmwn")}
+    polar = {r.root for r in runs if matcher_for(r.params).polar}
     bp = blueprint([r.root for r in runs], teaching, about is not None, polar)
     results = []
     with ExitStack() as stack:

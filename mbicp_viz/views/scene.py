@@ -17,9 +17,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mbicp_viz.core import IterationEvent, PairKind, PairStatus, Pose2, Scan, StartEvent
-
-RGB = tuple[int, int, int]
+from mbicp_viz.core import MATCHERS, IterationEvent, PairKind, PairStatus, Pose2, Scan, StartEvent
+from mbicp_viz.core.matchers import RGB
 
 
 @dataclass(frozen=True)
@@ -93,55 +92,19 @@ METRIC_WEIGHT = Style("PMWN metric weight λ [m/rad]", (210, 0, 130))
 
 def threshold_style(params) -> Style:
     """What a matcher's per-iteration threshold (``IterationEvent.threshold``) is, in its plots."""
-    if getattr(params, "mad_rejection", False):
-        return replace(
-            THRESHOLD,
-            label=f"MAD threshold: median + {params.mad_k:g} MAD, at least "
-            f"{params.mad_floor:g} m [m]",
-        )
-    if hasattr(params, "max_error"):
-        return replace(THRESHOLD, label="max_error: residuals beyond are not used [m]")
-    if hasattr(params, "outliers_maxPerc"):
-        return replace(
-            THRESHOLD,
-            label=f"trim limit: the {100 * params.outliers_maxPerc:g} % quantile or "
-            f"{params.outliers_adaptive_mult:g} x the {100 * params.outliers_adaptive_order:g} % "
-            "quantile of the segment distances, the smaller [m]",
-        )
-    return replace(
-        THRESHOLD, label=f"trim cut: the best {100 * params.filter:g} % of the pairs kept [m]"
-    )
+    return replace(THRESHOLD, label=params.threshold_label())
 
 
 def hard_cut(params) -> tuple[Style, float] | None:
     """The distance beyond which a matcher never pairs (MbICP's radial window Br, ICP's maximum
     correspondence distance), with its legend entry; None for the polar matchers."""
-    if hasattr(params, "Br"):
-        return replace(HARD_CUT, label=f"Br: radial window, {params.Br:g} m"), params.Br
-    if hasattr(params, "max_correspondence_dist"):
-        return (
-            replace(
-                HARD_CUT, label=f"max_correspondence_dist, {params.max_correspondence_dist:g} m"
-            ),
-            params.max_correspondence_dist,
-        )
-    return None
-
-
-# Compare mode: one colour per matcher, none of them a colour of the layers above.
-RUN_COLORS: dict[str, RGB] = {
-    "icp": (230, 159, 0),
-    "mbicp": (0, 114, 178),
-    "improved": (204, 80, 170),
-    "psm": (0, 158, 115),
-    "pmwn": (86, 180, 233),
-    "plicp": (120, 80, 30),
-}
+    cut = params.hard_cut()
+    return None if cut is None else (replace(HARD_CUT, label=cut[0]), cut[1])
 
 
 def run_style(name: str) -> Style:
     """The object scan of one matcher in compare mode."""
-    return Style(f"{name}: object scan", RUN_COLORS[name], OBJECT.order)
+    return Style(f"{name}: object scan", MATCHERS[name].colour, OBJECT.order)
 
 
 @dataclass(frozen=True, eq=False)

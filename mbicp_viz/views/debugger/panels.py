@@ -17,7 +17,7 @@ import numpy as np
 import viser
 import viser.uplot as uplot
 
-from mbicp_viz.core import ParamError, Params, field_specs
+from mbicp_viz.core import MATCHERS, ParamError, Params, field_specs
 
 from .. import scene
 from .state import DebugState, box_label, parse_entry, shown_value
@@ -253,12 +253,12 @@ def legend_html(styles: list[scene.Style], grid_m: float | None = None) -> str:
 def error_legend(state: DebugState) -> tuple[uplot.Series, ...]:
     series = [uplot.Series(label="iteration")]
     for run in state.runs:
-        own = scene.RUN_COLORS[run.name] if len(state.runs) > 1 else scene.ERROR.color
+        own = MATCHERS[run.name].colour if len(state.runs) > 1 else scene.ERROR.color
         series.append(
             _line(f"{run.name}: {scene.ERROR.label}", "err", replace(scene.ERROR, color=own))
         )
         thr = scene.threshold_style(run.start.params)
-        own = scene.RUN_COLORS[run.name] if len(state.runs) > 1 else thr.color
+        own = MATCHERS[run.name].colour if len(state.runs) > 1 else thr.color
         series.append(_line(f"{run.name}: {thr.label}", "m", replace(thr, color=own), dash=True))
     return tuple(series)
 
