@@ -54,6 +54,21 @@ def test_opens_on_the_final_iteration_with_a_result(session):
     assert "(motion of the laser frame" in content  # the frame the pose is in (no mount known here)
 
 
+def test_each_iteration_draws_exactly_the_layers_of_its_own(session, server):
+    """Back at the initial guess, the last iteration's pairs and step are gone from the scene (the
+    legend dropped them, the scene kept them drawn), and they come back with their iteration."""
+    n = session.state.max_iteration()
+    at_end = set(session.nodes)
+    assert "/improved/scene/pairs/point" in at_end
+    session.playback.slider.value = 0
+    own = {f"/improved/{ly.path}" for ly in session.state.layers(session.state.runs[0])}
+    assert set(session.nodes) <= own and "/improved/scene/pairs/point" not in session.nodes
+    gone = at_end - set(session.nodes)
+    assert gone and not gone & set(server.scene._handle_from_node_name)  # removed from the scene
+    session.playback.slider.value = n
+    assert set(session.nodes) == at_end
+
+
 def test_iteration_slider_redraws_without_rematching(session, monkeypatch):
     calls = []
     monkeypatch.setattr(st, "run_match", lambda *a, **k: calls.append(a))

@@ -152,15 +152,20 @@ class Session:
         """Every run's layers at the current iteration, the legend of what is shown, the plots."""
         with self.lock, self.client.atomic():
             shown: dict[str, scene.Style] = {}
+            drawn: dict[str, object] = {}
             for run in self.state.runs:
                 for layer in self.state.layers(run):
                     if not viser_draw.in_scan_plane(layer):
                         continue
                     visible = self.state.visible.get(layer.style.label, True)
                     name = f"/{run.name}/{layer.path}"
-                    self.nodes[name] = viser_draw.draw(self.client.scene, name, layer, visible)
+                    drawn[name] = viser_draw.draw(self.client.scene, name, layer, visible)
                     if visible and scene.has_content(layer):
                         shown.setdefault(layer.style.label, layer.style)
+            # a layer of another iteration (the step's points and pairs, at the initial guess)
+            for name in self.nodes.keys() - drawn.keys():
+                self.nodes[name].remove()
+            self.nodes = drawn
             self.shown = list(shown.values())
             self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
             self.playback.text.content = "  \n".join(
