@@ -479,3 +479,16 @@ def test_a_log_with_two_lasers_opens_the_front_one_and_the_page_says_which_strea
         page.close()
     finally:
         application.stop()
+
+
+def test_a_box_left_without_enter_says_so_on_the_page(browser, app):
+    """Text typed into a parameter box and not applied is never passed off as the matcher's."""
+    page, session = open_tab(browser, app)
+    b, before = box(page, "Bw [deg]"), session.state.params["improved"].Bw
+    b.fill("60")
+    page.get_by_text("Bw [deg]: '60' is not applied yet: Enter applies it").wait_for(timeout=10000)
+    assert session.state.params["improved"].Bw == before
+    b.press("Enter")
+    assert wait_for(lambda: session.state.params["improved"].Bw == pytest.approx(math.radians(60)))
+    assert wait_for(lambda: page.get_by_text("is not applied yet").count() == 0)
+    page.close()

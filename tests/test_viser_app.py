@@ -573,3 +573,14 @@ def test_lesson_mode_compiles_every_steps_matchers_while_the_server_starts(monke
         ) == len(set(warmed))
     finally:
         app.stop()
+
+
+def test_a_box_typed_without_enter_says_it_is_not_applied(session):
+    panel = session.matchers.params
+    before = session.state.params["improved"].Bw
+    panel.boxes["Bw"].handle.value = "60"  # typed, no Enter
+    assert "Bw" in panel.message.content and "'60' is not applied yet" in panel.message.content
+    assert session.state.params["improved"].Bw == before
+    submit(panel, Bw="60")  # Enter
+    assert "not applied" not in panel.message.content
+    assert session.state.params["improved"].Bw == pytest.approx(math.radians(60))

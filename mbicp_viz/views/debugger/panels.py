@@ -38,9 +38,10 @@ class CommitBox:
     changed within 50 ms of each other, faster than a hand moves, still lose the first change.)
     """
 
-    def __init__(self, gui, label: str, text: str, hint: str, on_commit):
+    def __init__(self, gui, label: str, text: str, hint: str, on_commit, on_pending=None):
+        self.applied = text
         self.handle = gui.add_text(label, text, multiline=True, hint=f"{hint} (Enter applies)")
-        self.on_commit = on_commit
+        self.on_commit, self.on_pending = on_commit, on_pending
         self.handle.on_update(lambda _: self._changed())
 
     @property
@@ -49,11 +50,14 @@ class CommitBox:
 
     def _changed(self) -> None:
         if "\n" in self.handle.value:
-            text = self.text
+            text = self.applied = self.text
             self.handle.value = text  # the box shows exactly what is applied
             self.on_commit(text)
+        elif self.on_pending is not None:  # typed, not applied: the page must not pass it off
+            self.on_pending(self.text if self.text != self.applied else None)
 
     def show(self, text: str) -> None:
+        self.applied = text
         self.handle.value = text  # sent to the page when it differs from what the page sent
 
 
@@ -64,6 +68,14 @@ class ParamPanel:
     folder: viser.GuiFolderHandle
     boxes: dict[str, CommitBox]
     message: viser.GuiMarkdownHandle
+
+    def pending(self, label: str, text: str | None) -> None:
+        """Say that a box shows text that is not applied (typed without Enter); None: it is."""
+        notice = f"{label}: '{text}' is not applied yet: Enter applies it"
+        if text is not None:
+            self.message.content = warning(notice)
+        elif "is not applied yet" in self.message.content:
+            self.message.content = ""
 
     def show(self, params: Params) -> None:
         """Put every box on ``params``: after any change, the page shows what the matcher uses (a
@@ -98,14 +110,17 @@ def param_panel(gui, title: str, params: Params, order: float, on_commit) -> Par
                 if s.type is not bool
                 else ""
             )
+            label = box_label(s)
             boxes[s.name] = CommitBox(
                 gui,
-                box_label(s),
+                label,
                 shown_value(s, getattr(params, s.name)),
                 f"{s.help}{bounds}",
                 lambda text, name=s.name: on_commit(name, text),
+                lambda text, label=label: panel.pending(label, text),
             )
-    return ParamPanel(folder, boxes, message)
+    panel = ParamPanel(folder, boxes, message)
+    return panel
 
 
 def _numeric(x_label: str, *axes: tuple[str, str, int, float]) -> dict:
