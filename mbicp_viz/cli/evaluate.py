@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 from pathlib import Path
@@ -54,7 +53,7 @@ from .options import (
     say,
     user_errors,
 )
-from .resume import log_identity, resumable_rows, settings_of, stop_if_interrupted
+from .resume import log_identity, matched_rows, settings_of
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the first N pairs")]
@@ -128,24 +127,23 @@ def sequence(
         "truth": truth,
         "frame": frame.value,
     }
-    rows = resumable_rows(out, run, pairs)
-    with rows, Progress(len(pairs)) as bar:
-        bar.resumed(len(rows.rows))
-        match_sequence(
+    rows = matched_rows(
+        out,
+        run,
+        pairs,
+        lambda on_row, skip: match_sequence(
             lg,
             p,
             limit,
             guess,
             truth,
-            on_row=lambda row: (rows.add(row), bar.update(1)),
+            on_row=on_row,
             workers=workers,
             search=search,
             base=frame is Frame.base,
-            skip=len(rows.rows),
-        )
-    stop_if_interrupted(rows, len(pairs))
-    rows.finish()
-    rows = rows.rows
+            skip=skip,
+        ),
+    )
     conv = sum(r["converged"] for r in rows)
     typer.echo(f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}")
     if truth:
@@ -504,22 +502,15 @@ def relations(
         "search": search.as_dict(),
         "guess": guess.value,
     }
-    # with --out, each row is on disk as it is finished and a stopped run resumes from them
-    kept = (
-        resumable_rows(out, run, [(records[i], records[j]) for i, j, _ in found]) if out else None
+    pairs = [(records[i], records[j]) for i, j, _ in found]
+    rows = matched_rows(
+        out,
+        run,
+        pairs,
+        lambda on_row, skip: match_relations(
+            lg, found, p, guess, search, on_row=on_row, skip=skip, workers=workers
+        ),
     )
-    rows: list[dict] = kept.rows if kept else []
-    with kept or contextlib.nullcontext(), Progress(len(found)) as bar:
-        bar.resumed(len(rows))
-
-        def take(row: dict) -> None:
-            kept.add(row) if kept else rows.append(row)
-            bar.update(1)
-
-        match_relations(lg, found, p, guess, search, on_row=take, skip=len(rows), workers=workers)
-    if kept:
-        stop_if_interrupted(kept, len(found))
-        kept.finish()
     typer.echo(f"{algo.value}: {summary(rows)} ({missing} relations without a scan at both ends)")
     if stored := stored_summary(rows):
         typer.echo(stored)

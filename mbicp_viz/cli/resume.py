@@ -3,6 +3,7 @@ way, and the same command started again goes on from the rows already written.""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -10,7 +11,7 @@ import typer
 
 from mbicp_viz.errors import InputError
 
-from .options import INTERRUPTED_CODE, say
+from .options import INTERRUPTED_CODE, Progress, say
 
 if TYPE_CHECKING:  # the rows reader loads the core (numpy): only once a command runs
     from mbicp_viz.readers.rows import PartialRows
@@ -52,3 +53,33 @@ def stop_if_interrupted(rows: PartialRows, total: int) -> None:
             f"{rows.path}; the same command goes on from them"
         )
         raise typer.Exit(INTERRUPTED_CODE)
+
+
+def matched_rows(
+    out: Path | None, run: dict, pairs: list[tuple[int, int]], match: Callable[..., object]
+) -> list[dict]:
+    """Every pair's row, ``match(on_row, skip)`` running the pairs after the first ``skip``. With
+    ``out``, each row is on disk as it is finished (``OUT.partial``), a stopped run ends here with
+    its rows kept and the same command resumes from them, and ``out`` is written whole at the end;
+    without, the rows stay in memory (a Ctrl-C still ends the command, ``user_errors``)."""
+    kept = resumable_rows(out, run, pairs) if out is not None else None
+    rows: list[dict] = kept.rows if kept is not None else []
+    with Progress(len(pairs)) as bar:
+        bar.resumed(len(rows))
+
+        def take(row: dict) -> None:
+            if kept is not None:
+                kept.add(row)  # appends to rows as well
+            else:
+                rows.append(row)
+            bar.update(1)
+
+        if kept is None:
+            match(take, 0)
+        else:
+            with kept:
+                match(take, len(rows))
+    if kept is not None:
+        stop_if_interrupted(kept, len(pairs))
+        kept.finish()
+    return rows
