@@ -108,4 +108,6 @@ class MatchResult:
         if self.degeneracy is not None:
             d["condition_number"] = self.degeneracy.condition_number
             d["weakest_direction"] = list(self.degeneracy.weakest_direction)
+            d["eigenvalues"] = list(self.degeneracy.eigenvalues)
+            d["degeneracy_length_m"] = self.degeneracy.length
         return d

@@ -210,7 +210,7 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
         "'mantine-Flex-root')][1]"
         "//input"
     ).first.check()
-    assert wait_for(lambda: [r.name for r in session.state.runs] == ["icp", "improved"])
+    assert wait_for(lambda: [r.matcher for r in session.state.runs] == ["icp", "improved"])
     legend = page.locator(".mbicp-legend")
     assert wait_for(lambda: run_style("icp").label in legend.inner_text())
     assert run_style("improved").label in legend.inner_text()

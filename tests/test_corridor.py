@@ -10,10 +10,11 @@ from mbicp_viz.cli import app
 from mbicp_viz.core import ImprovedParams, Pose2, Recorder, match
 from mbicp_viz.evaluation.corridor import surface_condition
 from mbicp_viz.evaluation.pairs import stored_truth
+from mbicp_viz.evaluation.single import Setup, match_pair
 from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene, viser_draw
 from mbicp_viz.views.debugger.state import DebugState, Source
-from mbicp_viz.views.rrd import Run, record
+from mbicp_viz.views.rrd import record
 from mbicp_viz.views.text import iteration_text
 
 from .conftest import DATA
@@ -72,7 +73,8 @@ def test_held_direction_is_drawn_in_both_front_ends(tmp_path):
         assert drawn and all(np.linalg.norm(ly.ends - ly.starts) > 0 for ly in drawn)
     finally:
         server.stop()
-    record([Run("improved", state.ref, state.obj, state.guess, params)], str(tmp_path / "held.rrd"))
+    held = match_pair(state.ref, state.obj, params, Setup(state.guess), record=True)
+    record([held], str(tmp_path / "held.rrd"))
     from rerun.chunk import RrdReader
 
     assert "/improved/scene/held" in {

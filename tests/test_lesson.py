@@ -205,7 +205,9 @@ def test_each_step_shows_its_own_layers(lesson):
             if ly.path.startswith(f"{scene.SCANS}/") and scene.has_content(ly)
         }
         compared = (
-            {scene.run_style(r.name) for r in sr.runs} if scene.OBJECT in sr.step.layers else set()
+            {scene.run_style(r.matcher) for r in sr.runs}
+            if scene.OBJECT in sr.step.layers
+            else set()
         )
         assert scene.REFERENCE in drawn
         # nothing the step did not ask for

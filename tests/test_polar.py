@@ -250,13 +250,15 @@ def test_compare_prints_every_matcher_with_errors(tmp_path):
 def test_polar_recording_carries_cost_curves_and_the_circle(tmp_path):
     from rerun.chunk import RrdReader
 
-    from mbicp_viz.views.rrd import Run, record
+    from mbicp_viz.evaluation.single import match_pair
+    from mbicp_viz.views.rrd import record
 
     ref = scans("laserazos")[10]
     obj = seen_from(ref, Pose2(0.05, -0.02, math.radians(4.0)))
     path = tmp_path / "polar.rrd"
-    rec = Recorder()
-    record([Run("pmwn", ref, obj, Pose2(), PmwnParams())], str(path), extra_observer=rec)
+    m = match_pair(ref, obj, PmwnParams(), record=True)
+    record([m], str(path))
+    rec = m.events
     counts = {}
     for c in RrdReader(str(path)).stream().to_chunks():
         # per-iteration rows (not the static styles)

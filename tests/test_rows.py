@@ -54,8 +54,8 @@ def test_rows_read_back_as_written(rows_file):
     rows = read_rows(rows_file)
     assert [(r.ref, r.obj) for r in rows] == [(w["ref"], w["obj"]) for w in written]
     for r, w in zip(rows, written):
-        assert r.params.as_dict() == w["params"] and r.algorithm == w["algorithm"] == "improved"
-        assert [r.guess.x, r.guess.y, r.guess.theta] == w["guess_pose"] and r.success == w[
+        assert r.params.as_dict() == w["params"] and r.matcher == w["algorithm"] == "improved"
+        assert [r.guess.x, r.guess.y, r.guess.theta] == w["guess_pose"] and r.score.success == w[
             "success"
         ]
         # the line it is on
@@ -65,14 +65,17 @@ def test_rows_read_back_as_written(rows_file):
 def test_failures_worst_first_with_a_reason(rows_file):
     rows = read_rows(rows_file)
     bad = worst_first(rows)
-    assert bad and all(failed(r) for r in bad) and len(bad) == sum(not r.success for r in rows)
-    assert [r.error_xy for r in bad] == sorted((r.error_xy for r in bad), reverse=True)
+    assert (
+        bad and all(failed(r) for r in bad) and len(bad) == sum(not r.score.success for r in rows)
+    )
+    assert [r.score.error_xy for r in bad] == sorted((r.score.error_xy for r in bad), reverse=True)
     for r in bad:
         reason = failure_reason(r)
-        if not r.converged:
+        if not r.result.converged:
             assert reason.startswith("stopped early")
-        elif r.inliers_truth < 0.5:
-            assert reason.startswith("low overlap") and f"{100 * r.inliers_truth:.0f} %" in reason
+        elif r.score.inliers_truth < 0.5:
+            on = r.score.inliers_truth
+            assert reason.startswith("low overlap") and f"{100 * on:.0f} %" in reason
         else:
             assert reason.split(" (")[0] in ("degenerate direction", "wrong basin")
 
@@ -86,11 +89,11 @@ def test_every_failure_reopens_exactly_as_it_failed(rows_file):
     assert state.pair == (first.ref, first.obj) and state.guess == first.guess
     for row in src.failures:
         assert state.open_row(row) is None
-        assert state.algorithms == [row.algorithm] and state.params[row.algorithm] == row.params
+        assert state.algorithms == [row.matcher] and state.params[row.matcher] == row.params
         pose = state.runs[0].result.pose
         assert (
-            math.hypot(pose.x - row.pose.x, pose.y - row.pose.y) < 1e-9
-            and abs(pose.theta - row.pose.theta) < 1e-9
+            math.hypot(pose.x - row.result.pose.x, pose.y - row.result.pose.y) < 1e-9
+            and abs(pose.theta - row.result.pose.theta) < 1e-9
         )
         text = state.result_markdown()
         assert (
@@ -99,7 +102,7 @@ def test_every_failure_reopens_exactly_as_it_failed(rows_file):
             and failure_reason(row) in text
         )
     # change what the evaluation ran with: the page says the run no longer reproduces it
-    assert state.set_params(row.algorithm, {"MaxIter": "3"}) is None
+    assert state.set_params(row.matcher, {"MaxIter": "3"}) is None
     assert "this run differs from it" in state.result_markdown()
 
 
@@ -158,7 +161,7 @@ def test_damaged_rows_files_end_in_one_line(tmp_path_factory, rows_file, cut, fl
     except InputError as e:
         assert "\n" not in str(e) and "rows.json" in str(e)
     else:
-        assert rows and all(r.algorithm in MATCHERS for r in rows)
+        assert rows and all(r.matcher in MATCHERS for r in rows)
 
 
 def test_rows_remember_the_scan_stream_and_reopen_only_on_it(tmp_path, intel):

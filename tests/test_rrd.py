@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from mbicp_viz.core import ImprovedParams, MbicpParams, PairKind, PairStatus, Pose2, Recorder
-from mbicp_viz.views.rrd import Run, record
+from mbicp_viz.core import ImprovedParams, MbicpParams, PairKind, PairStatus
+from mbicp_viz.evaluation.single import match_pair
+from mbicp_viz.views.rrd import record
 
 from .conftest import RERUN, free_port, viewer_screenshot, wait_for
 
@@ -32,15 +33,9 @@ def columns(path):
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory, intel):
     path = tmp_path_factory.mktemp("rrd") / "match.rrd"
-    rec = Recorder()
-    ref, obj = intel.scans[11], intel.scans[12]
-    record(
-        [Run(ROOT, ref, obj, Pose2(), ImprovedParams())],
-        str(path),
-        teaching=True,
-        extra_observer=rec,
-    )
-    return path, rec
+    m = match_pair(intel.scans[11], intel.scans[12], ImprovedParams(), record=True)
+    record([m], str(path), teaching=True)
+    return path, m.events
 
 
 def by_iteration(values):
@@ -110,8 +105,8 @@ def test_two_generations_compare_equal(tmp_path, intel):
         p = tmp_path / f"run{k}.rrd"
         record(
             [
-                Run("mbicp", intel.scans[20], intel.scans[21], Pose2(), MbicpParams()),
-                Run("improved", intel.scans[20], intel.scans[21], Pose2(), ImprovedParams()),
+                match_pair(intel.scans[20], intel.scans[21], p, record=True)
+                for p in (MbicpParams(), ImprovedParams())
             ],
             str(p),
         )

@@ -4,17 +4,23 @@ import numpy as np
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.core import Pose2, pose_error, relative
+from mbicp_viz.core import ImprovedParams, MatchResult, Pose2, Termination, pose_error, relative
 from mbicp_viz.evaluation.trajectory import accumulate, kalman
 from mbicp_viz.readers import read_log
+from mbicp_viz.readers.pair_match import PairMatch
 
 from .conftest import INTEL, LASERAZOS
 
 
+def row(k: int, motion: Pose2, converged: bool = True) -> PairMatch:
+    reason = Termination.CONVERGED if converged else Termination.MAX_ITERATIONS
+    result = MatchResult("improved", motion, converged, reason, 5, 0.0, 300, 0, None, None)
+    return PairMatch(k, k + 1, ImprovedParams(), Pose2(), "identity", result, "laser")
+
+
 def rows_from(poses, converged=True):
     return [
-        {"x": d.x, "y": d.y, "theta": d.theta, "converged": converged}
-        for d in (relative(a, b) for a, b in zip(poses[:-1], poses[1:]))
+        row(k, relative(a, b), converged) for k, (a, b) in enumerate(zip(poses[:-1], poses[1:]))
     ]
 
 
@@ -34,7 +40,7 @@ def test_kalman_agrees_when_both_sources_agree_and_follows_odometry_without_matc
     assert max(pose_error(a, b)[0] for a, b in zip(fused, truth)) < 1e-9
     # matches that did not converge are ignored: the filter dead-reckons on odometry
     skipped = kalman(
-        [{"x": 5.0, "y": 0.0, "theta": 1.0, "converged": False}] * 14,
+        [row(k, Pose2(5.0, 0.0, 1.0), converged=False) for k in range(14)],
         odo,
         (0.05, 0.05, 0.03),
         (0.02, 0.02, 0.01),
@@ -45,7 +51,7 @@ def test_kalman_agrees_when_both_sources_agree_and_follows_odometry_without_matc
 def test_kalman_weighs_the_sharper_source():
     odo = [Pose2(), Pose2(1.0, 0.0, 0.0)]
     fused = kalman(
-        [{"x": 1.2, "y": 0.0, "theta": 0.0, "converged": True}],
+        [row(0, Pose2(1.2, 0.0, 0.0))],
         odo,
         (0.2, 0.2, 0.1),
         (0.02, 0.02, 0.01),

@@ -71,7 +71,7 @@ def test_each_iteration_draws_exactly_the_layers_of_its_own(session, server):
 
 def test_iteration_slider_redraws_without_rematching(session, monkeypatch):
     calls = []
-    monkeypatch.setattr(st, "run_match", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(st, "match_pair", lambda *a, **k: calls.append(a))
     run = session.state.runs[0]
     for k in (0, 1, 5, session.state.max_iteration()):
         session.playback.slider.value = k
@@ -173,7 +173,7 @@ def test_an_exception_inside_a_match_is_shown_and_the_server_keeps_serving(sessi
     def broken(*a, **k):
         raise ValueError("boom")
 
-    monkeypatch.setattr(st, "run_match", broken)
+    monkeypatch.setattr(st, "match_pair", broken)
     submit(session.matchers.params, Br="0.8")
     assert "boom" in session.h_status.content and session.h_result.content == good
     assert session.state.params["improved"].Br != 0.8  # the failed change is not kept
@@ -196,7 +196,7 @@ def test_parameter_form_stays_in_place_and_follows_the_matcher(session):
 
 def test_compare_chosen_matchers_each_in_its_colour(session):
     session.matchers.boxes["icp"].value = True
-    assert [r.name for r in session.state.runs] == ["icp", "improved"]
+    assert [r.matcher for r in session.state.runs] == ["icp", "improved"]
     legend = session.h_legend.content
     for name in ("icp", "improved"):
         assert scene.run_style(name).label in legend
@@ -208,7 +208,7 @@ def test_compare_chosen_matchers_each_in_its_colour(session):
     )
     session.matchers.boxes["improved"].value = False
     session.matchers.boxes["icp"].value = False  # none: refused, the last choice stays
-    assert [r.name for r in session.state.runs] == [
+    assert [r.matcher for r in session.state.runs] == [
         "icp"
     ] and "choose at least one" in session.h_status.content
 
@@ -354,7 +354,7 @@ def test_every_layer_of_every_matcher_has_a_place_in_both_front_ends(server, nam
     """An unknown layer is an error in both front ends: draw every layer of every iteration of
     every matcher in viser, and write them all to an .rrd."""
     from mbicp_viz.views import viser_draw
-    from mbicp_viz.views.rrd import Run, record
+    from mbicp_viz.views.rrd import record
 
     log = read_log(LASERAZOS)
     state = DebugState(Source("laserazos", log, guess=Pose2(0.05, 0.0, 0.05), algorithms=(name,)))
@@ -369,11 +369,7 @@ def test_every_layer_of_every_matcher_has_a_place_in_both_front_ends(server, nam
     assert "scene/reference" in drawn and "scene/pairs/point" in drawn
     if name == "pmwn":
         assert "scene/polar/circle_points" in drawn
-    record(
-        [Run(name, state.ref, state.obj, state.guess, state.params[name])],
-        str(tmp_path / "all.rrd"),
-        teaching=True,
-    )
+    record(state.runs, str(tmp_path / "all.rrd"), teaching=True)
     with pytest.raises(TypeError):
         viser_draw.in_scan_plane(
             scene.Points("elsewhere/points", np.zeros((1, 2)), scene.OBJECT, 0.1)
@@ -559,11 +555,14 @@ def test_lesson_mode_opens_each_step_and_refuses_a_forged_step(server):
 def test_lesson_mode_compiles_every_steps_matchers_while_the_server_starts(monkeypatch):
     """A later step must not stall on compilation: the warm-up runs every matcher of the lesson."""
     import mbicp_viz.views.debugger.app as app_module
+    from mbicp_viz.core import matcher_for
     from mbicp_viz.views.debugger.lesson import step_source
     from mbicp_viz.views.lesson.steps import load_lesson
 
     warmed = []
-    monkeypatch.setattr(app_module, "run_match", lambda name, *a: warmed.append(name))
+    monkeypatch.setattr(
+        app_module, "match", lambda ref, obj, guess, p: warmed.append(matcher_for(p).name)
+    )
     steps = tuple(load_lesson())
     app = app_module.App(step_source(steps[0], steps), "127.0.0.1", 0)
     try:

@@ -107,6 +107,7 @@ def sequence(
     identity)."""
     from mbicp_viz.evaluation.pairs import MISSING
     from mbicp_viz.evaluation.sequence import match_sequence, odometry_summary, truth_summary
+    from mbicp_viz.readers.pair_match import PairMatch, parse_pair_match
     from mbicp_viz.readers.params_toml import load_search, make_params
 
     if truth not in (None, "pose"):
@@ -143,15 +144,17 @@ def sequence(
             base=frame is Frame.base,
             skip=skip,
         ),
+        PairMatch.to_json,
+        parse_pair_match,
     )
-    conv = sum(r["converged"] for r in rows)
+    conv = sum(r.result.converged for r in rows)
     typer.echo(f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}")
     if truth:
         typer.echo("\n".join(truth_summary(rows)))
     if odometry := odometry_summary(rows):
         typer.echo(odometry)
     say(f"poses: motions of {lg.frames.frame_text(frame is Frame.base)}")
-    if without := sum(r["guess"] == MISSING.format(guess.value) for r in rows):
+    if without := sum(r.guess_source == MISSING.format(guess.value) for r in rows):
         say(
             f"{without} pair(s) with no {guess.value} at one of their scans: matched from the "
             f"identity (their rows' guess says '{MISSING.format(guess.value)}')"

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import tempfile
 from typing import Annotated
 
@@ -107,34 +106,27 @@ def match_cmd(
         truth,
         params,
     )
-    outcome = single.run(sp.ref, sp.obj, s.guess, p, record=not as_json)
-    base = frame is Frame.base
+    base, frames = frame is Frame.base, sp.log.frames
+    m = single.match_pair(
+        sp.ref,
+        sp.obj,
+        p,
+        s,
+        frames,
+        base,
+        # record numbers in the log; two files: the first scan of each
+        indices=(0, 0) if second else (pair or sp.log.consecutive_pairs(1)[0]),
+        stream=sp.log.topic,
+        record=not as_json or bool(rrd or connect or serve),
+    )
     if as_json:
-        # scan numbers within each file
-        indices = (0, 0) if second else (pair or sp.log.consecutive_pairs(1)[0])
-        typer.echo(json.dumps(single.row(indices, s, outcome, sp.log.frames, base)))
+        typer.echo(m.json_line())
     else:
-        frames = sp.log.frames
         truth_pose = frames.reported(s.truth, base) if s.truth is not None else None
-        typer.echo(
-            "\n".join(
-                match_report(
-                    sp.label,
-                    s,
-                    outcome,
-                    single.reported(outcome.result, frames, base),
-                    frames.frame_text(base),
-                    truth_pose,
-                )
-            )
-        )
+        typer.echo("\n".join(match_report(sp.label, m, frames.frame_text(base), truth_pose)))
     _say_if_interpreted()
     if rrd or connect or serve:
-        from mbicp_viz.views.rrd import Run
-
-        _record(
-            [Run(algo.value, sp.ref, sp.obj, s.guess, p, s.truth)], rrd, connect, serve, port, teach
-        )
+        _record([m], rrd, connect, serve, port, teach)
 
 
 def compare_cmd(
@@ -160,8 +152,7 @@ def compare_cmd(
 ):
     """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
     from mbicp_viz.core import tiers
-    from mbicp_viz.evaluation.compare import compare_table
-    from mbicp_viz.views.rrd import Run
+    from mbicp_viz.evaluation.compare import compare_matches, compare_table
 
     from .options import params_for
 
@@ -185,17 +176,11 @@ def compare_cmd(
         "errors against: "
         f"{s.truth_source or 'nothing (no known answer; give --truth X Y THETA_DEG)'}\n"
     )
-    typer.echo(compare_table(sp.ref, sp.obj, s.guess, ps, s.truth))
+    matches = compare_matches(sp, s, ps)
+    typer.echo(compare_table(matches))
     _say_if_interpreted()
     if rrd or connect or serve:
-        _record(
-            [Run(a, sp.ref, sp.obj, s.guess, p, s.truth) for a, p in ps.items()],
-            rrd,
-            connect,
-            serve,
-            port,
-            teach,
-        )
+        _record(matches, rrd, connect, serve, port, teach)
 
 
 def _say_if_interpreted() -> None:
@@ -205,8 +190,8 @@ def _say_if_interpreted() -> None:
         say(tiers.INTERPRETED)
 
 
-def _record(runs, rrd, connect, serve, port, teach) -> None:
-    """Write the runs to an .rrd, stream them to a viewer, and/or serve them on 127.0.0.1."""
+def _record(matches, rrd, connect, serve, port, teach) -> None:
+    """Write the matches to an .rrd, stream them to a viewer, and/or serve them on 127.0.0.1."""
     from mbicp_viz.views.rrd import record
     from mbicp_viz.views.rrd import serve as serve_rrd
 
@@ -215,7 +200,7 @@ def _record(runs, rrd, connect, serve, port, teach) -> None:
         if rrd
         else (tempfile.mkdtemp(prefix="mbicp-viz-") + "/match.rrd" if serve else None)
     )
-    record(runs, path, connect, teach)
+    record(matches, path, connect, teach)
     if path:
         say(f"recording written to {path} (open it with: rerun {path})")
     if serve:

@@ -55,23 +55,32 @@ def stop_if_interrupted(rows: PartialRows, total: int) -> None:
         raise typer.Exit(INTERRUPTED_CODE)
 
 
+def _same(row):
+    return row
+
+
 def matched_rows(
-    out: Path | None, run: dict, pairs: list[tuple[int, int]], match: Callable[..., object]
-) -> list[dict]:
+    out: Path | None,
+    run: dict,
+    pairs: list[tuple[int, int]],
+    match: Callable[..., object],
+    encode: Callable[[object], dict] = _same,
+    decode: Callable[[dict, str, int], object] = lambda row, path, line: row,
+) -> list:
     """Every pair's row, ``match(on_row, skip)`` running the pairs after the first ``skip``. With
-    ``out``, each row is on disk as it is finished (``OUT.partial``), a stopped run ends here with
-    its rows kept and the same command resumes from them, and ``out`` is written whole at the end;
-    without, the rows stay in memory (a Ctrl-C still ends the command, ``user_errors``)."""
+    ``out``, each row is on disk as it is finished (``OUT.partial``, ``encode``-d to JSON), a
+    stopped run ends here with its rows kept and the same command resumes from them (``decode``-d
+    from the file, path and line), and ``out`` is written whole at the end; without, the rows stay
+    in memory (a Ctrl-C still ends the command, ``user_errors``)."""
     kept = resumable_rows(out, run, pairs) if out is not None else None
-    rows: list[dict] = kept.rows if kept is not None else []
+    rows = [decode(r, str(kept.path), k) for k, r in enumerate(kept.rows, 2)] if kept else []
     with Progress(len(pairs)) as bar:
         bar.resumed(len(rows))
 
-        def take(row: dict) -> None:
+        def take(row) -> None:
+            rows.append(row)
             if kept is not None:
-                kept.add(row)  # appends to rows as well
-            else:
-                rows.append(row)
+                kept.add(encode(row))
             bar.update(1)
 
         if kept is None:

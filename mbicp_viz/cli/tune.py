@@ -244,7 +244,7 @@ def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
     """Each training log's pairs under the best parameters, as rows: the debugger lists their
     failures worst first and opens each as it ran."""
     from mbicp_viz.evaluation.failures import worst_first
-    from mbicp_viz.evaluation.sequence import pair_row
+    from mbicp_viz.evaluation.single import Setup, match_pair
     from mbicp_viz.readers import read_log
     from mbicp_viz.readers.rows import read_rows, rows_text
 
@@ -253,19 +253,16 @@ def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
         lg = read_log(path, reading)
         records = lg.record_numbers()
         rows = [
-            pair_row(
-                records[c.i],
-                records[c.j],
+            match_pair(
                 lg.scans[c.i],
                 lg.scans[c.j],
                 best,
-                c.guess,
-                "tune's guess",
-                c.truth,
+                Setup(c.guess, "tune's guess", c.truth, "the log's scan poses"),
                 lg.frames,
                 False,
-                lg.topic,
-            )
+                indices=(records[c.i], records[c.j]),
+                stream=lg.topic,
+            ).to_json()
             for c in cases
             if c.log == k
         ]

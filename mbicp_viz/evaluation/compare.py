@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 
-from mbicp_viz.core import Params, Pose2, Scan, pose_error
+from mbicp_viz.core import Params
+from mbicp_viz.readers.pair_match import PairMatch
 
-from .single import run
+from .pairs import ScanPair
+from .single import Setup, match_pair
 
 # on_ref_%: object points within INLIER_RADIUS_M of a reference point at the result — a verdict
 # from the data alone, for the pairs whose truth nobody knows.
@@ -16,22 +18,29 @@ HEADER = (
 )
 
 
-def compare_table(
-    ref: Scan, obj: Scan, guess: Pose2, params: dict[str, Params], truth: Pose2 | None
-) -> str:
-    """One line per matcher; the error columns say ``-`` when the answer is unknown."""
+def compare_matches(pair: ScanPair, s: Setup, params: dict[str, Params]) -> list[PairMatch]:
+    """Each matcher on ``pair`` from ``s.guess``, in the laser frame, with its iterations."""
+    i, j = pair.ref.source.index, pair.obj.source.index
+    return [
+        match_pair(pair.ref, pair.obj, p, s, pair.log.frames, False, indices=(i, j), record=True)
+        for p in params.values()
+    ]
+
+
+def compare_table(matches: list[PairMatch]) -> str:
+    """One line per matcher (laser frame); the error columns say ``-`` when the answer is
+    unknown."""
     lines = [HEADER]
-    for name, p in params.items():
-        o = run(ref, obj, guess, p)
-        r = o.result
-        if truth is not None:
-            et, er = pose_error(r.pose, truth)
-            err = f"{et * 1000:>9.1f} {math.degrees(er):>8.3f}"
-        else:
-            err = f"{'-':>9} {'-':>8}"
+    for m in matches:
+        r, sc = m.result, m.score
+        err = (
+            f"{sc.error_xy * 1000:>9.1f} {math.degrees(sc.error_theta):>8.3f}"
+            if sc is not None
+            else f"{'-':>9} {'-':>8}"
+        )
         lines.append(
-            f"{name:<10} {r.pose.x:>+9.4f} {r.pose.y:>+9.4f} {math.degrees(r.pose.theta):>+10.3f} "
-            f"{err} "
-            f"{100 * o.on_ref:>8.1f} {r.iterations:>5} {r.reason.value:<15} {o.time_ms:>8.1f}"
+            f"{m.matcher:<10} {r.pose.x:>+9.4f} {r.pose.y:>+9.4f} "
+            f"{math.degrees(r.pose.theta):>+10.3f} {err} "
+            f"{100 * m.on_ref:>8.1f} {r.iterations:>5} {r.reason.value:<15} {m.time_ms:>8.1f}"
         )
     return "\n".join(lines)

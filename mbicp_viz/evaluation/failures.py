@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from mbicp_viz.readers.rows import EvalRow
+from mbicp_viz.readers.pair_match import PairMatch
 
 # Successful Intel matches stay below 40 (99th percentile, 427 pairs from the identity); half of
 # the failures' final constraints are above 19, a fifth above 50.
@@ -21,43 +21,44 @@ DEGENERATE_CONDITION = 50.0
 LOW_OVERLAP = 0.5  # share of object points within 5 cm of the reference at the stored pose
 
 
-def failed(row: EvalRow) -> bool:
+def failed(row: PairMatch) -> bool:
     """Scored rows fail outside the criteria; unscored ones when the matcher did not converge."""
-    return not row.success if row.success is not None else not row.converged
+    return not row.score.success if row.score is not None else not row.result.converged
 
 
-def failure_reason(row: EvalRow) -> str:
-    if not row.converged:
-        return f"stopped early ({row.reason})"
-    if row.inliers_truth is not None and row.inliers_truth < LOW_OVERLAP:
+def failure_reason(row: PairMatch) -> str:
+    if not row.result.converged:
+        return f"stopped early ({row.result.reason.value})"
+    on_truth = row.score.inliers_truth if row.score is not None else None
+    if on_truth is not None and on_truth < LOW_OVERLAP:
         return (
-            f"low overlap ({100 * row.inliers_truth:.0f} % of the object points on the "
+            f"low overlap ({100 * on_truth:.0f} % of the object points on the "
             "reference at the stored pose)"
         )
-    if row.condition_number is not None and row.condition_number > DEGENERATE_CONDITION:
-        return f"degenerate direction (condition number {row.condition_number:.0f})"
+    deg = row.result.degeneracy
+    if deg is not None and deg.condition_number > DEGENERATE_CONDITION:
+        return f"degenerate direction (condition number {deg.condition_number:.0f})"
     return "wrong basin (converged elsewhere)"
 
 
-def worst_first(rows: list[EvalRow]) -> list[EvalRow]:
+def worst_first(rows: list[PairMatch]) -> list[PairMatch]:
     """The failed rows: the largest translation error first, then rotation error, then order."""
-    return sorted(
-        (r for r in rows if failed(r)),
-        key=lambda r: (-(r.error_xy or 0.0), -(r.error_theta or 0.0), r.line),
-    )
+
+    def badness(r: PairMatch) -> tuple[float, float, int]:
+        sc = r.score
+        return (-sc.error_xy, -sc.error_theta, r.line) if sc else (0.0, 0.0, r.line)
+
+    return sorted((r for r in rows if failed(r)), key=badness)
 
 
-def failure_label(rank: int, row: EvalRow) -> str:
+def failure_label(rank: int, row: PairMatch) -> str:
     """One line per failure, as the debugger's list shows it."""
-    error = (
-        ""
-        if row.error_xy is None
-        else f"{row.error_xy:.3f} m, {math.degrees(row.error_theta):.2f} deg: "
-    )
+    sc = row.score
+    error = "" if sc is None else f"{sc.error_xy:.3f} m, {math.degrees(sc.error_theta):.2f} deg: "
     return f"{rank}. scans {row.ref} -> {row.obj}: {error}{failure_reason(row)}"
 
 
-def failure_summary(rows: list[EvalRow], path: str, shown: int = 3) -> list[str]:
+def failure_summary(rows: list[PairMatch], path: str, shown: int = 3) -> list[str]:
     """The worst failures, for the end of ``eval sequence``."""
     bad = worst_first(rows)
     if not bad:

@@ -48,10 +48,14 @@ def load_pair(
     )
 
 
+# A guess from the log's scan poses: they are then no answer to judge the match against.
+SCAN_POSES = "scan poses"
+
+
 def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:
     """Initial guess from the poses (else odometry) the log stores, identity when it has neither."""
     if ref.pose is not None and obj.pose is not None:
-        return relative(ref.pose, obj.pose), "scan poses"
+        return relative(ref.pose, obj.pose), SCAN_POSES
     if ref.odometry is not None and obj.odometry is not None:
         return relative(ref.odometry, obj.odometry), "odometry"
     return Pose2(), "identity"
@@ -91,7 +95,21 @@ def pair_guess(
             ref.source.path,
             field="--guess",
         )
-    return relative(a, b), kind.value
+    return relative(a, b), SCAN_POSES if kind is Guess.pose else kind.value
+
+
+def known_answer(
+    ref: Scan, obj: Scan, guess_source: str, given: Pose2 | None = None
+) -> tuple[Pose2 | None, str | None]:
+    """What a pair's match is judged against, and where it came from: ``given``, else the log's
+    scan poses unless the guess came from them (a match started at its own answer proves
+    nothing), else nothing."""
+    if given is not None:
+        return given, "given"
+    stored = stored_truth(ref, obj)
+    if stored is not None and guess_source != SCAN_POSES:
+        return stored, "the log's scan poses"
+    return None, None
 
 
 def stored_truth(ref: Scan, obj: Scan) -> Pose2 | None:

@@ -30,6 +30,8 @@ from pathlib import Path
 from mbicp_viz.core import MATCHERS, Params, Pose2, Scan
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import read_log
+from mbicp_viz.readers.log import Frames
+from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.params_toml import params_from_mapping, read_toml
 
 from .pairs import Thin, block_mask, displaced_pair, stored_guess, stored_truth
@@ -61,6 +63,18 @@ class Scenario:
     truth: Pose2 | None
     params: dict[str, Params]
     teaching: bool
+
+    def match(self, params: Params) -> PairMatch:
+        """One matcher on the scenario's pair from its guess, with the iterations' events (laser
+        frame: a scenario is a pair of scans)."""
+        from .single import Setup, match_pair
+
+        s = Setup(self.guess, "given", self.truth, None if self.truth is None else "given")
+        return match_pair(self.ref, self.obj, params, s, Frames(), indices=(0, 1), record=True)
+
+    def matches(self) -> list[PairMatch]:
+        """Every matcher of the scenario, in order."""
+        return [self.match(p) for p in self.params.values()]
 
 
 def _pose_deg(v, path, field) -> Pose2:

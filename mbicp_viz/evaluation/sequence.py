@@ -5,45 +5,27 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
-from mbicp_viz.core import Params, Pose2, Scan, SearchParams, match, pose_error, relative
-from mbicp_viz.core.agreement import inlier_fraction
+from mbicp_viz.core import Params, SearchParams, match
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
+from mbicp_viz.readers.pair_match import PairMatch
 
 from .criteria import CONSECUTIVE, Criteria
 from .pairs import Guess, pair_guess, stored_truth
 from .pool import ordered_map
-from .single import reported, result_row, run
+from .single import Setup, match_pair, scored
 
 
-def truth_doubted(row: dict) -> bool:
-    """A failed pair where more object points land on the reference at the matched pose than at
-    the stored one: the scans themselves side with the matcher (or cannot tell the two apart)."""
-    return not row["success"] and row["inliers_match"] > row["inliers_truth"]
-
-
-def scored(ref: Scan, obj: Scan, pose, truth) -> dict:
-    """Error of ``pose`` against ``truth`` and, for a failure, what the points say of each (the
-    fields ``truth_doubted`` reads)."""
-    et, er = pose_error(pose, truth)
-    row = {"error_xy": et, "error_theta": er, "success": CONSECUTIVE.correct(et, er)}
-    if not row["success"]:  # is the matcher wrong, or the stored pose? Ask the points.
-        row |= {
-            "inliers_match": inlier_fraction(ref, obj, pose),
-            "inliers_truth": inlier_fraction(ref, obj, truth),
-        }
-    return row
-
-
-def truth_summary(rows: list[dict]) -> list[str]:
+def truth_summary(rows: list[PairMatch]) -> list[str]:
     """How many scored rows succeeded, and of the failures how many the points side with."""
     from mbicp_viz.core.agreement import INLIER_RADIUS_M
 
-    ok = sum(r["success"] for r in rows)
-    doubted = sum(truth_doubted(r) for r in rows)
+    ok = sum(r.score.success for r in rows)
+    doubted = sum(r.score.truth_doubted for r in rows)
     return [
         f"against the scan poses: {ok}/{len(rows)} within {CONSECUTIVE.text()} "
         f"({100.0 * ok / len(rows):.1f} %)",
@@ -64,8 +46,8 @@ def match_sequence(
     search: SearchParams | None = None,
     base: bool = True,
     skip: int = 0,
-) -> list[dict]:
-    """One row per consecutive pair of usable scans, in order: the match's motion (of the robot's
+) -> list[PairMatch]:
+    """One record per consecutive pair of usable scans, in order: the match's motion (of the robot's
     base when ``base`` and the log knows the laser's mount), how well it lays the scans on each
     other, its distance from the log's odometry when the log has some, and with ``truth="pose"``
     its error against the log's scan poses. The first ``skip`` pairs are left out (a run resumed
@@ -98,7 +80,7 @@ def match_sequence(
     return ordered_map(_match_row, jobs, workers, on_row)
 
 
-def _match_row(job) -> dict:
+def _match_row(job) -> PairMatch:
     path, i, j, ref, obj, params, guess, truth, search, frames, base, stream = job
     t0 = time.perf_counter()
     g, source = pair_guess(ref, obj, guess, search, missing_ok=True)
@@ -108,65 +90,23 @@ def _match_row(job) -> dict:
         answer = stored_truth(ref, obj)
         if answer is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
-    row = pair_row(i, j, ref, obj, params, g, source, answer, frames, base, stream)
-    if guess is Guess.search:
-        row["guess_ms"] = guess_ms
-    return row
-
-
-def pair_row(
-    i: int,
-    j: int,
-    ref: Scan,
-    obj: Scan,
-    params: Params,
-    guess: Pose2,
-    source: str,
-    truth: Pose2 | None,
-    frames,
-    base: bool,
-    stream: str | None,
-) -> dict:
-    """The row of one pair (``eval sequence``, ``tune``'s worst pairs): the match from ``guess``
-    (laser frame; ``source`` says where it came from) reported in the frame ``base`` chooses, its
-    distance from the log's odometry when it has some, and with ``truth`` (laser frame) its error.
-    The guess, every parameter and the scan stream read (``ScanLog.topic``) are kept: the pair
-    reopens exactly as it ran (``serve LOG --rows``)."""
-    o = run(ref, obj, guess, params)
-    r = reported(o.result, frames, base)
-    row = (
-        result_row(i, j, r, o.time_ms)
-        | r.as_dict()
-        | {
-            "guess": source,
-            "guess_pose": [guess.x, guess.y, guess.theta],
-            "on_ref": o.on_ref,
-            "frame": frames.frame_name(base),
-            "stream": stream,
-            "params": params.as_dict(),
-        }
-    )
-    # how far the match is from the odometry
-    if ref.odometry is not None and obj.odometry is not None:
-        et, er = pose_error(r.pose, frames.reported(relative(ref.odometry, obj.odometry), base))
-        row |= {"odometry_xy": et, "odometry_theta": er}
-    if truth is not None:
-        row |= scored(ref, obj, o.result.pose, truth)
-    return row
+    s = Setup(g, source, answer, None if answer is None else "the log's scan poses")
+    m = match_pair(ref, obj, params, s, frames, base, indices=(i, j), stream=stream)
+    return replace(m, guess_ms=guess_ms) if guess is Guess.search else m
 
 
 # Agreement with odometry: paper-independent, a wheel encoder's few centimetres over a scan pair.
 ODOMETRY_AGREEMENT = Criteria("odometry agreement", 0.05, math.radians(1.0))
 
 
-def odometry_summary(rows: list[dict]) -> str | None:
+def odometry_summary(rows: list[PairMatch]) -> str | None:
     """How far the matches are from the log's odometry, when it has some."""
-    near = [r for r in rows if "odometry_xy" in r]
+    near = [r for r in rows if r.odometry_xy is not None]
     if not near:
         return None
-    ok = sum(ODOMETRY_AGREEMENT.correct(r["odometry_xy"], r["odometry_theta"]) for r in near)
-    med_xy = float(np.median([r["odometry_xy"] for r in near]))
-    med_th = math.degrees(float(np.median([r["odometry_theta"] for r in near])))
+    ok = sum(ODOMETRY_AGREEMENT.correct(r.odometry_xy, r.odometry_theta) for r in near)
+    med_xy = float(np.median([r.odometry_xy for r in near]))
+    med_th = math.degrees(float(np.median([r.odometry_theta for r in near])))
     return (
         f"against the odometry: {ok}/{len(near)} within {ODOMETRY_AGREEMENT.text()} "
         f"({100.0 * ok / len(near):.1f} %); median difference {1000 * med_xy:.1f} mm, {med_th:.3f} "
@@ -181,7 +121,7 @@ def _ceiling_row(job) -> tuple[bool, list[tuple[bool, bool]]]:
     truth = stored_truth(ref, obj)
     rows = [scored(ref, obj, match(ref, obj, truth, p).pose, truth) for p in params]
     found = CONSECUTIVE.judge(correlative_search(ref, obj).pose, truth)
-    return found, [(r["success"], truth_doubted(r)) for r in rows]
+    return found, [(r.success, r.truth_doubted) for r in rows]
 
 
 def ceiling_summary(
@@ -214,7 +154,7 @@ def ceiling(
     correlative search alone finds, and how many each matcher keeps when started at the truth itself
     (its fixed point: no guess can do better). Of the pairs a matcher leaves, those where more
     object points lie on the reference at its pose than at the stored one are counted as doubting
-    the truth (see ``truth_doubted``). Returns (search hits, hits per matcher, doubts per matcher,
+    the truth (``Score.truth_doubted``). Returns (search hits, hits per matcher, doubts per matcher,
     pairs)."""
     pairs = log.consecutive_pairs(limit)
     for i, j in pairs:

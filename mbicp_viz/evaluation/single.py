@@ -1,5 +1,6 @@
-"""One pair, matched as ``match`` and ``compare`` do: the guess and where it came from, the result,
-how well it lays the scans on each other, and its error when the answer is known."""
+"""One pair's match and its record (``readers/pair_match.PairMatch``): the guess and where it came
+from, the result, how well it lays the scans on each other, its distance from the odometry and its
+error when the answer is known. Every command and front end that matches a pair makes it here."""
 
 from __future__ import annotations
 
@@ -19,20 +20,20 @@ from mbicp_viz.core import (
 )
 from mbicp_viz.core.agreement import inlier_fraction
 from mbicp_viz.readers.log import Frames
+from mbicp_viz.readers.pair_match import PairMatch, Score
 
-from .pairs import ScanPair, pair_guess, stored_truth
+from .criteria import CONSECUTIVE
+from .pairs import ScanPair, known_answer, pair_guess, stored_odometry
 
 
 @dataclass(frozen=True)
 class Setup:
     """Where a pair's match starts and what it is judged against."""
 
-    guess: Pose2
-    guess_source: (
-        str  # "scan poses", "odometry", "identity", "search", "given", "search around ..."
-    )
-    truth: Pose2 | None
-    truth_source: str | None
+    guess: Pose2 = Pose2()  # laser frame
+    guess_source: str = "given"  # "scan poses", "odometry", "identity", "search", "searched ..."
+    truth: Pose2 | None = None  # laser frame
+    truth_source: str | None = None
 
 
 def setup(
@@ -56,36 +57,7 @@ def setup(
             correlative_search(pair.ref, pair.obj, g, search).pose,
             f"searched around {source}",
         )
-    if truth is not None:
-        return Setup(g, source, truth, "given")
-    stored = stored_truth(pair.ref, pair.obj)
-    if stored is not None and source != "scan poses":
-        return Setup(g, source, stored, "the log's scan poses")
-    return Setup(g, source, None, None)
-
-
-@dataclass(frozen=True)
-class Outcome:
-    result: MatchResult
-    time_ms: float
-    on_ref: float  # fraction of object points within INLIER_RADIUS_M of a reference point
-    recorder: Recorder | None
-    interpreted: bool = (
-        False  # run while numba compiled the kernels in the background (core/tiers.py)
-    )
-
-
-def run(ref: Scan, obj: Scan, guess: Pose2, params: Params, record: bool = False) -> Outcome:
-    from mbicp_viz.core import tiers
-
-    rec = Recorder() if record else None
-    compiling = tiers.compiling()  # a compile the match's first kernel starts runs at its end
-    t0 = time.perf_counter()
-    result = match(ref, obj, guess, params, rec)
-    ms = 1000.0 * (time.perf_counter() - t0)
-    return Outcome(
-        result, ms, inlier_fraction(ref, obj, result.pose), rec, compiling or tiers.compiling()
-    )
+    return Setup(g, source, *known_answer(pair.ref, pair.obj, source, truth))
 
 
 def reported(result: MatchResult, frames: Frames, base: bool) -> MatchResult:
@@ -94,36 +66,60 @@ def reported(result: MatchResult, frames: Frames, base: bool) -> MatchResult:
     return result.conjugated(frames.mount) if frames.reports_base(base) else result
 
 
-def result_row(ref: int, obj: int, r: MatchResult, time_ms: float) -> dict:
-    """The stable JSON record of one match (``match --json``, ``eval sequence``): scripts rely on
-    these keys."""
-    return {
-        "ref": ref,
-        "obj": obj,
-        "x": r.pose.x,
-        "y": r.pose.y,
-        "theta": r.pose.theta,
-        "iterations": r.iterations,
-        "converged": r.converged,
-        "reason": r.reason.value,
-        "time_ms": time_ms,
-    }
+def scored(ref: Scan, obj: Scan, pose: Pose2, truth: Pose2) -> Score:
+    """The laser's motion ``pose`` against ``truth``: its error, whether it is within the
+    consecutive-pair criteria and, for a failure, what the points say of each."""
+    et, er = pose_error(pose, truth)
+    if CONSECUTIVE.correct(et, er):
+        return Score(et, er, True)
+    # is the matcher wrong, or the stored pose? Ask the points.
+    return Score(et, er, False, inlier_fraction(ref, obj, pose), inlier_fraction(ref, obj, truth))
 
 
-def row(indices: tuple[int, int], s: Setup, o: Outcome, frames: Frames, base: bool = True) -> dict:
-    """The JSON record of ``match --json`` (the keys of ``eval sequence``'s rows, and more)."""
-    r = reported(o.result, frames, base)
-    out = (
-        result_row(*indices, r, o.time_ms)
-        | r.as_dict()
-        | {
-            "on_ref": o.on_ref,
-            "guess": s.guess_source,
-            "frame": frames.frame_name(base),
-            "interpreted": o.interpreted,
-        }
+def match_pair(
+    ref: Scan,
+    obj: Scan,
+    params: Params,
+    s: Setup = Setup(),
+    frames: Frames = Frames(),  # noqa: B008 - frozen
+    base: bool = True,
+    *,
+    indices: tuple[int, int] | None = None,
+    stream: str | None = None,
+    record: bool = False,
+) -> PairMatch:
+    """Match one pair from ``s.guess`` and make its record: the result reported in the frame
+    ``base`` chooses, how well it lays the scans on each other, its distance from the log's
+    odometry and, with ``s.truth``, its error; ``record`` keeps every iteration's events.
+    ``indices`` are the record numbers (default: the scans' own)."""
+    from mbicp_viz.core import tiers
+
+    rec = Recorder() if record else None
+    compiling = tiers.compiling()  # a compile the match's first kernel starts runs at its end
+    t0 = time.perf_counter()
+    result = match(ref, obj, s.guess, params, rec)
+    ms = 1000.0 * (time.perf_counter() - t0)
+    shown = reported(result, frames, base)
+    odometry, fields = stored_odometry(ref, obj), {}
+    if odometry is not None:
+        et, er = pose_error(shown.pose, frames.reported(odometry, base))
+        fields = {"odometry": odometry, "odometry_xy": et, "odometry_theta": er}
+    i, j = indices if indices is not None else (ref.source.index, obj.source.index)
+    return PairMatch(
+        i,
+        j,
+        params,
+        s.guess,
+        s.guess_source,
+        shown,
+        frames.frame_name(base),
+        inlier_fraction(ref, obj, result.pose),
+        stream,
+        ms,
+        interpreted=compiling or tiers.compiling(),
+        truth=s.truth,
+        truth_source=s.truth_source,
+        score=scored(ref, obj, result.pose, s.truth) if s.truth is not None else None,
+        events=rec,
+        **fields,
     )
-    if s.truth is not None:
-        et, er = pose_error(r.pose, frames.reported(s.truth, base))
-        out |= {"error_xy": et, "error_theta": er, "truth": s.truth_source}
-    return out

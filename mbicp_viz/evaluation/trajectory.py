@@ -15,6 +15,7 @@ import numpy as np
 from mbicp_viz.core import Pose2, relative
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
+from mbicp_viz.readers.pair_match import PairMatch
 
 # The EKF's noise, per axis (m, m, rad): odometry increments predict, matches correct.
 ODOMETRY_SIGMA = (0.05, 0.05, math.radians(2.0))
@@ -24,20 +25,20 @@ FUSED = "kalman (matcher + odometry)"
 STORED = "log poses"
 
 
-def accumulate(rows: list[dict]) -> list[Pose2]:
-    """Poses of scans rows[0]['ref'], rows[k]['obj'] ... composed from the matched increments."""
+def accumulate(rows: list[PairMatch]) -> list[Pose2]:
+    """Poses of scans rows[0].ref, rows[k].obj ... composed from the matched increments."""
     poses = [Pose2()]
     for r in rows:
-        poses.append(poses[-1] @ Pose2(r["x"], r["y"], r["theta"]))
+        poses.append(poses[-1] @ r.result.pose)
     return poses
 
 
-def scan_indices(rows: list[dict]) -> list[int]:
+def scan_indices(rows: list[PairMatch]) -> list[int]:
     """The scans a sequence of consecutive rows visits."""
-    return [rows[0]["ref"]] + [r["obj"] for r in rows]
+    return [rows[0].ref] + [r.obj for r in rows]
 
 
-def log_poses(log: ScanLog, rows: list[dict]) -> list[Pose2] | None:
+def log_poses(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
     """The log's own scan poses for the same scans, in the first scan's frame (None if missing)."""
     scans = [log.scan(i) for i in scan_indices(rows)]
     if any(s.pose is None for s in scans):
@@ -45,7 +46,7 @@ def log_poses(log: ScanLog, rows: list[dict]) -> list[Pose2] | None:
     return [relative(scans[0].pose, s.pose) for s in scans]
 
 
-def sequence_tracks(log: ScanLog, rows: list[dict], fuse: bool) -> dict[str, list[Pose2]]:
+def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str, list[Pose2]]:
     """The trajectories of a sequence: the matches composed, the log's poses when it stores them,
     and with ``fuse`` the EKF of the matches with the log's odometry (last; the one a map is drawn
     on)."""
@@ -65,7 +66,7 @@ def sequence_tracks(log: ScanLog, rows: list[dict], fuse: bool) -> dict[str, lis
     return out
 
 
-def stamps(log: ScanLog, rows: list[dict]) -> list[float]:
+def stamps(log: ScanLog, rows: list[PairMatch]) -> list[float]:
     """Each visited scan's time stamp (its record number when it has none)."""
     return [
         s.stamp if s.stamp is not None else float(i)
@@ -82,7 +83,7 @@ def _jacobians(x: Pose2, u: Pose2):
 
 
 def kalman(
-    rows: list[dict],
+    rows: list[PairMatch],
     odometry: list[Pose2],
     q_sigma: tuple[float, float, float],
     r_sigma: tuple[float, float, float],
@@ -97,8 +98,8 @@ def kalman(
         u = relative(odometry[k], odometry[k + 1])
         Jx, Ju = _jacobians(x, u)
         prior, Pp = x @ u, Jx @ P @ Jx.T + Ju @ Q @ Ju.T
-        if row["converged"]:
-            m = Pose2(row["x"], row["y"], row["theta"])
+        if row.result.converged:
+            m = row.result.pose
             Jx_m, Ju_m = _jacobians(x, m)
             z = x @ m
             Rz = Ju_m @ R @ Ju_m.T
@@ -129,7 +130,7 @@ def tum_text(poses: list[Pose2], stamps: list[float]) -> str:
 
 
 def plot_png(
-    log: ScanLog, rows: list[dict], tracks: dict[str, list[Pose2]], path: str, map_track: str
+    log: ScanLog, rows: list[PairMatch], tracks: dict[str, list[Pose2]], path: str, map_track: str
 ) -> None:
     """Trajectories, and the map: every scan drawn at its pose on ``map_track``."""
     from mbicp_viz.pyplot import pyplot, save_png

@@ -4,137 +4,32 @@ matched pair, read back so that a pair reopens exactly as it ran (``serve LOG --
 Rows are JSON lines, one object per line, written as each pair finishes (``PartialRows``); files
 of earlier versions, one JSON array, still read.
 
-A row holds the pair (record numbers), the matcher and every one of its parameters, the initial
-guess in the laser frame, and what came out (pose, convergence, and with ``--truth`` the errors).
-Each object's line in the file is kept: an error names the file, the line and the field.
+A row is a pair's record (``pair_match.PairMatch``): the pair (record numbers), the matcher and
+every one of its parameters, the initial guess in the laser frame, and what came out. Each
+object's line in the file is kept: an error names the file, the line and the field.
 """
 
 from __future__ import annotations
 
 import json
-import math
-from dataclasses import dataclass
 from pathlib import Path
 
-from mbicp_viz.core import MATCHERS, Params, Pose2
 from mbicp_viz.errors import InputError
 from mbicp_viz.outputs import write_text, written
 
-from .params_toml import params_from_mapping
+from .pair_match import PairMatch, parse_pair_match
 from .text import opening
 
 MAX_FILE_BYTES = 512_000_000  # ~300 000 rows; a rows file is read whole
 PARTIAL = ".partial"  # a stopped run's rows, beside the file they become
 
 
-@dataclass(frozen=True)
-class EvalRow:
-    """One evaluated pair, as the evaluation ran it."""
-
-    line: int  # where its object starts in the file
-    ref: int  # record numbers in the log
-    obj: int
-    algorithm: str
-    params: Params
-    guess: Pose2  # the initial guess, object frame in the reference frame (laser frame)
-    guess_source: str
-    pose: Pose2  # the evaluation's answer, in ``frame``
-    frame: str
-    # the scan stream the log was read as (a bag's topic ...; None: its only one)
-    stream: str | None
-    converged: bool
-    reason: str  # why the matcher stopped
-    success: bool | None = None  # with ``--truth``: within the criteria of the scan poses
-    error_xy: float | None = None  # [m] against the scan poses
-    error_theta: float | None = None  # [rad]
-    inliers_truth: float | None = None  # share of object points on the reference at the stored pose
-    condition_number: float | None = None  # of the final constraints (degeneracy)
-
-
-class _Fields:
-    """One row's fields, each checked for its type; errors name the row's line and the field."""
-
-    def __init__(self, obj: dict, path: str, line: int):
-        self.obj, self.path, self.line = obj, path, line
-
-    def error(self, key: str, message: str) -> InputError:
-        return InputError(message, self.path, self.line, key)
-
-    def get(self, key: str, kinds: tuple[type, ...], what: str, optional: bool = False):
-        if key not in self.obj:
-            if optional:
-                return None
-            raise self.error(
-                key,
-                "missing (rows are written by `mbicp-viz eval sequence --out`; a file from an "
-                "older version lacks the fields that reopen a pair: run it again)",
-            )
-        v = self.obj[key]
-        if isinstance(v, bool) != (bool in kinds) or not isinstance(v, kinds):
-            raise self.error(key, f"expected {what}, got {json.dumps(v)[:40]}")
-        return v
-
-    def count(self, key: str) -> int:
-        v = self.get(key, (int,), "a record number")
-        if v < 0:
-            raise self.error(key, f"expected a record number, got {v}")
-        return v
-
-    def number(self, key: str, optional: bool = False, finite: bool = True) -> float | None:
-        v = self.get(key, (int, float), "a number", optional)
-        if v is not None and finite and not math.isfinite(v):
-            raise self.error(key, f"expected a finite number, got {v}")
-        return None if v is None else float(v)
-
-    def pose(self, key: str) -> Pose2:
-        v = self.get(key, (list,), "[x, y, theta]")
-        if len(v) != 3 or any(
-            isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
-            for c in v
-        ):
-            raise self.error(
-                key, f"expected [x, y, theta] of finite numbers, got {json.dumps(v)[:60]}"
-            )
-        return Pose2(*(float(c) for c in v))
-
-    def params(self, algorithm: str) -> Params:
-        values = self.get("params", (dict,), "an object of the matcher's parameters")
-        try:
-            return params_from_mapping(MATCHERS[algorithm].params_type, values, self.path, "params")
-        except InputError as e:
-            raise self.error(e.field, e.message) from None
-
-
-def parse_row(obj, path: str, line: int) -> EvalRow:
-    """One row object, every field checked."""
-    if not isinstance(obj, dict):
-        raise InputError("expected a JSON object (one evaluated pair)", path, line)
-    f = _Fields(obj, path, line)
-    algorithm = f.get("algorithm", (str,), "a matcher's name")
-    if algorithm not in MATCHERS:
-        raise f.error("algorithm", f"unknown matcher {algorithm!r}; known: {', '.join(MATCHERS)}")
-    ref, obj_ = f.count("ref"), f.count("obj")
-    if ref == obj_:
-        raise f.error("obj", f"the same record as ref ({ref})")
-    return EvalRow(
-        line,
-        ref,
-        obj_,
-        algorithm,
-        f.params(algorithm),
-        f.pose("guess_pose"),
-        f.get("guess", (str,), "where the guess came from"),
-        Pose2(f.number("x"), f.number("y"), f.number("theta")),
-        f.get("frame", (str,), "a frame's name"),
-        f.get("stream", (str, type(None)), "a scan stream's name or null", optional=True),
-        f.get("converged", (bool,), "true or false"),
-        f.get("reason", (str,), "a stopping reason"),
-        f.get("success", (bool,), "true or false", optional=True),
-        f.number("error_xy", optional=True),
-        f.number("error_theta", optional=True),
-        f.number("inliers_truth", optional=True),
-        f.number("condition_number", optional=True, finite=False),
-    )
+def parse_row(obj, path: str, line: int) -> PairMatch:
+    """One row: a pair's record, of two different records of the log."""
+    m = parse_pair_match(obj, path, line)
+    if m.ref == m.obj:
+        raise InputError(f"the same record as ref ({m.ref})", path, line, "obj")
+    return m
 
 
 def rows_text(rows: list[dict]) -> str:
@@ -212,7 +107,7 @@ def _objects(text: str, path: str):
         p = skip(p + 1)
 
 
-def read_rows(path: str | Path) -> list[EvalRow]:
+def read_rows(path: str | Path) -> list[PairMatch]:
     """Every row of a rows file, in order; an empty file or array is refused."""
     path = str(path)
     p = Path(path)

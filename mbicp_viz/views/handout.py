@@ -30,7 +30,7 @@ def side_plot(sr: StepRun, iteration: int | None = None) -> Plot | None:
         ranges = [ly for ly in sr.layers(run, k) if ly.path.startswith(f"{scene.POLAR}/ranges/")]
         if ranges:
             return Plot(
-                f"{run.name}: ranges per bearing at iteration {k}",
+                f"{run.matcher}: ranges per bearing at iteration {k}",
                 "bearing [deg]",
                 "range [dm]",
                 ranges,
@@ -42,7 +42,7 @@ def side_plot(sr: StepRun, iteration: int | None = None) -> Plot | None:
     )
     if hist:
         return Plot(
-            f"{sr.runs[0].name}: pair distances at iteration {k}",
+            f"{sr.runs[0].matcher}: pair distances at iteration {k}",
             "pair distance [m]",
             "pairs per bin (relative heights)",
             hist,
@@ -58,7 +58,8 @@ def panel_title(sr: StepRun, name: str, n: int) -> str:
 
 def step_png(sr: StepRun) -> bytes:
     panels = [
-        (panel_title(sr, r.name, len(r.iterations)), sr.layers(r, shown_only=True)) for r in sr.runs
+        (panel_title(sr, r.matcher, len(r.iterations)), sr.layers(r, shown_only=True))
+        for r in sr.runs
     ]
     return scene_png(
         panels, side_plot(sr), f"Step {sr.step.number}: {sr.step.title}", sr.step.window
@@ -77,7 +78,7 @@ def handout_markdown(step_runs: list[StepRun], pngs: list[str]) -> str:
         parts.append(
             f"## Step {s.number}: {s.title}\n\n![Step {s.number}]({png})\n\n{sr.text}\n\n"
             f"**Try:** {sr.try_text}\n\n*Data: `{s.path.name}`; matchers: "
-            f"{', '.join(r.name for r in sr.runs)}.*\n"
+            f"{', '.join(r.matcher for r in sr.runs)}.*\n"
         )
     return "\n".join(parts)
 

@@ -40,7 +40,7 @@ def step_markdown(sr: StepRun, total: int, every_iteration: bool = False) -> str
         )
     else:
         views = "; ".join(
-            f"{slot} view: {panel_title(sr, r.name, len(r.iterations))}"
+            f"{slot} view: {panel_title(sr, r.matcher, len(r.iterations))}"
             for slot, r in zip(SLOTS, sr.runs)
         )
         plot = side_plot(sr)

@@ -14,12 +14,8 @@ from mbicp_viz.evaluation.scenarios import (
     scenario_paths,
 )
 
-from .rrd import Run, record
+from .rrd import record
 from .text import truth_line
-
-
-def scenario_runs(s: Scenario) -> list[Run]:
-    return [Run(name, s.ref, s.obj, s.guess, p, s.truth) for name, p in s.params.items()]
 
 
 def about(s: Scenario) -> str:
@@ -28,15 +24,12 @@ def about(s: Scenario) -> str:
 
 def record_scenario(s: Scenario, out: Path) -> list[str]:
     """Write ``out`` for one scenario; one summary line per matcher."""
-    results = record(
-        scenario_runs(s),
-        str(out),
-        teaching=s.teaching,
-        recording_id=f"mbicp-viz/{s.name}",
-        about=about(s),
+    matches = s.matches()
+    record(
+        matches, str(out), teaching=s.teaching, recording_id=f"mbicp-viz/{s.name}", about=about(s)
     )
     lines = []
-    for name, r in zip(s.params, results):
+    for name, r in zip(s.params, (m.result for m in matches)):
         line = (
             f"{name}: {r.pose}, {'converged' if r.converged else r.reason.value}, "
             f"{r.iterations} iterations"

@@ -12,34 +12,24 @@ upright, and the values a user hovers over are the logged ones.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from mbicp_viz.core import (
-    Event,
-    FinishEvent,
-    IterationEvent,
-    MatchResult,
-    Observer,
-    Params,
-    Pose2,
-    Scan,
-    StartEvent,
-    broadcast,
-    match,
-)
+from mbicp_viz.core import Event, FinishEvent, IterationEvent, Params, Pose2, StartEvent
 from mbicp_viz.errors import InputError
 from mbicp_viz.outputs import written
+from mbicp_viz.readers.pair_match import PairMatch
 
 from . import scene
 
 APP_ID = "mbicp-viz"
 ABOUT = "about"
+RECORD = "record"  # under each run's root: the match's record (readers/pair_match.py), JSON
 _Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -299,40 +289,24 @@ class RerunObserver:
         )
 
 
-@dataclass(frozen=True)
-class Run:
-    """One matcher run to record under ``root``; ``truth`` (if known) is drawn as the object scan
-    there, and so is the scans' odometry when they have some."""
-
-    root: str
-    ref: Scan
-    obj: Scan
-    guess: Pose2
-    params: Params
-    truth: Pose2 | None = None
-
-
 def record(
-    runs: list[Run],
+    matches: list[PairMatch],
     path: str | None = None,
     connect: str | None = None,
     teaching: bool = False,
     recording_id: str = "mbicp-viz",
-    extra_observer: Observer | None = None,
     about: str | None = None,
-) -> list[MatchResult]:
-    """Match every run with a rerun observer attached; write ``path`` (.rrd) and/or stream to
-    ``connect``.
+) -> None:
+    """Replay each match's events (``PairMatch.events``) under its matcher's root, with its record
+    beside them (``ROOT/record``, JSON); write ``path`` (.rrd) and/or stream to ``connect``.
 
     ``about`` (Markdown) is stored as a document beside the runs: what the recording shows.
     """
-    from mbicp_viz.core import matcher_for
-    from mbicp_viz.evaluation.pairs import stored_odometry
+    from mbicp_viz.core import MATCHERS
 
     stream = new_stream(recording_id, live=connect is not None)
-    polar = {r.root for r in runs if matcher_for(r.params).polar}
-    bp = blueprint([r.root for r in runs], teaching, about is not None, polar)
-    results = []
+    roots = [m.matcher for m in matches]
+    bp = blueprint(roots, teaching, about is not None, {r for r in roots if MATCHERS[r].polar})
     with ExitStack() as stack:
         if path is not None:
             stack.enter_context(saving(stream, path, bp))
@@ -342,16 +316,22 @@ def record(
             stream.connect_grpc(connect, default_blueprint=bp)
         if about is not None:
             stream.log(ABOUT, rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
-        for r in runs:
-            obs = RerunObserver(stream, r.root, teaching, r.truth, stored_odometry(r.ref, r.obj))
-            observer = obs if extra_observer is None else broadcast(obs, extra_observer)
-            results.append(match(r.ref, r.obj, r.guess, r.params, observer))
+        for m in matches:
+            observer = RerunObserver(stream, m.matcher, teaching, m.truth, m.odometry)
+            for ev in m.events.events:
+                observer(ev)
+            stream.log(f"{m.matcher}/{RECORD}", rr.TextDocument(record_text(m)), static=True)
         stream.flush()
-    return results
 
 
-def _record_to(path: str, runs: list[Run], kw: dict) -> None:
-    record(runs, path, **kw)
+def record_text(m: PairMatch) -> str:
+    """The record a recording keeps of a match: its JSON without the wall times (a recording is
+    the same every time it is made)."""
+    return json.dumps(m.to_json(timings=False), indent=1)
+
+
+def _record_to(path: str, matches: list[PairMatch], kw: dict) -> None:
+    record(matches, path, **kw)
 
 
 # One recording process for a server's exports, replaced after RECORDINGS_PER_PROCESS of them.
@@ -359,12 +339,12 @@ RECORDINGS_PER_PROCESS = 25
 _recorder = None
 
 
-def recorded_bytes(runs: list[Run], **kw) -> bytes:
-    """``record(runs, path, **kw)``'s file as bytes, recorded in another process: rerun-sdk (0.41)
-    keeps about 2.5 MB of every recording stream until its process ends, so a server recording on
-    demand (the debugger's "export .rrd") would grow with every export. The process is started
-    (spawned: the server's threads are not forked along) at the first export and replaced after
-    ``RECORDINGS_PER_PROCESS``; ``stop_recorder`` ends it."""
+def recorded_bytes(matches: list[PairMatch], **kw) -> bytes:
+    """``record(matches, path, **kw)``'s file as bytes, recorded in another process: rerun-sdk
+    (0.41) keeps about 2.5 MB of every recording stream until its process ends, so a server
+    recording on demand (the debugger's "export .rrd") would grow with every export. The process
+    is started (spawned: the server's threads are not forked along) at the first export and
+    replaced after ``RECORDINGS_PER_PROCESS``; ``stop_recorder`` ends it."""
     import multiprocessing
     import tempfile
     from concurrent.futures import ProcessPoolExecutor
@@ -381,7 +361,7 @@ def recorded_bytes(runs: list[Run], **kw) -> bytes:
         )
     with tempfile.TemporaryDirectory() as tmp:
         path = str(Path(tmp) / "session.rrd")
-        _recorder.submit(_record_to, path, runs, kw).result()
+        _recorder.submit(_record_to, path, matches, kw).result()
         return Path(path).read_bytes()
 
 
@@ -422,7 +402,7 @@ def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
 
 
 def record_sequence(
-    log, rows: list[dict], path: str, recording_id: str = "mbicp-viz/sequence"
+    log, rows: list[PairMatch], path: str, recording_id: str = "mbicp-viz/sequence"
 ) -> None:
     """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map,
     per-pair log."""
@@ -446,7 +426,7 @@ def record_sequence(
     with saving(stream, path, bp):
         log_y_up(stream, space)
         poses, stored = accumulate(rows), log_poses(log, rows)
-        by_obj = {row["obj"]: row for row in rows}
+        by_obj = {row.obj: row for row in rows}
         for n, k in enumerate(scan_indices(rows)):
             stream.set_time("scan", sequence=k)
             traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
@@ -503,16 +483,18 @@ def time_recordings(log, params: Params, limit: int | None, repeat: int, teachin
 
     from mbicp_viz.evaluation.bench import Timing
     from mbicp_viz.evaluation.pairs import stored_guess
+    from mbicp_viz.evaluation.single import Setup, match_pair
 
     times, sizes = [], []
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "bench.rrd")
         for i, j in log.consecutive_pairs(limit):
             ref, obj = log.scan(i), log.scan(j)
-            guess, _ = stored_guess(ref, obj)
+            s = Setup(*stored_guess(ref, obj), None, None)
             for _ in range(repeat):
                 t0 = time.perf_counter()
-                record([Run("bench", ref, obj, guess, params)], path, teaching=teaching)
+                m = match_pair(ref, obj, params, s, log.frames, record=True)
+                record([m], path, teaching=teaching)
                 times.append(1000.0 * (time.perf_counter() - t0))
                 sizes.append(os.path.getsize(path))
     return Timing("recording to .rrd", np.array(times)), np.array(sizes)

@@ -19,6 +19,7 @@ import numpy as np
 
 from mbicp_viz.core import MATCHERS, IterationEvent, PairKind, PairStatus, Pose2, Scan, StartEvent
 from mbicp_viz.core.matchers import RGB
+from mbicp_viz.readers.pair_match import PairMatch
 
 
 @dataclass(frozen=True)
@@ -570,7 +571,7 @@ def sequence_layers(
     points: np.ndarray,
     trajectory: np.ndarray,
     log_trajectory: np.ndarray | None,
-    row: dict | None,
+    row: PairMatch | None,
 ) -> list[Layer]:
     """Scan ``k`` placed at the pose accumulated from the matches (world = first scan's frame)."""
     layers: list[Layer] = [
@@ -582,15 +583,16 @@ def sequence_layers(
     if log_trajectory is not None:
         layers.append(Strips(f"{SEQUENCE}/log_trajectory", [log_trajectory], LOG_TRAJECTORY, 0.015))
     if row is not None:
+        r = row.result
         layers += [
-            Scalar(f"{PLOTS}/iterations", float(row["iterations"]), ITERATIONS),
-            Scalar(f"{PLOTS}/time_ms", float(row["time_ms"]), TIME),
+            Scalar(f"{PLOTS}/iterations", float(r.iterations), ITERATIONS),
+            Scalar(f"{PLOTS}/time_ms", float(row.time_ms), TIME),
             Text(
                 LOG,
-                f"pair {row['ref']} -> {row['obj']}: ({row['x']:+.3f} m, {row['y']:+.3f} m, "
-                f"{math.degrees(row['theta']):+.2f} deg), {row['iterations']} iterations, "
-                f"{row['reason']}",
-                "INFO" if row["converged"] else "WARN",
+                f"pair {row.ref} -> {row.obj}: ({r.pose.x:+.3f} m, {r.pose.y:+.3f} m, "
+                f"{math.degrees(r.pose.theta):+.2f} deg), {r.iterations} iterations, "
+                f"{r.reason.value}",
+                "INFO" if r.converged else "WARN",
             ),
         ]
     return layers

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from mbicp_viz.core import IterationEvent, MatchResult, PairKind, PairStatus, Pose2, pose_error
+from mbicp_viz.readers.pair_match import PairMatch
 
 
 def result_fields(r: MatchResult, frame: str = "the laser frame") -> list[tuple[str, str]]:
@@ -140,28 +141,27 @@ def iteration_text(ev: IterationEvent) -> str:
     )
 
 
-def match_report(
-    label: str, setup, outcome, result: MatchResult, frame: str, truth: Pose2 | None
-) -> list[str]:
+def match_report(label: str, m: PairMatch, frame: str, truth: Pose2 | None) -> list[str]:
     """``match``'s report: the pair, the guess (laser frame, as the iterations) and where it came
-    from, one line per iteration, the result as reported (``result`` in ``frame``), the agreement
-    with the data and, when known, the error against the answer (``truth``, in the same frame)."""
+    from, one line per iteration, the result as reported (``m.result`` in ``frame``), the
+    agreement with the data and, when known, the error against the answer (``truth``, in the same
+    frame)."""
     from mbicp_viz.core.agreement import INLIER_RADIUS_M
 
     lines = [
         label,
-        f"initial guess {setup.guess} (laser frame; from: {setup.guess_source})",
+        f"initial guess {m.guess} (laser frame; from: {m.guess_source})",
         "",
         ITERATION_HEADER,
     ]
-    lines += [iteration_line(e) for e in outcome.recorder.iterations]
+    lines += [iteration_line(e) for e in m.iterations]
     lines += [
         "",
-        *result_lines(result, frame),
-        f"{'on ref':<11} {agreement_line(outcome.on_ref, INLIER_RADIUS_M)}",
+        *result_lines(m.result, frame),
+        f"{'on ref':<11} {agreement_line(m.on_ref, INLIER_RADIUS_M)}",
     ]
     if truth is not None:
-        lines.append(f"{'truth':<11} {truth_line(result.pose, truth)} ({setup.truth_source})")
-    how = "; interpreted while numba compiled the kernels" if outcome.interpreted else ""
-    lines.append(f"{'time':<11} {outcome.time_ms:.1f} ms (with the recording observer{how})")
+        lines.append(f"{'truth':<11} {truth_line(m.result.pose, truth)} ({m.truth_source})")
+    how = "; interpreted while numba compiled the kernels" if m.interpreted else ""
+    lines.append(f"{'time':<11} {m.time_ms:.1f} ms (with the recording observer{how})")
     return lines

@@ -19,11 +19,11 @@ from contextlib import contextmanager
 
 import viser
 
-from mbicp_viz.core import tiers
+from mbicp_viz.core import MATCHERS, match, tiers
 
 from .camera import TopDownCamera
 from .session import Session
-from .state import Source, run_match
+from .state import Source
 
 
 def local_origins(host: str, port: int) -> set[str]:
@@ -91,8 +91,6 @@ class App:
         install (core/tiers.py's quick start) a background process compiles them while the tabs
         match at once, interpreted; then they are loaded from the cache it wrote."""
         try:
-            from mbicp_viz.core import MATCHERS
-
             from .state import DebugState
 
             state = DebugState(self.source)
@@ -104,8 +102,8 @@ class App:
             if tiers.compile_in_background():
                 self.ready.set()
                 tiers.wait_compiled()
-            for name in names:
-                run_match(name, state.ref, state.obj, state.guess, state.params[name])
+            for name in names:  # a match of each, so that its kernels are loaded now
+                match(state.ref, state.obj, state.guess, state.params[name])
         except Exception:  # the session's own match will show what is wrong
             traceback.print_exc()
         finally:

@@ -205,7 +205,7 @@ class Plots:
             data=histogram_series(state),
             series=histogram_legend(state),
             aspect=1.6,
-            title=f"{first.name}: pair distances (this iteration)",
+            title=f"{first.matcher}: pair distances (this iteration)",
             **_numeric(
                 "pair distance [m]", ("n", "pairs per bin", 3, _top(counts)), ("mark", "", 1, 1.0)
             ),
@@ -219,7 +219,8 @@ class Plots:
             data=cost_series(state) or (np.zeros(1),) * 3,
             aspect=1.6,
             visible=polar is not None,
-            title=f"{polar.name if polar else 'polar matchers'}: cost per shift (this iteration)",
+            title=f"{polar.matcher if polar else 'polar matchers'}: cost per shift (this "
+            "iteration)",
             series=(
                 uplot.Series(label="shift [deg]"),
                 _line("cost [m]", "m", scene.COST),
@@ -268,13 +269,13 @@ def legend_html(styles: list[scene.Style], grid_m: float | None = None) -> str:
 def error_legend(state: DebugState) -> tuple[uplot.Series, ...]:
     series = [uplot.Series(label="iteration")]
     for run in state.runs:
-        own = MATCHERS[run.name].colour if len(state.runs) > 1 else scene.ERROR.color
+        own = MATCHERS[run.matcher].colour if len(state.runs) > 1 else scene.ERROR.color
         series.append(
-            _line(f"{run.name}: {scene.ERROR.label}", "err", replace(scene.ERROR, color=own))
+            _line(f"{run.matcher}: {scene.ERROR.label}", "err", replace(scene.ERROR, color=own))
         )
         thr = scene.threshold_style(run.start.params)
-        own = MATCHERS[run.name].colour if len(state.runs) > 1 else thr.color
-        series.append(_line(f"{run.name}: {thr.label}", "m", replace(thr, color=own), dash=True))
+        own = MATCHERS[run.matcher].colour if len(state.runs) > 1 else thr.color
+        series.append(_line(f"{run.matcher}: {thr.label}", "m", replace(thr, color=own), dash=True))
     return tuple(series)
 
 

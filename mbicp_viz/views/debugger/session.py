@@ -158,7 +158,7 @@ class Session:
                     if not viser_draw.in_scan_plane(layer):
                         continue
                     visible = self.state.visible.get(layer.style.label, True)
-                    name = f"/{run.name}/{layer.path}"
+                    name = f"/{run.matcher}/{layer.path}"
                     drawn[name] = viser_draw.draw(self.client.scene, name, layer, visible)
                     if visible and scene.has_content(layer):
                         shown.setdefault(layer.style.label, layer.style)
@@ -169,7 +169,7 @@ class Session:
             self.shown = list(shown.values())
             self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
             self.playback.text.content = "  \n".join(
-                f"**{r.name}**: {self.state.iteration_text(r)}" for r in self.state.runs
+                f"**{r.matcher}**: {self.state.iteration_text(r)}" for r in self.state.runs
             )
             if self.plots.shown is not None:
                 self.plots.iteration(self.state)

@@ -7,7 +7,8 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess
 from mbicp_viz.evaluation.scenarios import find_scenario
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
-from mbicp_viz.readers.rows import EvalRow, read_rows
+from mbicp_viz.readers.pair_match import PairMatch
+from mbicp_viz.readers.rows import read_rows
 
 from .state import Source
 
@@ -79,7 +80,7 @@ def files_source(
     )
 
 
-def _failures(path: str, log: ScanLog) -> tuple[list[EvalRow], str]:
+def _failures(path: str, log: ScanLog) -> tuple[list[PairMatch], str]:
     """The failed rows of an evaluation of ``log``, worst first, each checked against the log."""
     from mbicp_viz.evaluation.failures import worst_first
 

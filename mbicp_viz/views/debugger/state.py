@@ -27,14 +27,14 @@ from mbicp_viz.core import (
     field_specs,
     pose_error,
 )
-from mbicp_viz.core.agreement import INLIER_RADIUS_M, inlier_fraction
+from mbicp_viz.core.agreement import INLIER_RADIUS_M
 from mbicp_viz.core.params import check_value
 from mbicp_viz.errors import InputError
-from mbicp_viz.evaluation.pairs import Guess, pair_guess, stored_odometry, stored_truth
-from mbicp_viz.evaluation.recorded import Run, run_match
+from mbicp_viz.evaluation.pairs import Guess, known_answer, pair_guess
+from mbicp_viz.evaluation.single import Setup, match_pair
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
+from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.params_toml import presets_for
-from mbicp_viz.readers.rows import EvalRow
 
 from .. import scene, text
 
@@ -57,9 +57,9 @@ class Source:
     note: str = ""  # Markdown shown above the panels (a scenario's "what to look at")
     teaching: bool = False  # iso-distance curves on from the start
     # an evaluation's failed pairs, worst first
-    failures: list[EvalRow] = field(default_factory=list)
+    failures: list[PairMatch] = field(default_factory=list)
     rows_label: str = ""  # the rows file they come from, and how many rows it holds
-    opened: EvalRow | None = None  # the row the first match reopens
+    opened: PairMatch | None = None  # the row the first match reopens
     options: ReadOptions | None = None  # how the log was read (to read another of its scan streams)
     shown: tuple[str, ...] | None = (
         None  # the layers (legend labels) shown at first; None: each style's default
@@ -148,11 +148,11 @@ class DebugState:
         self.search = source.search
         self.algorithms: list[str] = list(source.algorithms)
         self.pair = source.pair
-        self.opened: EvalRow | None = None  # the evaluation row last reopened
+        self.opened: PairMatch | None = None  # the evaluation row last reopened
         self.guess, self.guess_source = self._pair_guess()
         if source.opened is not None:
             self._apply_row(source.opened)
-        self.runs: list[Run] = []
+        self.runs: list[PairMatch] = []  # one per shown matcher, with its events
         self.iteration = 0
         self.visible = {
             s.label: s.label in source.shown
@@ -173,12 +173,14 @@ class DebugState:
     def obj(self):
         return self.source.log.scan(self.pair[1])
 
+    def setup(self) -> Setup:
+        """Where the match starts, and the known answer: the source's, else the log's scan poses
+        unless the guess came from them."""
+        answer = known_answer(self.ref, self.obj, self.guess_source, self.source.truth)
+        return Setup(self.guess, self.guess_source, *answer)
+
     def truth(self) -> Pose2 | None:
-        """The known answer: the source's, else the log's scan poses unless the guess came from
-        them."""
-        if self.source.truth is not None:
-            return self.source.truth
-        return stored_truth(self.ref, self.obj) if self.guess_source != "scan poses" else None
+        return self.setup().truth
 
     def _pair_guess(self) -> tuple[Pose2, str]:
         if self.source.guess is not None:
@@ -228,20 +230,20 @@ class DebugState:
             self.source, self.pair, self.guess, self.guess_source = old
         return err
 
-    def _apply_row(self, row: EvalRow) -> None:
+    def _apply_row(self, row: PairMatch) -> None:
         self.pair, self.opened = (row.ref, row.obj), row
         self.ref, self.obj  # noqa: B018 - an unusable scan is refused here
-        self.algorithms, self.params[row.algorithm] = [row.algorithm], row.params
+        self.algorithms, self.params[row.matcher] = [row.matcher], row.params
         self.guess, self.guess_source = row.guess, f"the evaluation's guess ({row.guess_source})"
 
-    def open_row(self, row: EvalRow) -> str | None:
+    def open_row(self, row: PairMatch) -> str | None:
         """Reopen an evaluated pair exactly as the evaluation ran it: its scans, matcher,
         parameters and initial guess. None, or why not (then nothing changes)."""
         old = (
             self.pair,
             self.opened,
             list(self.algorithms),
-            self.params[row.algorithm],
+            self.params[row.matcher],
             self.guess,
             self.guess_source,
         )
@@ -255,7 +257,7 @@ class DebugState:
                 self.pair,
                 self.opened,
                 self.algorithms,
-                self.params[row.algorithm],
+                self.params[row.matcher],
                 self.guess,
                 self.guess_source,
             ) = old
@@ -265,9 +267,19 @@ class DebugState:
     def rematch(self) -> str | None:
         """Re-run every shown matcher; None, or why it failed (the last good runs are kept)."""
         t0 = time.perf_counter()
+        log, setup = self.source.log, self.setup()
         try:
             runs = [
-                run_match(n, self.ref, self.obj, self.guess, self.params[n])
+                match_pair(
+                    self.ref,
+                    self.obj,
+                    self.params[n],
+                    setup,
+                    log.frames,
+                    indices=self.pair,
+                    stream=log.topic,
+                    record=True,
+                )
                 for n in self.algorithms
             ]
         except MATCH_ERRORS as e:
@@ -357,29 +369,29 @@ class DebugState:
         )
 
     # ---- what is shown ----------------------------------------------------------------------
-    def event(self, run: Run) -> IterationEvent | None:
+    def event(self, run: PairMatch) -> IterationEvent | None:
         """The run's event at the current iteration (None at the initial guess)."""
         if self.iteration == 0 or not run.iterations:
             return None
         return run.iterations[min(self.iteration, len(run.iterations)) - 1]
 
-    def layers(self, run: Run) -> list[scene.Layer]:
+    def layers(self, run: PairMatch) -> list[scene.Layer]:
         """The scene layers of ``run`` at the current iteration; in compare mode each run's object
         scan takes its matcher's colour."""
         return scene.pair_layers(
             self.ref,
             self.obj,
-            run.name,
+            run.matcher,
             run.start,
             run.iterations,
             self.iteration,
-            self.truth(),
-            stored_odometry(self.ref, self.obj),
+            run.truth,
+            run.odometry,
             len(self.runs) > 1,
             self.iso_point,
         )
 
-    def iteration_text(self, run: Run) -> str:
+    def iteration_text(self, run: PairMatch) -> str:
         ev = self.event(run)
         if ev is None:
             return f"iteration 0: the initial guess ({self.guess_source})"
@@ -388,25 +400,22 @@ class DebugState:
     def result_markdown(self) -> str:
         """Every run's result (the robot base's motion when the laser's mount is known), the
         agreement of its pose with the data, and the known answer's."""
-        from mbicp_viz.evaluation.single import reported
-
-        frames, truth, parts = self.source.log.frames, self.truth(), []
-        odometry = stored_odometry(self.ref, self.obj)
+        frames, parts = self.source.log.frames, []
         for run in self.runs:
-            r = reported(run.result, frames, True)
+            r = run.result
             lines = [
                 f"**{label}** {value}"
                 for label, value in text.result_fields(r, frames.frame_text())
             ]
-            on_ref = inlier_fraction(self.ref, self.obj, run.result.pose)
-            lines.append(f"**on ref** {text.agreement_line(on_ref, INLIER_RADIUS_M)}")
-            if truth is not None:
+            lines.append(f"**on ref** {text.agreement_line(run.on_ref, INLIER_RADIUS_M)}")
+            if run.truth is not None:
                 lines.append(
-                    f"**known answer** {text.truth_line(r.pose, frames.reported(truth, True))}"
+                    f"**known answer** {text.truth_line(r.pose, frames.reported(run.truth, True))}"
                 )
-            if odometry is not None:
+            if run.odometry is not None:
                 lines.append(
-                    f"**odometry** {text.pose_distance(r.pose, frames.reported(odometry, True))} "
+                    "**odometry** "
+                    f"{text.pose_distance(r.pose, frames.reported(run.odometry, True))} "
                     "from "
                     f"the odometry ({self.source.log.odometry_source or 'the log'})"
                 )
@@ -419,24 +428,24 @@ class DebugState:
             parts.append(self._row_markdown(row))
         return "\n\n".join(parts)
 
-    def _row_markdown(self, row: EvalRow) -> str:
+    def _row_markdown(self, row: PairMatch) -> str:
         """What the evaluation found for this pair, and whether this run reproduces it."""
         from mbicp_viz.evaluation.failures import failed, failure_reason
         from mbicp_viz.evaluation.single import reported
 
         lines = [
-            f"**evaluation** ({self.source.rows_label}, line {row.line}): {row.algorithm} gave "
-            f"{row.pose} "
+            f"**evaluation** ({self.source.rows_label}, line {row.line}): {row.matcher} gave "
+            f"{row.result.pose} "
             f"(motion of the {row.frame} frame)"
         ]
-        if row.error_xy is not None:
+        if (sc := row.score) is not None:
             lines.append(
-                f"{row.error_xy * 1000:.1f} mm, {math.degrees(row.error_theta):.3f} deg from the "
+                f"{sc.error_xy * 1000:.1f} mm, {math.degrees(sc.error_theta):.3f} deg from the "
                 "scan poses"
             )
         if failed(row):
             lines.append(f"failed: {failure_reason(row)}")
-        run = next((r for r in self.runs if r.name == row.algorithm), None)
+        run = next((r for r in self.runs if r.matcher == row.matcher), None)
         frames = self.source.log.frames
         if run is None or row.frame not in (frames.frame_name(True), frames.frame_name(False)):
             lines.append(
@@ -444,8 +453,10 @@ class DebugState:
                 f"{frames.frame_name(True)})"
             )
         else:
+            laser = run.events.finish.result  # the laser's motion, reported as the row was
             et, er = pose_error(
-                reported(run.result, frames, row.frame == frames.frame_name(True)).pose, row.pose
+                reported(laser, frames, row.frame == frames.frame_name(True)).pose,
+                row.result.pose,
             )
             lines.append(
                 "this run reproduces it (the poses agree within 1 nm and 1 nrad)"
@@ -474,14 +485,10 @@ class DebugState:
 
     def session_rrd(self) -> bytes:
         """The session (data, parameters, all iterations of every shown matcher) as an .rrd."""
-        from ..rrd import Run, recorded_bytes
+        from ..rrd import recorded_bytes
 
-        runs = [
-            Run(n, self.ref, self.obj, self.guess, self.params[n], self.truth())
-            for n in self.algorithms
-        ]
         return recorded_bytes(
-            runs,
+            self.runs,
             teaching=True,
             recording_id="mbicp-viz/session",
             about="# mbicp-viz "

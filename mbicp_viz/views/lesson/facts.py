@@ -16,7 +16,7 @@ from mbicp_viz.core import IterationEvent, PairKind, PairStatus, Pose2, Scan, po
 from mbicp_viz.core.metric import mad_threshold
 from mbicp_viz.core.tiers import run
 from mbicp_viz.errors import InputError
-from mbicp_viz.evaluation.recorded import Run
+from mbicp_viz.readers.pair_match import PairMatch
 
 Facts = dict[str, dict[str, object]]
 
@@ -65,7 +65,7 @@ def iteration_facts(ev: IterationEvent) -> dict[str, object]:
     }
 
 
-def run_facts(run: Run, truth: Pose2 | None, shown: int) -> dict[str, object]:
+def run_facts(run: PairMatch, truth: Pose2 | None, shown: int) -> dict[str, object]:
     """A matcher's run: its result, its error against the known answer, its first, last and shown
     iterations (``first.kept``, ``last.threshold_m``, ``shown.interpolated`` ...), its resampling
     grid and its degeneracy indicator when it has them."""

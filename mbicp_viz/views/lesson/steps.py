@@ -28,9 +28,8 @@ import numpy as np
 
 from mbicp_viz.core import MATCHERS, Params
 from mbicp_viz.errors import InputError
-from mbicp_viz.evaluation.pairs import stored_odometry
-from mbicp_viz.evaluation.recorded import Run, run_match
 from mbicp_viz.evaluation.scenarios import Scenario, load_scenario, recordings_dir
+from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.params_toml import params_from_mapping, read_toml
 from mbicp_viz.views import scene
 
@@ -244,8 +243,8 @@ class StepRun:
     """A step after its runs: what it shows, and its text with the numbers filled in."""
 
     step: Step
-    runs: list[Run]
-    variant: Run | None
+    runs: list[PairMatch]
+    variant: PairMatch | None
     facts: F.Facts
     text: str
     try_text: str
@@ -257,7 +256,7 @@ class StepRun:
         return n if self.step.iteration is None else min(self.step.iteration, n)
 
     def layers(
-        self, run: Run, iteration: int | None = None, shown_only: bool = False
+        self, run: PairMatch, iteration: int | None = None, shown_only: bool = False
     ) -> list[scene.Layer]:
         """Everything ``run`` draws at ``iteration`` (default: the step's), as the debugger draws it
         (``scene.pair_layers``); ``shown_only``: only the kinds the step shows (and every plot)."""
@@ -265,12 +264,12 @@ class StepRun:
         layers = scene.pair_layers(
             s.ref,
             s.obj,
-            run.name,
+            run.matcher,
             run.start,
             run.iterations,
             self.iteration if iteration is None else iteration,
-            s.truth,
-            stored_odometry(s.ref, s.obj),
+            run.truth,
+            run.odometry,
         )
         if shown_only:
             layers = [
@@ -278,7 +277,7 @@ class StepRun:
                 for ly in layers
                 if getattr(ly, "style", None) not in scene.STYLES or ly.style in self.step.layers
             ]
-        return scene.compared(layers, run.name) if len(self.runs) > 1 else layers
+        return scene.compared(layers, run.matcher) if len(self.runs) > 1 else layers
 
     def distance_layers(self) -> list[scene.Layer]:
         """The step's list of distances as a dot plot (paper 000 Fig. 9), when it has one."""
@@ -293,15 +292,15 @@ class StepRun:
 def run_step(step: Step) -> StepRun:
     """Run the step's matchers (and its variant), gather its numbers, fill in its text."""
     s = step.scenario
-    runs = [run_match(name, s.ref, s.obj, s.guess, p) for name, p in s.params.items()]
+    runs = s.matches()
     v = step.variant
-    variant = run_match(v.matcher, s.ref, s.obj, s.guess, v.params) if v is not None else None
+    variant = s.match(v.params) if v is not None else None
     facts: F.Facts = {
         "scan": F.scan_facts(s.ref),
         "object_scan": F.scan_facts(s.obj),
         "guess": F.pose_facts(s.guess),
     }
-    named = [(r.name, r) for r in runs] + ([(v.name, variant)] if variant is not None else [])
+    named = [(r.matcher, r) for r in runs] + ([(v.name, variant)] if variant is not None else [])
     for name, run in named:
         facts[name] = F.run_facts(
             run, s.truth, len(run.iterations) if step.iteration is None else step.iteration
