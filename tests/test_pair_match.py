@@ -2,6 +2,7 @@
 hold the same record, and it reads back as it was written."""
 
 import json
+import math
 
 import pytest
 from rerun.chunk import RrdReader
@@ -66,6 +67,9 @@ def test_a_record_reads_back_as_it_was_written(three_records):
     printed, _, _, rows = three_records
     again = parse_pair_match(printed, "match.json", 1).to_json()
     assert again == printed
+    # a match that kept no pairs has no error: written as null, read back as NaN, written as null
+    unknown = parse_pair_match(printed | {"error": None}, "match.json", 1)
+    assert math.isnan(unknown.result.error) and unknown.to_json()["error"] is None
     (read,) = read_rows(rows)
     assert read.to_json() == json_lines(rows)[0] and read.line == 1
     assert read.matcher == "improved" and read.score is not None and read.events is None

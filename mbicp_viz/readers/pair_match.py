@@ -249,14 +249,15 @@ def _degeneracy(f: _Fields) -> Degeneracy | None:
 
 def _result(f: _Fields, matcher: str) -> MatchResult:
     reason = _reason(f)
-    error = f.number("error", optional=True)
+    # strict JSON has no NaN: a match without kept pairs writes its error as null
+    error = f.get("error", (int, float, type(None)), "a number or null", optional=True)
     return MatchResult(
         matcher,
         Pose2(f.number("x"), f.number("y"), f.number("theta")),
         f.flag("converged"),
         reason,
         f.count("iterations"),
-        math.nan if error is None else error,  # strict JSON has no NaN: written as null
+        math.nan if error is None else float(error),
         f.count("pairs_kept"),
         f.count("pairs_rejected"),
         _covariance(f),
