@@ -55,16 +55,12 @@ def stop_if_interrupted(rows: PartialRows, total: int) -> None:
         raise typer.Exit(INTERRUPTED_CODE)
 
 
-def _same(row):
-    return row
-
-
 def matched_rows(
     out: Path | None,
     run: dict,
     pairs: list[tuple[int, int]],
     match: Callable[..., object],
-    encode: Callable[[object], dict] = _same,
+    encode: Callable[[object], dict] = lambda row: row,
     decode: Callable[[dict, str, int], object] = lambda row, path, line: row,
 ) -> list:
     """Every pair's row, ``match(on_row, skip)`` running the pairs after the first ``skip``. With

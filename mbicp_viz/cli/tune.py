@@ -244,6 +244,7 @@ def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
     """Each training log's pairs under the best parameters, as rows: the debugger lists their
     failures worst first and opens each as it ran."""
     from mbicp_viz.evaluation.failures import worst_first
+    from mbicp_viz.evaluation.pairs import STORED_ANSWER
     from mbicp_viz.evaluation.single import Setup, match_pair
     from mbicp_viz.readers import read_log
     from mbicp_viz.readers.rows import read_rows, rows_text
@@ -257,7 +258,7 @@ def _worst_rows(rows_dir: Path, logs: list[str], cases, best, reading) -> None:
                 lg.scans[c.i],
                 lg.scans[c.j],
                 best,
-                Setup(c.guess, "tune's guess", c.truth, "the log's scan poses"),
+                Setup(c.guess, "tune's guess", c.truth, STORED_ANSWER),
                 lg.frames,
                 False,
                 indices=(records[c.i], records[c.j]),

@@ -50,6 +50,8 @@ def load_pair(
 
 # A guess from the log's scan poses: they are then no answer to judge the match against.
 SCAN_POSES = "scan poses"
+# Where the answer came from when it is the log's scan poses.
+STORED_ANSWER = "the log's scan poses"
 
 
 def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:
@@ -108,7 +110,7 @@ def known_answer(
         return given, "given"
     stored = stored_truth(ref, obj)
     if stored is not None and guess_source != SCAN_POSES:
-        return stored, "the log's scan poses"
+        return stored, STORED_ANSWER
     return None, None
 
 

@@ -15,7 +15,7 @@ from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.pair_match import PairMatch
 
 from .criteria import CONSECUTIVE, Criteria
-from .pairs import Guess, pair_guess, stored_truth
+from .pairs import STORED_ANSWER, Guess, pair_guess, stored_truth
 from .pool import ordered_map
 from .single import Setup, match_pair, scored
 
@@ -90,7 +90,7 @@ def _match_row(job) -> PairMatch:
         answer = stored_truth(ref, obj)
         if answer is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
-    s = Setup(g, source, answer, None if answer is None else "the log's scan poses")
+    s = Setup(g, source, answer, None if answer is None else STORED_ANSWER)
     m = match_pair(ref, obj, params, s, frames, base, indices=(i, j), stream=stream)
     return replace(m, guess_ms=guess_ms) if guess is Guess.search else m
 
