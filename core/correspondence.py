@@ -7,7 +7,7 @@ reference points whose bearing lies within the angular window +/-Bw of the point
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -17,10 +17,11 @@ from .scan import Scan
 from .tiers import kernel, run
 
 
-@dataclass(frozen=True, eq=False)
-class ReferenceIndex:
+class ReferenceIndex(NamedTuple):
     """The reference scan prepared once per match: points in scan order and a bearing index.
 
+    A named tuple, not a dataclass: the compiled kernels take it whole and read it by field
+    (numba types a named tuple of arrays and scalars; a structured record holds scalars only).
     ``ext_bearings`` repeats the bearings shifted by -2pi and +2pi so that a window crossing
     +/-pi (360-degree scanners) is one contiguous slice; ``ext_map`` maps back to point indices.
     """
@@ -95,11 +96,6 @@ def _extended(pts, b, L: float, full: bool):
 _NEAR_K = 3
 
 
-def polar(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Bearing [rad] and range [m] of each point (computed once per iteration, used twice)."""
-    return np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1])
-
-
 @kernel
 def _first_at_least(eb, a: float, strict: bool) -> int:
     """``np.searchsorted(eb, a, "right" if strict else "left")``: the first index whose bearing is
@@ -137,26 +133,23 @@ def _reaches(px, py, r, ux, uy, rho):
 
 
 @kernel
-def _nearest_kernel(
-    p,
-    alpha,
-    rng,
-    eb,
-    ex,
-    ey,
-    ek,
-    eux,
-    euy,
-    ext_map,
-    n_ref: int,
-    Bw: float,
-    Br: float,
-    L: float,
-    max_factor: float,
-    max_step: float,
-):
-    """The loop of ``nearest`` over the moved points (compiled: a handful of candidates per point,
-    where numpy paid a call per step for all points at once)."""
+def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
+    """Metric-nearest reference point of each moved point within MbICP's angular window +/-Bw.
+
+    Exact for every pair whose metric distance is at most Br. First the 2K beams around the
+    point's bearing (inside +/-Bw) give a candidate at distance d*; the window that can hold a
+    closer point is then bounded: with d0 = min(d*, Br), since d^2(p, q) >= |p - q|^2 L^2 /
+    (|q|^2 + L^2), any q with d(p, q) <= d0 has |p - q| <= d0 sqrt(|q|^2 + L^2) / L
+    <= d0 (|p| + |p - q| + L) / L, i.e. |p - q| <= d0 (|p| + L) / (L - d0) when d0 < L (and
+    always <= d0 sqrt(max|q|^2 + L^2) / L): within the smaller radius rho of the two, so within
+    asin(rho / |p|) of p's bearing. Points whose bounded window reaches beyond the 2K beams (a ray
+    just outside them passes within rho of the point) are searched again over the whole bounded
+    window. Returns (index, squared metric distance) per point p (of bearing ``alpha`` and range
+    ``rng``); a point with no candidate gets index -1 and distance inf.
+    """
+    eb, ex, ey, ek = R.ext_bearings, R.ext_x, R.ext_y, R.ext_sq_norm_L2
+    eux, euy, ext_map, n_ref = R.ext_ux, R.ext_uy, R.ext_map, len(R.points)
+    max_factor, max_step = R.max_factor, R.max_step
     idx = np.empty(len(alpha), dtype=np.int64)
     out = np.empty(len(alpha))
     clip_to_bw = Bw < _NEAR_K * max_step  # the 2K beams may reach beyond +/-Bw: clip them
@@ -171,7 +164,7 @@ def _nearest_kernel(
             hi = max(min(pos + _NEAR_K, _first_at_least(eb, a + Bw, True)), lo)
             lo, hi = max(lo, 0), min(hi, len(eb))
         best, d2 = _window_min(px, py, ex, ey, ek, lo, hi)
-        # the window that can hold anything closer (see ``nearest``), never wider than +/-Bw: only
+        # the window that can hold anything closer (see above), never wider than +/-Bw: only
         # when a ray just outside the 2K beams passes within rho of the point is it searched
         d0 = np.sqrt(min(max(d2, 0.0), Br * Br))
         rho = d0 * min((r + L) / max(L - d0, 1e-12), max_factor)
@@ -195,56 +188,6 @@ def _nearest_kernel(
         else:
             idx[i], out[i] = -1, np.inf
     return idx, out
-
-
-def nearest(
-    ref: ReferenceIndex, moved: np.ndarray, Bw: float, Br: float, L: float, moved_polar=None
-):
-    """Metric-nearest reference point of each moved point within MbICP's angular window +/-Bw.
-
-    Exact for every pair whose metric distance is at most Br. First the 2K beams around the
-    point's bearing (inside +/-Bw) give a candidate at distance d*; the window that can hold a
-    closer point is then bounded: with d0 = min(d*, Br), since d^2(p, q) >= |p - q|^2 L^2 /
-    (|q|^2 + L^2), any q with d(p, q) <= d0 has |p - q| <= d0 sqrt(|q|^2 + L^2) / L
-    <= d0 (|p| + |p - q| + L) / L, i.e. |p - q| <= d0 (|p| + L) / (L - d0) when d0 < L (and
-    always <= d0 sqrt(max|q|^2 + L^2) / L): within the smaller radius rho of the two, so within
-    asin(rho / |p|) of p's bearing. Points whose bounded window reaches beyond the 2K beams (a ray
-    just outside them passes within rho of the point) are searched again over the whole bounded
-    window. A point with no candidate gets index -1 and
-    distance inf. ``moved_polar``: ``polar(moved)`` when the caller has it. Returns (index, squared
-    metric distance).
-    """
-    alpha, rng = moved_polar if moved_polar is not None else polar(moved)
-    return run(
-        _nearest_kernel,
-        moved,
-        alpha,
-        rng,
-        ref.ext_bearings,
-        ref.ext_x,
-        ref.ext_y,
-        ref.ext_sq_norm_L2,
-        ref.ext_ux,
-        ref.ext_uy,
-        ref.ext_map,
-        len(ref.points),
-        float(Bw),
-        float(Br),
-        float(L),
-        ref.max_factor,
-        ref.max_step,
-    )
-
-
-@dataclass(frozen=True, eq=False)
-class Pairs:
-    """Candidate pairs for a subset of the moved object points (``obj`` indexes those points)."""
-
-    obj: np.ndarray  # (K,)
-    target: np.ndarray  # (K, 2)
-    kind: np.ndarray  # (K,) PairKind
-    ref_index: np.ndarray  # (K, 2)
-    dist: np.ndarray  # (K,) metric distance [m]
 
 
 @kernel(inline="always")
@@ -287,31 +230,35 @@ def _ray_bound(px, py, ux, uy, mf2):
 
 
 @kernel
-def _window_kernel(
-    p,
-    alpha,
-    eb,
-    ex,
-    ey,
-    ek,
-    eux,
-    euy,
-    ext_map,
-    n_ref: int,
-    full: bool,
-    Bw: float,
-    L: float,
-    max_inter: float,
-    max_factor: float,
-):
-    """The loop of ``mbicp_pairs``: per object point the target, d^2, kind and reference indices
-    (j, -1) or (j1, j2); d^2 = inf where the window holds no reference point.
+def _window_kernel(p, alpha, R: ReferenceIndex, Bw: float, L: float, max_inter: float):
+    """MbICP's correspondences as the original C code makes them (Minguez et al. 2006, §IV).
+
+    The window of an object point holds the reference points whose bearing lies in
+    [alpha - Bw, alpha + Bw), bearings compared modulo 2 pi. With one point there, that point;
+    with more, every segment between consecutive window points is tried: its point metrically
+    closest to the object point (the metric of the object point, as the code's lambda), clamped
+    to the segment, or the nearer end when the segment's *squared* length is MaxDistInter or
+    more (the code compares it so); the candidate of smallest metric distance (the reference
+    point's metric) wins. A 360-degree reference is searched across its seam, a partial one has
+    no segment from its last point to its first.
+
+    Where this departs from the code, the code is wrong: its atan2 angles wrap at +/-pi (a
+    window there misses half its points); a point more than Bw past the scan's end is paired
+    with the scan's last point (beyond Br at any range that matters); a window without
+    reference points pairs its point with the origin at distance Br. Here such a point gets no
+    pair. Pairs at a metric distance above Br are cut later (``rejection.reject``).
 
     Every segment of the window is a candidate, as in the C code; this walks them outwards from
     the object point's bearing and stops on each side where a bound shows that no segment beyond
     can be nearer (the segment's points lie between its ends' bearings). Equal distances go to the
     lower segment, the first the C code meets: the answer is the C code's.
+
+    Per object point: the target, d^2, kind and reference indices (j, -1) or (j1, j2); d^2 = inf
+    where the window holds no reference point.
     """
+    eb, ex, ey, ek = R.ext_bearings, R.ext_x, R.ext_y, R.ext_sq_norm_L2
+    eux, euy, ext_map, n_ref = R.ext_ux, R.ext_uy, R.ext_map, len(R.points)
+    full, max_factor = R.full_circle, R.max_factor
     n = len(alpha)
     target = np.empty((n, 2))
     d2 = np.empty(n)
@@ -378,120 +325,27 @@ def _window_kernel(
 
 @kernel
 def candidates(
-    point_line: bool,
-    p,
-    alpha,
-    rng,
-    eb,
-    ex,
-    ey,
-    ek,
-    eux,
-    euy,
-    ext_map,
-    points,
-    neighbours,
-    full: bool,
-    max_factor: float,
-    max_step: float,
-    Bw: float,
-    Br: float,
-    L: float,
-    max_inter: float,
+    point_line: bool, p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float, max_inter
 ):
     """The pairs of the points p (moved into the reference frame, with their bearings and ranges)
     that find a target: (rows of p, target, kind, reference indices (K, 2), squared metric
-    distance). ``point_line``: paper 000 §2.4.1 (``point_line_pairs``), else MbICP's
-    (``mbicp_pairs``). The reference's arrays are ``ReferenceIndex``'s."""
-    n_ref = len(points)
+    distance). ``point_line``: paper 000 §2.4.1 (``_share_targets``), else MbICP's
+    (``_window_kernel``)."""
     if point_line:
-        best, d2 = _nearest_kernel(
-            p, alpha, rng, eb, ex, ey, ek, eux, euy, ext_map, n_ref, Bw, Br, L, max_factor, max_step
-        )
+        best, d2 = nearest(p, alpha, rng, R, Bw, Br, L)
         rows = np.flatnonzero(best >= 0)
-        target, kind, second, d2f = _share_targets(
-            p[rows], best[rows], d2[rows], points, ek, neighbours, L, max_inter
-        )
+        target, kind, second, d2f = _share_targets(p[rows], best[rows], d2[rows], R, L, max_inter)
         ref_index = np.empty((len(rows), 2), dtype=np.int64)
         for k in range(len(rows)):  # element by element: slice assignments are slow to compile
             ref_index[k, 0], ref_index[k, 1] = best[rows[k]], second[k]
         return rows, target, kind, ref_index, d2f
-    target, d2, kind, ref_index = _window_kernel(
-        p, alpha, eb, ex, ey, ek, eux, euy, ext_map, n_ref, full, Bw, L, max_inter, max_factor
-    )
+    target, d2, kind, ref_index = _window_kernel(p, alpha, R, Bw, L, max_inter)
     rows = np.flatnonzero(d2 < np.inf)
     return rows, target[rows], kind[rows], ref_index[rows], d2[rows]
 
 
-def _pairs(
-    point_line: bool, ref: ReferenceIndex, moved, moved_polar, rows, Bw, Br, L, max_dist_inter
-) -> Pairs:
-    found, target, kind, ref_index, d2 = run(
-        candidates,
-        point_line,
-        moved[rows],
-        moved_polar[0][rows],
-        moved_polar[1][rows],
-        ref.ext_bearings,
-        ref.ext_x,
-        ref.ext_y,
-        ref.ext_sq_norm_L2,
-        ref.ext_ux,
-        ref.ext_uy,
-        ref.ext_map,
-        ref.points,
-        ref.neighbours,
-        ref.full_circle,
-        ref.max_factor,
-        ref.max_step,
-        float(Bw),
-        float(Br),
-        float(L),
-        float(max_dist_inter),
-    )
-    return Pairs(rows[found], target, kind, ref_index, np.sqrt(np.maximum(d2, 0.0)))
-
-
-def mbicp_pairs(
-    ref: ReferenceIndex,
-    moved: np.ndarray,
-    moved_polar,
-    rows: np.ndarray,
-    Bw: float,
-    Br: float,
-    L: float,
-    max_dist_inter: float,
-) -> Pairs:
-    """MbICP's correspondences as the original C code makes them (Minguez et al. 2006, §IV).
-
-    The window of an object point holds the reference points whose bearing lies in
-    [alpha - Bw, alpha + Bw), bearings compared modulo 2 pi. With one point there, that point;
-    with more, every segment between consecutive window points is tried: its point metrically
-    closest to the object point (the metric of the object point, as the code's lambda), clamped
-    to the segment, or the nearer end when the segment's *squared* length is MaxDistInter or
-    more (the code compares it so); the candidate of smallest metric distance (the reference
-    point's metric) wins. A 360-degree reference is searched across its seam, a partial one has
-    no segment from its last point to its first.
-
-    Where this departs from the code, the code is wrong: its atan2 angles wrap at +/-pi (a
-    window there misses half its points); a point more than Bw past the scan's end is paired
-    with the scan's last point (beyond Br at any range that matters); a window without
-    reference points pairs its point with the origin at distance Br. Here such a point gets no
-    pair. Pairs at a metric distance above Br are cut later (``rejection.reject``).
-    """
-    return _pairs(False, ref, moved, moved_polar, rows, Bw, Br, L, max_dist_inter)
-
-
-def point_line_pairs(
-    ref: ReferenceIndex,
-    moved: np.ndarray,
-    moved_polar,
-    rows: np.ndarray,
-    Bw: float,
-    Br: float,
-    L: float,
-    max_dist_inter: float,
-) -> Pairs:
+@kernel
+def _share_targets(p, best, d2, R: ReferenceIndex, L: float, max_len: float):
     """Paper 000 §2.4.1: point-to-point pairs, point-to-line for object points sharing a target.
 
     Every object point takes its metric-nearest reference point m_j. Among the points sharing one
@@ -500,17 +354,11 @@ def point_line_pairs(
     segment). As in PL-ICP (Censi 2008), m'_j is sought among the scan neighbours of m_j, where
     it lies but at occlusion edges. Segments longer than MaxDistInter would bridge two surfaces:
     such a point keeps m_j.
+
+    Per pair: target, kind, second reference point (-1: none) and d^2; ``sq_norm_L2[j]`` =
+    |q_j|^2 + L^2 for reference point j (``ReferenceIndex.ext_sq_norm_L2``).
     """
-    return _pairs(True, ref, moved, moved_polar, rows, Bw, Br, L, max_dist_inter)
-
-
-@kernel
-def _share_targets(p, best, d2, points, sq_norm_L2, neighbours, L: float, max_len: float):
-    """The loop of ``point_line_pairs``: target, kind, second reference point (-1: none) and d^2
-    per pair.
-
-    ``sq_norm_L2[j]`` = |q_j|^2 + L^2 for reference point j (ReferenceIndex.ext_sq_norm_L2).
-    """
+    points, sq_norm_L2, neighbours = R.points, R.ext_sq_norm_L2, R.neighbours
     n = len(best)
     # per reference point: the closest object point, first of ties
     winner = np.empty(len(points), dtype=np.int64)

@@ -20,6 +20,8 @@ with its iterations recorded (the same numbers: the loop is deterministic).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .events import (
@@ -53,12 +55,78 @@ _KEPT, _OUTSIDE, _TRIMMED, _DOUBLE = (
 _OK, _TOO_FEW, _SINGULAR = 0, 1, 2
 
 
+class Rays(NamedTuple):
+    """Both scans as CSM holds them: every ray (valid or not) in scan order, readings outside
+    (min_reading, max_reading] invalid. A named tuple: the compiled loop takes it whole."""
+
+    rx: np.ndarray  # the reference rays' points [m], bearings [rad] and their cos and sin
+    ry: np.ndarray
+    rtheta: np.ndarray
+    rcos: np.ndarray
+    rsin: np.ndarray
+    rvalid: np.ndarray
+    sx: np.ndarray  # the object rays' points [m]
+    sy: np.ndarray
+    svalid: np.ndarray
+    full_circle: bool  # the reference covers 360 degrees
+
+    @staticmethod
+    def of(ref: Scan, obj: Scan, params: IcpParams) -> Rays:
+        def of_scan(scan):
+            r = np.where(scan.valid, scan.ranges, 0.0)
+            ok = scan.valid & (r > params.min_reading) & (r <= params.max_reading)
+            return (
+                r * np.cos(scan.bearings),
+                r * np.sin(scan.bearings),
+                np.ascontiguousarray(scan.bearings, float),
+                ok,
+            )
+
+        rx, ry, rtheta, rvalid = of_scan(ref)
+        sx, sy, _, svalid = of_scan(obj)
+        rcos, rsin = np.cos(rtheta), np.sin(rtheta)
+        return Rays(rx, ry, rtheta, rcos, rsin, rvalid, sx, sy, svalid, ref.is_full_circle())
+
+    def ref_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """The valid reference points, and for each ray the index of its point there."""
+        return np.column_stack((self.rx, self.ry))[self.rvalid], np.cumsum(self.rvalid) - 1
+
+
+class IcpLoopParams(NamedTuple):
+    """What CSM's icp_loop reads of the parameters (a named tuple: numba passes it whole)."""
+
+    line: bool  # PL-ICP: point to line, else point to segment
+    max_iter: int
+    eps_xy: float  # a step below both ends the loop [m, rad]
+    eps_th: float
+    max_dist: float  # max_correspondence_dist [m]
+    order: float  # outliers_adaptive_order: the quantile ...
+    mult: float  # ... times outliers_adaptive_mult, and the outliers_maxPerc quantile, trim
+    max_perc: float
+    doubles: bool  # outliers_remove_doubles
+
+    @staticmethod
+    def of(p: IcpParams) -> IcpLoopParams:
+        return IcpLoopParams(
+            isinstance(p, PlIcpParams),
+            int(p.max_iterations),
+            float(p.epsilon_xy),
+            float(p.epsilon_theta),
+            float(p.max_correspondence_dist),
+            float(p.outliers_adaptive_order),
+            float(p.outliers_adaptive_mult),
+            float(p.outliers_maxPerc),
+            bool(p.outliers_remove_doubles),
+        )
+
+
 @kernel
-def _nearest(rx, ry, rtheta, rcos, rsin, rvalid, px, py, phi):
+def _nearest(S: Rays, px, py, phi):
     """The Euclidean-nearest valid reference ray to (px, py): walk outwards from the ray nearest
     in bearing, up and down, while a ray can still be nearer. Every point of a ray u_j lies at
     least as far from p as p's distance to the ray, |p x u_j| when p lies ahead of it (p . u_j > 0)
     and |p| behind it, and that bound grows as the walk moves away from p's bearing."""
+    rx, ry, rtheta, rcos, rsin, rvalid = S.rx, S.ry, S.rtheta, S.rcos, S.rsin, S.rvalid
     n = len(rx)
     lo, hi = 0, n
     while lo < hi:
@@ -122,27 +190,10 @@ def _segment_foot(ax, ay, bx, by, px, py, clamp: bool):
 
 
 @kernel
-def _pairs(
-    rx,
-    ry,
-    rtheta,
-    rcos,
-    rsin,
-    rvalid,
-    sx,
-    sy,
-    svalid,
-    x,
-    y,
-    th,
-    max_dist,
-    order,
-    mult,
-    max_perc,
-    doubles: bool,
-):
+def _pairs(S: Rays, x, y, th, lp: IcpLoopParams):
     """One iteration's correspondences at the pose (x, y, th): per object ray the moved point,
     j1, j2 (-1: none), its status and its distance to the segment j1-j2."""
+    rx, ry, rvalid, sx, sy = S.rx, S.ry, S.rvalid, S.sx, S.sy
     n, m = len(sx), len(rx)
     c, s = np.cos(th), np.sin(th)
     wx, wy = np.empty(n), np.empty(n)
@@ -151,21 +202,11 @@ def _pairs(
     d2 = np.full(n, np.inf)
     for i in range(n):
         wx[i], wy[i] = c * sx[i] - s * sy[i] + x, s * sx[i] + c * sy[i] + y
-        if not svalid[i]:
+        if not S.svalid[i]:
             continue
-        best, d = _nearest(
-            rx,
-            ry,
-            rtheta,
-            rcos,
-            rsin,
-            rvalid,
-            wx[i],
-            wy[i],
-            _on_branch(np.arctan2(wy[i], wx[i]), rtheta),
-        )
+        best, d = _nearest(S, wx[i], wy[i], _on_branch(np.arctan2(wy[i], wx[i]), S.rtheta))
         d2[i] = d
-        if best < 0 or d > max_dist * max_dist or best == 0 or best == m - 1:
+        if best < 0 or d > lp.max_dist * lp.max_dist or best == 0 or best == m - 1:
             continue
         up, down = best + 1, best - 1
         while up < m and not rvalid[up]:
@@ -183,7 +224,7 @@ def _pairs(
             dd = (wx[i] - rx[down]) ** 2 + (wy[i] - ry[down]) ** 2
             other = up if du < dd else down
         j1[i], j2[i], status[i] = best, other, _KEPT
-    if doubles:  # several object rays on one j1: only those near the nearest one stay
+    if lp.doubles:  # several object rays on one j1: only those near the nearest one stay
         nearest_d2 = np.full(m, np.inf)
         for i in range(n):
             if status[i] == _KEPT:
@@ -201,8 +242,8 @@ def _pairs(
     limit = np.inf
     if k > 0:
         kept = dist[status == _KEPT]
-        lim1 = kth_smallest(kept, max(0, min(int(np.floor(k * max_perc)), k - 1)))
-        lim2 = mult * kth_smallest(kept, max(0, min(int(np.floor(k * order)), k - 1)))
+        lim1 = kth_smallest(kept, max(0, min(int(np.floor(k * lp.max_perc)), k - 1)))
+        lim2 = lp.mult * kth_smallest(kept, max(0, min(int(np.floor(k * lp.order)), k - 1)))
         limit = min(lim1, lim2)
         for i in range(n):
             if status[i] == _KEPT and dist[i] > limit:
@@ -211,10 +252,11 @@ def _pairs(
 
 
 @kernel
-def _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line: bool):
+def _targets(S: Rays, wx, wy, j1, j2, status, line: bool):
     """The kept pairs as the solver takes them: object point (sensor frame), target and weight.
     ICP: the foot on the segment, weight I; PL-ICP: the point j1 and n n^T of the segment's
     normal."""
+    rx, ry, sx, sy = S.rx, S.ry, S.sx, S.sy
     idx = np.flatnonzero(status == _KEPT)
     K = len(idx)
     p, q, C = np.empty((K, 2)), np.empty((K, 2)), np.zeros((K, 2, 2))
@@ -249,65 +291,24 @@ def _hash(j1, j2, status):
 
 
 @kernel
-def _loop(
-    rx,
-    ry,
-    rtheta,
-    rcos,
-    rsin,
-    rvalid,
-    sx,
-    sy,
-    svalid,
-    x,
-    y,
-    th,
-    line: bool,
-    max_iter: int,
-    eps_xy: float,
-    eps_th: float,
-    max_dist: float,
-    order: float,
-    mult: float,
-    max_perc: float,
-    doubles: bool,
-    trace,
-):
+def _loop(S: Rays, x, y, th, lp: IcpLoopParams, trace):
     """CSM's icp_loop from (x, y, th): (outcome, x, y, th, total distance, kept pairs, iterations,
     converged, and the last iteration's pairs: wx, wy, j1, j2, status). ``trace`` (poses (n, 6),
     statuses, ... for n iterations) records each iteration; an empty one records nothing."""
     record = len(trace[0]) > 0
-    hashes = np.empty(max_iter, dtype=np.uint64)
-    n = len(sx)
+    hashes = np.empty(lp.max_iter, dtype=np.uint64)
+    n = len(S.sx)
     total, valid, it, code, converged = 0.0, 0, 0, _OK, False
     wx, wy, j1, j2 = np.empty(0), np.empty(0), np.empty(0, np.int64), np.empty(0, np.int64)
     status = np.empty(0, np.int8)
-    for it in range(max_iter):
-        wx, wy, j1, j2, status, dist, limit, k = _pairs(
-            rx,
-            ry,
-            rtheta,
-            rcos,
-            rsin,
-            rvalid,
-            sx,
-            sy,
-            svalid,
-            x,
-            y,
-            th,
-            max_dist,
-            order,
-            mult,
-            max_perc,
-            doubles,
-        )
+    for it in range(lp.max_iter):
+        wx, wy, j1, j2, status, dist, limit, k = _pairs(S, x, y, th, lp)
         kept = np.flatnonzero(status == _KEPT)
         if k < FAIL_FRACTION * n or len(kept) < FAIL_FRACTION * n or len(kept) < 3:
             code = _TOO_FEW
             break
         total, valid = dist[kept].sum(), len(kept)
-        p, q, C = _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line)
+        p, q, C = _targets(S, wx, wy, j1, j2, status, lp.line)
         A, b = normal_terms(p, q, C)
         nx, ny, nth, ok = solve(A, b)
         if not ok:
@@ -330,11 +331,11 @@ def _loop(
         dth = np.arctan2(np.sin(nth - th), np.cos(nth - th))
         x, y, th = nx, ny, nth
         hashes[it] = _hash(j1, j2, status)
-        if line:  # PL-ICP ends when the pairs repeat those of an earlier iteration
+        if lp.line:  # PL-ICP ends when the pairs repeat those of an earlier iteration
             for a in range(it):
                 if hashes[a] == hashes[it]:
                     converged = True
-        if converged or (np.hypot(dx, dy) < eps_xy and abs(dth) < eps_th):
+        if converged or (np.hypot(dx, dy) < lp.eps_xy and abs(dth) < lp.eps_th):
             converged = True
             break
     return code, x, y, th, total, valid, it + 1, converged, wx, wy, j1, j2, status
@@ -351,57 +352,10 @@ def _empty_trace(n_iter: int, n: int):
     )
 
 
-class _Scans:
-    """Both scans as CSM holds them: every ray (valid or not) in scan order, readings outside
-    (min_reading, max_reading] invalid."""
-
-    def __init__(self, ref: Scan, obj: Scan, params: IcpParams):
-        def rays(scan):
-            r = np.where(scan.valid, scan.ranges, 0.0)
-            ok = scan.valid & (r > params.min_reading) & (r <= params.max_reading)
-            return (
-                r * np.cos(scan.bearings),
-                r * np.sin(scan.bearings),
-                np.ascontiguousarray(scan.bearings, float),
-                ok,
-            )
-
-        self.rx, self.ry, self.rtheta, self.rvalid = rays(ref)
-        self.rcos, self.rsin = np.cos(self.rtheta), np.sin(self.rtheta)
-        self.sx, self.sy, _, self.svalid = rays(obj)
-        self.full_circle = ref.is_full_circle()
-
-    def ref_points(self) -> tuple[np.ndarray, np.ndarray]:
-        """The valid reference points, and for each ray the index of its point there."""
-        return np.column_stack((self.rx, self.ry))[self.rvalid], np.cumsum(self.rvalid) - 1
-
-    def run(self, start: Pose2, params: IcpParams, trace=None):
-        p = params
-        return run(
-            _loop,
-            self.rx,
-            self.ry,
-            self.rtheta,
-            self.rcos,
-            self.rsin,
-            self.rvalid,
-            self.sx,
-            self.sy,
-            self.svalid,
-            start.x,
-            start.y,
-            start.theta,
-            isinstance(p, PlIcpParams),
-            p.max_iterations,
-            p.epsilon_xy,
-            p.epsilon_theta,
-            p.max_correspondence_dist,
-            p.outliers_adaptive_order,
-            p.outliers_adaptive_mult,
-            p.outliers_maxPerc,
-            p.outliers_remove_doubles,
-            trace if trace is not None else _empty_trace(0, 0),
-        )
+def _run(S: Rays, start: Pose2, params: IcpParams, trace=None):
+    """One run of the loop from ``start`` (recorded into ``trace`` when given)."""
+    trace = trace if trace is not None else _empty_trace(0, 0)
+    return run(_loop, S, start.x, start.y, start.theta, IcpLoopParams.of(params), trace)
 
 
 def _restarts(params: IcpParams, result: Pose2) -> list[tuple[Pose2, str]]:
@@ -430,14 +384,14 @@ def match(
     params = params if params is not None else IcpParams()
     line = isinstance(params, PlIcpParams)
     name = "plicp" if line else "icp"
-    scans = _Scans(ref, obj, params)
+    rays = Rays.of(ref, obj, params)
     runs = [(initial_guess, "")]
-    outcomes = [scans.run(initial_guess, params)]
+    outcomes = [_run(rays, initial_guess, params)]
     code, x, y, th, total, valid = outcomes[0][:6]
     best = 0
     if code == _OK and params.restart and total / valid > params.restart_threshold_mean_error:
         for start, label in _restarts(params, Pose2(x, y, th)):
-            out = scans.run(start, params)
+            out = _run(rays, start, params)
             if out[0] != _OK:  # CSM stops restarting at the first failure
                 break
             runs.append((start, f"restart from the first run's result, {label}"))
@@ -445,24 +399,24 @@ def match(
             if out[4] < outcomes[best][4]:
                 best = len(outcomes) - 1
     if observer is not None:
-        _replay(observer, name, params, scans, runs, outcomes, best, initial_guess)
-    result = _result(name, scans, params, outcomes, best)
+        _replay(observer, name, params, rays, runs, outcomes, best, initial_guess)
+    result = _result(name, rays, params, outcomes, best)
     if observer is not None:
         observer(FinishEvent(result))
     return result
 
 
-def _replay(observer, name, params, scans, runs, outcomes, best, initial_guess) -> None:
+def _replay(observer, name, params, rays, runs, outcomes, best, initial_guess) -> None:
     """The recorded events of every run (the restarts continue the iteration count)."""
-    ref_pts, ref_of_ray = scans.ref_points()
-    obj_valid = np.flatnonzero(scans.svalid)
-    obj_pts = np.column_stack((scans.sx, scans.sy))[obj_valid]
+    ref_pts, ref_of_ray = rays.ref_points()
+    obj_valid = np.flatnonzero(rays.svalid)
+    obj_pts = np.column_stack((rays.sx, rays.sy))[obj_valid]
     used = np.arange(len(obj_pts))
     observer(StartEvent(name, params, ref_pts, obj_pts, used, initial_guess, None))
     count = 0
     for k, ((start, label), out) in enumerate(zip(runs, outcomes)):
-        trace = _empty_trace(out[6], len(scans.sx))
-        scans.run(start, params, trace)
+        trace = _empty_trace(out[6], len(rays.sx))
+        _run(rays, start, params, trace)
         poses, stat, first, second, dists, limits = trace
         recorded = out[6] if out[0] == _OK else out[6] - 1  # a failed iteration computes no pose
         for it in range(recorded):
@@ -516,49 +470,36 @@ def _feet(a: np.ndarray, b: np.ndarray, p: np.ndarray, clamp: bool) -> np.ndarra
     return a + (np.clip(t, 0.0, 1.0) if clamp else t)[:, None] * e
 
 
-def _result(name, scans, params, outcomes, best) -> MatchResult:
+def _result(name, rays, params, outcomes, best) -> MatchResult:
     """The kept run's pose; its last iteration's kept pairs make the final system (as CSM reports
     their count), for the covariance and the degeneracy indicator."""
     code, x, y, th, total, valid, _, converged, wx, wy, j1, j2, status = outcomes[best]
     iterations = sum(o[6] for o in outcomes)
     pose = Pose2(x, y, th)
-    ref_pts, ref_of_ray = scans.ref_points()
+    ref_pts, ref_of_ray = rays.ref_points()
     if code != _OK:
         reason = Termination.TOO_FEW_PAIRS if code == _TOO_FEW else Termination.SINGULAR
         return build_result(
-            name, pose, reason, iterations, None, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M
+            name, pose, reason, iterations, None, ref_pts, rays.full_circle, DEGENERACY_LENGTH_M
         )
     reason = Termination.CONVERGED if converged else Termination.MAX_ITERATIONS
-    A, err, foot, first = run(
-        _final_system,
-        scans.rx,
-        scans.ry,
-        scans.sx,
-        scans.sy,
-        wx,
-        wy,
-        j1,
-        j2,
-        status,
-        x,
-        y,
-        th,
-        isinstance(params, PlIcpParams),
-    )
+    line = isinstance(params, PlIcpParams)
+    A, err, foot, first = run(_final_system, rays, wx, wy, j1, j2, status, x, y, th, line)
     n_candidates = int(np.count_nonzero(status != PairStatus.OUTSIDE_BR))
     last = FinalSystem(A, err, foot, ref_of_ray[first], len(first), n_candidates - len(first))
     return build_result(
-        name, pose, reason, iterations, last, ref_pts, scans.full_circle, DEGENERACY_LENGTH_M
+        name, pose, reason, iterations, last, ref_pts, rays.full_circle, DEGENERACY_LENGTH_M
     )
 
 
 @kernel
-def _final_system(rx, ry, sx, sy, wx, wy, j1, j2, status, x, y, th, line: bool):
+def _final_system(S: Rays, wx, wy, j1, j2, status, x, y, th, line: bool):
     """The kept pairs seen from the final pose (x, y, th): the normal matrix A = sum J^T C J in
     (x, y, theta) (C: the pair's weight as ``_targets`` gives it; J = [[1, 0, -y], [0, 1, x]] at
     the moved point), the mean squared distance of the moved points to their segments' feet, the
     feet, and each pair's j1 ray."""
-    p, _, C = _targets(rx, ry, sx, sy, wx, wy, j1, j2, status, line)
+    rx, ry = S.rx, S.ry
+    p, _, C = _targets(S, wx, wy, j1, j2, status, line)
     idx = np.flatnonzero(status == _KEPT)
     c, s = np.cos(th), np.sin(th)
     A, foot, err = np.zeros((3, 3)), np.empty((len(idx), 2)), 0.0

@@ -11,6 +11,8 @@ recorded (the same numbers: the loop is deterministic), and the recording become
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .correspondence import ReferenceIndex, candidates, visible_from_reference, visible_in_order
@@ -75,51 +77,91 @@ def rejection_floor(Br: float, mad_floor: float, mad_anneal: float, iteration: i
     return max(mad_floor, Br * decay)
 
 
+class MbicpLoopParams(NamedTuple):
+    """What the compiled loop reads of the parameters, by the names of the C code and paper 000
+    (a named tuple: numba passes it whole). Numbers stay floats, as the C code compares them."""
+
+    max_iter: int  # MaxIter
+    L: float  # the metric's rotation weight [m] (MbICP §III)
+    Bw: float  # the angular window [rad] (§IV)
+    Br: float  # the radial window [m]: pairs farther are cut (§IV)
+    max_inter: float  # MaxDistInter: longest segment interpolated [m^2, compared squared]
+    keep: float  # filter: the share of pairs kept, the closest (§IV)
+    asoc: float  # AsocError: the share of points that must find a pair
+    ratio: float  # errorRatio: the error's relative change that counts as converged
+    smooth: float  # IterSmoothConv: iterations in a row converged (or cycling) before stopping
+    errx: float  # an increment below errx, erry, errt in every component counts as converged
+    erry: float
+    errt: float
+    mad_k: float  # paper 000 §2.4.2: reject beyond median + mad_k MAD, never below the floor
+    mad_floor: float
+    mad_anneal: float
+    hold: float  # the weak-direction hold's condition number (0: off; ``_hold_weak``)
+    accelerate: float  # the largest extrapolation factor (0: off; ``_extrapolate``)
+    point_line: bool  # paper 000 §2.4.1 pairs, else MbICP's
+    mad: bool  # paper 000 §2.4.2 rejection, else the C code's filter
+    projection: bool  # the projection filter (§IV) ...
+    zbuffer: bool  # ... as a z-buffer of the reference viewpoint, else the C code's scan order
+    bin_start: float  # the z-buffer's first bin: the reference's first bearing [rad]
+    bin_width: float  # [rad]
+
+
 @kernel
-def _loop(
-    P,
-    x,
-    y,
-    th,
-    eb,
-    ex,
-    ey,
-    ek,
-    eux,
-    euy,
-    ext_map,
-    ref_points,
-    neighbours,
-    full,
-    max_factor,
-    max_step,
-    bin_start,
-    bin_width,
-    projection,
-    zbuffer,
-    point_line,
-    mad,
-    p,
-    ref_tangents,
-    trace,
-):
-    """The iterations from (x, y, th). ``p``: (MaxIter, L, Bw, Br, MaxDistInter, filter, AsocError,
-    errorRatio, IterSmoothConv, errx, erry, errt, mad_k, mad_floor, mad_anneal, hold_weak,
-    extrapolate). Returns the
-    estimate, how it ended, the iterations run and the last solved system. ``trace`` records each
-    iteration when it has rows (see ``_trace``)."""
-    max_iter, L, Bw, Br, max_inter, keep, asoc = int(p[0]), p[1], p[2], p[3], p[4], p[5], p[6]
-    ratio, smooth, errx, erry, errt, mad_k, mad_floor, mad_anneal = (
-        p[7],
-        p[8],
-        p[9],
-        p[10],
-        p[11],
-        p[12],
-        p[13],
-        p[14],
-    )
-    hold, accelerate = p[15], p[16]
+def _move(P, x, y, th, moved, alpha, rng):
+    """The object points in the reference frame at the estimate (x, y, th), with their bearings
+    and ranges, into the buffers ``moved``, ``alpha`` and ``rng``."""
+    c, s = np.cos(th), np.sin(th)
+    for i in range(len(P)):
+        mx, my = c * P[i, 0] - s * P[i, 1] + x, s * P[i, 0] + c * P[i, 1] + y
+        moved[i, 0], moved[i, 1], alpha[i], rng[i] = mx, my, np.arctan2(my, mx), np.hypot(mx, my)
+
+
+@kernel
+def _visible(alpha, rng, lp: MbicpLoopParams):
+    """The projection filter (MbICP §IV): which moved points the reference can see."""
+    if not lp.projection:
+        return np.ones(len(alpha), dtype=np.bool_)
+    if lp.zbuffer:
+        return visible_from_reference(alpha, rng, lp.bin_start, lp.bin_width, PROJECTION_MARGIN_M)
+    return visible_in_order(alpha)
+
+
+@kernel
+def _gather(vis, moved, alpha, rng, rows, v_moved, v_alpha, v_rng) -> int:
+    """The visible points into buffers kept across iterations; how many there are."""
+    m = 0
+    for i in range(len(vis)):
+        if vis[i]:
+            rows[m], v_moved[m, 0], v_moved[m, 1], v_alpha[m], v_rng[m] = (
+                i,
+                moved[i, 0],
+                moved[i, 1],
+                alpha[i],
+                rng[i],
+            )
+            m += 1
+    return m
+
+
+@kernel
+def _mean_sq_residual(pk, ck, ix, iy, ith) -> float:
+    """The mean squared Euclidean residual of the pairs (pk -> ck) after the increment."""
+    ci, si = np.cos(ith), np.sin(ith)
+    err = 0.0
+    for k in range(len(pk)):
+        ux, uy = (
+            ci * pk[k, 0] - si * pk[k, 1] + ix - ck[k, 0],
+            si * pk[k, 0] + ci * pk[k, 1] + iy - ck[k, 1],
+        )
+        err += ux * ux + uy * uy
+    return err / len(pk)
+
+
+@kernel
+def _loop(P, x, y, th, R: ReferenceIndex, lp: MbicpLoopParams, ref_tangents, trace):
+    """The iterations from (x, y, th): returns the estimate, how it ended, the iterations run and
+    the last solved system. ``trace`` records each iteration when it has rows (see ``_trace``)."""
+    L, Br, errx, erry, errt = lp.L, lp.Br, lp.errx, lp.erry, lp.errt
     record = len(trace[0]) > 0
     n = len(P)
     recent = np.zeros((CYCLE_PERIOD_MAX - 1, 3))
@@ -134,66 +176,20 @@ def _loop(
         np.empty(n),
     )
     d_prev, have_prev = np.zeros(3), False
-    for it in range(1, max_iter + 1):
-        c, s = np.cos(th), np.sin(th)
-        for i in range(n):
-            mx, my = c * P[i, 0] - s * P[i, 1] + x, s * P[i, 0] + c * P[i, 1] + y
-            moved[i, 0], moved[i, 1], alpha[i], rng[i] = (
-                mx,
-                my,
-                np.arctan2(my, mx),
-                np.hypot(mx, my),
-            )
-        if not projection:
-            vis = np.ones(n, dtype=np.bool_)
-        elif zbuffer:
-            vis = visible_from_reference(alpha, rng, bin_start, bin_width, PROJECTION_MARGIN_M)
-        else:
-            vis = visible_in_order(alpha)
-        m = 0
-        for i in range(n):  # the visible points, gathered into buffers kept across iterations
-            if vis[i]:
-                rows_all[m], v_moved[m, 0], v_moved[m, 1], v_alpha[m], v_rng[m] = (
-                    i,
-                    moved[i, 0],
-                    moved[i, 1],
-                    alpha[i],
-                    rng[i],
-                )
-                m += 1
+    for it in range(1, lp.max_iter + 1):
+        # the object points at the estimate, those the reference sees (§IV's projection filter)
+        _move(P, x, y, th, moved, alpha, rng)
+        vis = _visible(alpha, rng, lp)
+        m = _gather(vis, moved, alpha, rng, rows_all, v_moved, v_alpha, v_rng)
         rows = rows_all[:m]
+        # correspondences: MbICP's window search (§IV), or paper 000's point + line pairs (§2.4.1)
         found, target, kind, ref_index, d2 = candidates(
-            point_line,
-            v_moved[:m],
-            v_alpha[:m],
-            v_rng[:m],
-            eb,
-            ex,
-            ey,
-            ek,
-            eux,
-            euy,
-            ext_map,
-            ref_points,
-            neighbours,
-            full,
-            max_factor,
-            max_step,
-            Bw,
-            Br,
-            L,
-            max_inter,
+            lp.point_line, v_moved[:m], v_alpha[:m], v_rng[:m], R, lp.Bw, Br, L, lp.max_inter
         )
         obj_rows, dist = rows[found], np.sqrt(np.maximum(d2, 0.0))
-        status, thr = reject(
-            dist,
-            Br,
-            keep,
-            mad,
-            mad_k,
-            rejection_floor(Br, mad_floor, mad_anneal, it) if mad else 0.0,
-            record,
-        )
+        # rejection: beyond Br, then the C code's filter or paper 000's MAD rule (§2.4.2)
+        floor = rejection_floor(Br, lp.mad_floor, lp.mad_anneal, it) if lp.mad else 0.0
+        status, thr = reject(dist, Br, lp.keep, lp.mad, lp.mad_k, floor, record)
         kept = np.flatnonzero(status == KEPT)
         n_within = np.count_nonzero(status != OUTSIDE_BR)
         # the C code's association test: pairs within Br against the points the filter left
@@ -202,28 +198,23 @@ def _loop(
         held = np.zeros(4)
         factor = 0.0
         A = np.zeros((3, 3))
-        if n_within >= asoc * len(rows) and len(kept) >= 3:
+        if n_within >= lp.asoc * len(rows) and len(kept) >= 3:
+            # the increment minimising the metric distances of the kept pairs (MbICP §V)
             pk, ck = moved[obj_rows[kept]], target[kept]
             A, b = metric_normal_equations(pk, ck, L)
             step, step_ok = solve3(A, b)
-            if step_ok and hold > 0.0:
-                held = _hold_weak(ck, ref_index[kept, 0], ref_tangents, L, hold, step)
+            if step_ok and lp.hold > 0.0:
+                held = _hold_weak(ck, ref_index[kept, 0], ref_tangents, L, lp.hold, step)
             if step_ok:
                 ix, iy, ith = step[0], step[1], (step[2] + np.pi) % (2.0 * np.pi) - np.pi
-                if accelerate > 0.0 and not (abs(ix) < errx and abs(iy) < erry and abs(ith) < errt):
+                if lp.accelerate > 0.0 and not (
+                    abs(ix) < errx and abs(iy) < erry and abs(ith) < errt
+                ):
                     ix, iy, ith, factor = _extrapolate(
-                        x, y, th, ix, iy, ith, d_prev, have_prev, L, accelerate
+                        x, y, th, ix, iy, ith, d_prev, have_prev, L, lp.accelerate
                     )
                     have_prev = True
-                ci, si = np.cos(ith), np.sin(ith)
-                err = 0.0
-                for k in range(len(kept)):
-                    ux, uy = (
-                        ci * pk[k, 0] - si * pk[k, 1] + ix - ck[k, 0],
-                        si * pk[k, 0] + ci * pk[k, 1] + iy - ck[k, 1],
-                    )
-                    err += ux * ux + uy * uy
-                error = err / len(kept)
+                error = _mean_sq_residual(pk, ck, ix, iy, ith)
             else:
                 end = _SINGULAR
         else:
@@ -232,17 +223,13 @@ def _loop(
         nx, ny = ix + ci * x - si * y, iy + si * x + ci * y
         nth = (ith + th + np.pi) % (2.0 * np.pi) - np.pi
         if record:
+            pairs = (obj_rows, target, kind, ref_index, dist, status)
             _record(
                 trace,
                 it - 1,
                 (x, y, th, nx, ny, nth, ix, iy, ith),
                 vis,
-                obj_rows,
-                target,
-                kind,
-                ref_index,
-                dist,
-                status,
+                pairs,
                 thr,
                 error,
                 held,
@@ -263,7 +250,7 @@ def _loop(
         # compares the summed squared residuals of consecutive iterations
         error_sum = error * len(kept)
         small_ratio = prev_error >= 0.0 and (
-            abs(1.0 - error_sum / prev_error) <= ratio if prev_error > 0.0 else error_sum == 0.0
+            abs(1.0 - error_sum / prev_error) <= lp.ratio if prev_error > 0.0 else error_sum == 0.0
         )
         n_conv = (
             n_conv + 1
@@ -271,13 +258,14 @@ def _loop(
             else 0
         )
         prev_error = error_sum
-        if n_conv > smooth:
+        if n_conv > lp.smooth:
             end = _CONVERGED
             break
+        # a cycle: the estimate returned to one of the last few (stopping.py)
         back = returned(recent, n_recent, x, y, th, errx, erry, errt)
         n_recent = remember(recent, n_recent, bx, by, bth)
         n_cycle = n_cycle + 1 if back else 0
-        if n_cycle > smooth:
+        if n_cycle > lp.smooth:
             end = _CYCLE
             break
     return (
@@ -347,11 +335,10 @@ def _extrapolate(x, y, th, ix, iy, ith, d_prev, have_prev, L, most):
 
 
 @kernel
-def _record(
-    trace, k, poses_k, vis, rows, target, kind, ref_index, dist, status, thr, error, held, factor
-):
+def _record(trace, k, poses_k, vis, pairs, thr, error, held, factor):
     """Iteration ``k`` into the trace, element by element (slice assignments are slow to
-    compile)."""
+    compile). ``pairs``: (object rows, target, kind, reference indices, distance, status)."""
+    rows, target, kind, ref_index, dist, status = pairs
     (
         poses,
         visible,
@@ -409,64 +396,39 @@ def _trace(iterations: int, n: int):
 def _run(
     R: ReferenceIndex, P: np.ndarray, guess: Pose2, params: MbicpParams, improved: bool, trace
 ):
-    point_line = improved and params.point_line
-    mad = improved and params.mad_rejection
-    p = np.array(
-        [
-            params.MaxIter,
-            params.L,
-            params.Bw,
-            params.Br,
-            params.MaxDistInter,
-            params.filter,
-            params.AsocError,
-            params.errorRatio,
-            params.IterSmoothConv,
-            params.errx_out,
-            params.erry_out,
-            params.errt_out,
-            params.mad_k if improved else 0.0,
-            params.mad_floor if improved else 0.0,
-            params.mad_anneal if improved else 0.0,
-            params.hold_weak if improved else 0.0,
-            params.extrapolate if improved else 0.0,
-        ]
-    )
-    bin_start = float(R.bearings[0]) if len(R.bearings) else 0.0
     hold = improved and params.hold_weak > 0
+    lp = MbicpLoopParams(
+        max_iter=int(params.MaxIter),
+        L=float(params.L),
+        Bw=float(params.Bw),
+        Br=float(params.Br),
+        max_inter=float(params.MaxDistInter),
+        keep=float(params.filter),
+        asoc=float(params.AsocError),
+        ratio=float(params.errorRatio),
+        smooth=float(params.IterSmoothConv),
+        errx=float(params.errx_out),
+        erry=float(params.erry_out),
+        errt=float(params.errt_out),
+        mad_k=float(params.mad_k) if improved else 0.0,
+        mad_floor=float(params.mad_floor) if improved else 0.0,
+        mad_anneal=float(params.mad_anneal) if improved else 0.0,
+        hold=float(params.hold_weak) if hold else 0.0,
+        accelerate=float(params.extrapolate) if improved else 0.0,
+        point_line=bool(improved and params.point_line),
+        mad=bool(improved and params.mad_rejection),
+        projection=bool(params.ProjectionFilter),
+        zbuffer=bool(params.projection_zbuffer),
+        bin_start=float(R.bearings[0]) if len(R.bearings) else 0.0,
+        bin_width=float(run(projection_bin_width, R.bearings)),
+    )
     tangents = (
         surface_tangents(R.points, R.full_circle, np.arange(len(R.points)))
         if hold
         else np.zeros((0, 2))
     )
-    return run(
-        _loop,
-        np.ascontiguousarray(P, float),
-        guess.x,
-        guess.y,
-        guess.theta,
-        R.ext_bearings,
-        R.ext_x,
-        R.ext_y,
-        R.ext_sq_norm_L2,
-        R.ext_ux,
-        R.ext_uy,
-        R.ext_map,
-        R.points,
-        R.neighbours,
-        R.full_circle,
-        R.max_factor,
-        R.max_step,
-        bin_start,
-        run(projection_bin_width, R.bearings),
-        params.ProjectionFilter,
-        params.projection_zbuffer,
-        point_line,
-        mad,
-        p,
-        tangents,
-        trace,
-    )
+    P = np.ascontiguousarray(P, float)
+    return run(_loop, P, guess.x, guess.y, guess.theta, R, lp, tangents, trace)
 
 
 def match(

@@ -500,139 +500,169 @@ class Strategy:
     metric: bool  # PMWN: add lambda * |shift angle| to the cost and adapt lambda
 
 
+@dataclass(frozen=True, eq=False)
+class _Prepared:
+    """Both scans ready for the loop (PSM §3 step 1: median filter, range limits, segments) and
+    the bearing shifts the orientation step compares."""
+
+    grid: Grid
+    ref: PolarScan
+    obj: PolarScan
+    ref_pts: np.ndarray
+    obj_pts: np.ndarray
+    ref_point_of: np.ndarray  # bearing -> index of its valid reference point
+    normals: np.ndarray | None  # the reference's surface normals (surface_jacobian)
+    ref_r: np.ndarray  # the reference ranges, NaN where invalid
+    K: int  # the largest shift [bins]: no shift beyond the scan's own beams
+    shifts: np.ndarray  # -K .. K
+
+    @staticmethod
+    def of(strategy: Strategy, ref: Scan, obj: Scan, params) -> _Prepared:
+        grid = Grid.of(ref, strategy.name.upper())
+        pre = (params.median_window, params.min_range, params.max_range, params.max_jump)
+        ref_pre, obj_pre = preprocess(ref, *pre), preprocess(obj, *pre)
+        K = min(int(round(params.search_window / grid.step)), grid.n)
+        return _Prepared(
+            grid,
+            ref_pre,
+            obj_pre,
+            ref_pre.points(),
+            obj_pre.points(),
+            np.cumsum(ref_pre.valid) - 1,
+            beam_normals(ref_pre) if params.surface_jacobian else None,
+            np.where(ref_pre.valid, ref_pre.ranges, np.nan),
+            K,
+            np.arange(-K, K + 1),
+        )
+
+    def pairs(self, proj: np.ndarray, res) -> Correspondences:
+        return polar_pairs(self.grid, self.ref, proj, res.i, res.e, res.used, self.ref_point_of)
+
+
+@dataclass
+class _Turn:
+    """Sub-bearing orientation steps. Inside one bearing the fit's vertex depends on where the
+    samples fall and jumps sign across the answer, so whole steps flip between two phases:
+    sub-bearing steps are halved, and halved again at every flip (a bisection onto the answer)."""
+
+    gain: float = 0.5
+    last_fraction: float = 0.0
+
+    def bins(self, k_best: float) -> float:
+        """How many bins to turn back for a minimum found ``k_best`` bins away."""
+        if abs(k_best) >= 1.0:
+            return k_best
+        if k_best * self.last_fraction < 0:
+            self.gain *= 0.5
+        self.last_fraction = k_best
+        return self.gain * k_best
+
+
+class _Orientation(NamedTuple):
+    cost: np.ndarray  # per shift (PMWN: with the angle term of paper 003's norm)
+    range_cost: np.ndarray  # per shift, the range term alone
+    k_best: float | None  # the best shift [bins] (None: no orientation step this iteration)
+    abc: tuple | None  # the fit around it
+
+
+def _orientation(strategy: Strategy, s: _Prepared, params, proj_ext, lam, it) -> _Orientation:
+    """PSM §3 step 4: the cost of every shift of the projected ranges, and the best one."""
+    if not (strategy.orientation_due(it) and s.K > 0):
+        no_cost = np.full(len(s.shifts), np.nan)
+        return _Orientation(no_cost, no_cost, None, None)
+    cap = params.max_error if params.truncated_orientation else None
+    range_cost, _ = shift_costs(s.ref_r, proj_ext, s.K, params.min_pairs, cap)
+    cost = range_cost + lam * np.abs(s.shifts) * s.grid.step if strategy.metric else range_cost
+    return _Orientation(cost, range_cost, *best_shift(s.shifts, cost, strategy.refine, range_cost))
+
+
+def _polar_step(strategy: Strategy, s: _Prepared, proj0, o: _Orientation, lam, res, step):
+    """What the front ends plot of an iteration: ranges, the cost curve and its fit, weights, and
+    PMWN's circle picture (which holds for Diosi's model only; his rows are the rays u_i)."""
+    circle = strategy.metric and s.normals is None
+    return PolarStep(
+        s.grid.bearings,
+        s.ref_r,
+        proj0,
+        s.shifts,
+        o.cost,
+        o.k_best,
+        strategy.fit if o.k_best is not None else None,
+        o.abc,
+        lam,
+        res.e,
+        res.w,
+        step.rhs[:, None] * step.rows if circle else None,
+        0.5 * np.array(step.dt) if circle else None,
+    )
+
+
+def _balanced_lambda(s: _Prepared, params, range_cost, mean_abs: float) -> float:
+    """Paper 003 eq. 17 (lost): the weight that balances the two terms of the norm at the rotation
+    the range term points to, lambda = D / |theta_r|: D the mean |range difference| of this
+    iteration, theta_r the shift where the range cost alone is least. (Balancing at the step
+    actually taken would lock: a small step raises lambda, which keeps the next step small.)"""
+    j = least(range_cost)
+    theta_r = abs(float(s.shifts[j])) * s.grid.step if j is not None else 0.0
+    return min(mean_abs / max(theta_r, s.grid.step), params.lambda_max)
+
+
 def run_polar(
     strategy: Strategy, ref: Scan, obj: Scan, guess: Pose2, params, observer: Observer | None
 ) -> MatchResult:
     """Alternate orientation (shift the projected ranges) and translation (weighted LS) steps."""
-    grid = Grid.of(ref, strategy.name.upper())
-    pre = (params.median_window, params.min_range, params.max_range, params.max_jump)
-    ref_pre, obj_pre = preprocess(ref, *pre), preprocess(obj, *pre)
-    ref_pts, obj_pts = ref_pre.points(), obj_pre.points()
-    ref_point_of = np.cumsum(ref_pre.valid) - 1
-    normals = beam_normals(ref_pre) if params.surface_jacobian else None
-    ref_r = np.where(ref_pre.valid, ref_pre.ranges, np.nan)
-    # no shift beyond the scan's own beams
-    K = min(int(round(params.search_window / grid.step)), grid.n)
-    shifts = np.arange(-K, K + 1)
-    # the cost curve of an iteration without orientation step
-    no_cost = np.full(len(shifts), np.nan)
+    s = _Prepared.of(strategy, ref, obj, params)
+    grid, K = s.grid, s.K
     if observer is not None:
-        observer(
-            StartEvent(
-                strategy.name, params, ref_pts, obj_pts, np.arange(len(obj_pts)), guess, None
-            )
-        )
+        used = np.arange(len(s.obj_pts))
+        observer(StartEvent(strategy.name, params, s.ref_pts, s.obj_pts, used, guess, None))
     est, lam = guess, params.lambda0 if strategy.metric else None
-    # PMWN's circle picture holds for Diosi's model only
-    projected_circle = strategy.metric and normals is None
     n_small, it, reason, last = 0, 0, Termination.MAX_ITERATIONS, None
-    cycles = CycleWatch(params)
-    gain, last_fraction = 0.5, 0.0  # sub-bearing orientation steps (see below)
+    cycles, turn = CycleWatch(params), _Turn()
     for it in range(1, params.MaxIter + 1):
         before = est
-        proj_ext = project(grid, obj_pre, est, K)
+        proj_ext = project(grid, s.obj, est, K)
         proj0 = proj_ext[K : K + grid.n]
-        cost, k_best, abc = no_cost, None, None
-        range_cost = cost
-        if strategy.orientation_due(it) and K > 0:
-            range_cost, _ = shift_costs(
-                ref_r,
-                proj_ext,
-                K,
-                params.min_pairs,
-                params.max_error if params.truncated_orientation else None,
-            )
-            cost = range_cost + lam * np.abs(shifts) * grid.step if strategy.metric else range_cost
-            k_best, abc = best_shift(shifts, cost, strategy.refine, range_cost)
+        o = _orientation(strategy, s, params, proj_ext, lam, it)
         proj = proj0
-        if k_best is not None:
-            # r_proj(i + k) matches r_ref(i): the projection sits k bearings too far; turn it back.
-            # Inside one bearing the fit's vertex depends on where the samples fall and jumps sign
-            # across the answer, so whole steps flip between two phases: sub-bearing steps are
-            # halved, and halved again at every flip (a bisection onto the answer).
-            k_turn = k_best
-            if abs(k_best) < 1.0:
-                if k_best * last_fraction < 0:
-                    gain *= 0.5
-                last_fraction = k_best
-                k_turn = gain * k_best
-            est = Pose2(0.0, 0.0, -k_turn * grid.step) @ est
-            proj = project(grid, obj_pre, est)
+        if o.k_best is not None:
+            # r_proj(i + k) matches r_ref(i): the projection sits k bearings too far; turn it back
+            est = Pose2(0.0, 0.0, -turn.bins(o.k_best) * grid.step) @ est
+            proj = project(grid, s.obj, est)
+        # PSM §3 step 5: the translation, weighted least squares on the range differences
+        relaxed = params.min_pairs if params.relaxed_cut else None
         res = translation_residuals(
-            ref_pre,
-            proj,
-            params.max_error,
-            params.weight_constant(it),
-            params.min_pairs if params.relaxed_cut else None,
+            s.ref, proj, params.max_error, params.weight_constant(it), relaxed
         )
         if len(res.iu) < params.min_pairs:
-            reason = Termination.TOO_FEW_PAIRS
-            est = before
+            reason, est = Termination.TOO_FEW_PAIRS, before
             if observer is not None:
+                moved = before.apply(s.obj_pts)
+                no_pose = (float("nan"), Pose2(), None)
                 observer(
                     IterationEvent(
-                        it,
-                        before,
-                        before,
-                        before.apply(obj_pts),
-                        np.empty(0, np.int64),
-                        polar_pairs(grid, ref_pre, proj, res.i, res.e, res.used, ref_point_of),
-                        None,
-                        float("nan"),
-                        Pose2(),
-                        None,
+                        it, before, before, moved, _NONE, s.pairs(proj, res), None, *no_pose
                     )
                 )
             break
-        step = translation_step(ref_pre, res.iu, res.eu, res.wu, normals)
-        dt, error = step.dt, step.error
-        if dt is None:
+        step = translation_step(s.ref, res.iu, res.eu, res.wu, s.normals)
+        if step.dt is None:
             reason, est = Termination.SINGULAR, before
             break
-        est = Pose2(float(dt[0]), float(dt[1]), 0.0) @ est
+        est = Pose2(float(step.dt[0]), float(step.dt[1]), 0.0) @ est
         lam_used = lam
         if strategy.metric:
-            # Paper 003 eq. 17 (lost): the weight that balances the two terms of the norm at the
-            # rotation the range term points to, lambda = D / |theta_r|: D the mean |range
-            # difference| of this iteration, theta_r the shift where the range cost alone is least.
-            # (Balancing at the step actually taken would lock: a small step raises lambda, which
-            # keeps the next step small.)
-            j = least(range_cost)
-            theta_r = abs(float(shifts[j])) * grid.step if j is not None else 0.0
-            lam = min(step.mean_abs / max(theta_r, grid.step), params.lambda_max)
+            lam = _balanced_lambda(s, params, o.range_cost, step.mean_abs)
         inc = est @ before.inverse()
         if observer is not None:
-            # Diosi's rows are the rays u_i
-            circle = step.rhs[:, None] * step.rows if projected_circle else None
+            polar = _polar_step(strategy, s, proj0, o, lam_used, res, step)
+            moved, pairs = before.apply(s.obj_pts), s.pairs(proj, res)
             observer(
                 IterationEvent(
-                    it,
-                    before,
-                    est,
-                    before.apply(obj_pts),
-                    np.empty(0, np.int64),
-                    polar_pairs(grid, ref_pre, proj, res.i, res.e, res.used, ref_point_of),
-                    params.max_error,
-                    error,
-                    inc,
-                    PolarStep(
-                        grid.bearings,
-                        ref_r,
-                        proj0,
-                        shifts,
-                        cost,
-                        k_best,
-                        strategy.fit if k_best is not None else None,
-                        abc,
-                        lam_used,
-                        res.e,
-                        res.w,
-                        circle,
-                        0.5 * np.array(dt) if projected_circle else None,
-                    ),
+                    it, before, est, moved, _NONE, pairs, params.max_error, step.error, inc, polar
                 )
             )
-        last = (error, res.iu, len(res.iu), len(res.i) - len(res.iu))
+        last = (step.error, res.iu, len(res.iu), len(res.i) - len(res.iu))
         n_small = n_small + 1 if params.small(inc) else 0
         if n_small >= params.stop_after:
             reason = Termination.CONVERGED
@@ -640,11 +670,24 @@ def run_polar(
         if cycles.step(before, est) >= params.stop_after:
             reason = Termination.CYCLE
             break
+    result = _result(strategy, s, est, reason, it, last)
+    if observer is not None:
+        observer(FinishEvent(result))
+    return result
+
+
+# An iteration's hidden points: the polar matchers hide none
+_NONE = np.empty(0, np.int64)
+
+
+def _result(strategy: Strategy, s: _Prepared, est: Pose2, reason, it: int, last) -> MatchResult:
+    """The estimate, with the last translation step's pairs for the degeneracy indicator."""
     deg = None
     if last is not None:
-        j = ref_point_of[last[1]]
-        deg = degeneracy(ref_pts[j], surface_tangents(ref_pts, grid.full, j), DEGENERACY_LENGTH_M)
-    result = MatchResult(
+        j = s.ref_point_of[last[1]]
+        tangents = surface_tangents(s.ref_pts, s.grid.full, j)
+        deg = degeneracy(s.ref_pts[j], tangents, DEGENERACY_LENGTH_M)
+    return MatchResult(
         strategy.name,
         est,
         reason.converged,
@@ -656,6 +699,3 @@ def run_polar(
         None,
         deg,
     )
-    if observer is not None:
-        observer(FinishEvent(result))
-    return result

@@ -27,6 +27,7 @@ Python code calls a kernel through ``run(kernel, *args)``; compiled code calls k
 from __future__ import annotations
 
 import os
+import pickle
 import subprocess
 import sys
 import threading
@@ -59,6 +60,7 @@ def kernel(fn=None, *, inline: str = "never"):
     k = njit(cache=True, inline=inline)(fn)
     # an inlined kernel is compiled into its callers only: no cache entry of its own
     if inline == "never":
+        _stale_index_reads_as_stale(k)
         _KERNELS.append(k)
     return k
 
@@ -66,8 +68,27 @@ def kernel(fn=None, *, inline: str = "never"):
 def elementwise(fn):
     """A compiled scalar kernel that broadcasts as a numpy ufunc (numba's vectorize, cached)."""
     k = vectorize(cache=True)(fn)
+    _stale_index_reads_as_stale(k)
     _KERNELS.append(k)
     return k
+
+
+def _stale_index_reads_as_stale(k) -> None:
+    """numba unpickles a kernel's cache index before it checks that the index belongs to the
+    source as it is now; an index written by an earlier version whose argument types named a class
+    since renamed or removed (a named tuple a loop takes) then raises instead of reading as stale,
+    and every match fails. Such an index reads as empty here, as numba means a stale one to: the
+    kernel compiles anew and overwrites it."""
+    index = function_cache(k)._cache_file
+    load = index._load_index
+
+    def tolerant():
+        try:
+            return load()
+        except (AttributeError, ImportError, pickle.UnpicklingError, EOFError):
+            return {}
+
+    index._load_index = tolerant
 
 
 class _Tiers:

@@ -13,7 +13,7 @@ from mbicp_viz.core import ImprovedParams, Pose2, Recorder, match, pose_error
 from mbicp_viz.core.mbicp import _extrapolate
 from mbicp_viz.evaluation.bench import bench_guesses
 from mbicp_viz.evaluation.pairs import stored_truth
-from mbicp_viz.readers.params_toml import load_params
+from mbicp_viz.readers.params_toml import make_params
 from mbicp_viz.views.text import iteration_text
 
 from .conftest import DATA
@@ -81,7 +81,7 @@ def test_fewer_iterations_to_the_same_answers_on_real_pairs(laserazos):
     file's improved MbICP succeeds as often with fewer iterations, and says which steps went on."""
     pairs = laserazos.consecutive_pairs(39)
     guesses = bench_guesses(laserazos, pairs, (0.3, math.radians(15.0)), 0)
-    option = load_params("poor-guess", "improved")
+    option = make_params("improved", "poor-guess")
     assert option.extrapolate > 0.0
     annealed = option.replace(extrapolate=0.0)
     counts = {"on": [0, 0], "off": [0, 0]}
@@ -123,6 +123,7 @@ def test_match_and_the_debugger_say_which_steps_went_on(laserazos):
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app
+    from mbicp_viz.views.debugger import report
     from mbicp_viz.views.debugger.state import DebugState, Source
 
     option = "poor-guess"
@@ -148,7 +149,7 @@ def test_match_and_the_debugger_say_which_steps_went_on(laserazos):
     marked = [line for line in res.stdout.splitlines() if "extrapolated x" in line]
     assert marked and all(float(line.rsplit("x", 1)[1]) > 1.0 for line in marked)
 
-    params = load_params(option, "improved")
+    params = make_params("improved", option)
     state = DebugState(
         Source(
             "laserazos",
@@ -162,7 +163,7 @@ def test_match_and_the_debugger_say_which_steps_went_on(laserazos):
     texts = []
     for k in range(1, state.max_iteration() + 1):
         state.iteration = k
-        ev = state.event(state.runs[0])
-        texts.append((ev.extrapolated, state.iteration_text(state.runs[0])))
+        ev = report.event(state, state.runs[0])
+        texts.append((ev.extrapolated, report.iteration_text(state, state.runs[0])))
     assert any(f for f, _ in texts)
     assert all(("extrapolated" in t) == bool(f) for f, t in texts)

@@ -335,3 +335,11 @@ def test_errors_raised_in_worker_processes_arrive_whole():
     scans = read_log(INTEL).scans[:4]
     with pytest.raises(ScanError, match="scan 0.*refused in a worker"):
         ordered_map(_refuse, scans, workers=2)
+
+
+def test_a_key_holding_a_newline_is_named_on_one_line(tmp_path):
+    """A parameter file's key is the user's text: one holding a control character is quoted and
+    escaped, so the error stays one line (the rows-file fuzzer found such a key)."""
+    params = write(tmp_path, "p.toml", '"mad_\\nanneal" = 1.0\n')
+    code, out = run("match", INTEL, "--pair", 0, 1, "--params", params)
+    assert_clean_error(code, out, "p.toml", "'mad_\\nanneal': unknown parameter")

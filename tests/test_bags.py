@@ -263,6 +263,7 @@ def test_the_debugger_switches_topics_and_shows_the_odometry(tmp_path, intel, la
     one (never both); the object scan at the bag's odometry is a layer, with its distance in the
     result."""
     from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger import report
     from mbicp_viz.views.debugger.sources import files_source
     from mbicp_viz.views.debugger.state import DebugState
 
@@ -273,12 +274,12 @@ def test_the_debugger_switches_topics_and_shows_the_odometry(tmp_path, intel, la
         files_source(str(path), None, guess="identity", options=ReadOptions(topic="/scan"))
     )
     assert state.rematch() is None and set(state.source.log.scan_topics) == {"/scan", "/rear/scan"}
-    paths = {ly.path: ly for ly in state.layers(state.runs[0])}
+    paths = {ly.path: ly for ly in report.layers(state, state.runs[0])}
     odometry = paths[f"{scene.SCANS}/odometry"]
     assert odometry.style is scene.ODOMETRY
     laser = relative(intel.scan(30).pose, intel.scan(31).pose)  # the odometry, seen by the laser
     assert np.allclose(odometry.xy, laser.apply(state.runs[0].start.obj_points), atol=1e-9)
-    assert "from the odometry (/odom (nav_msgs/Odometry))" in state.result_markdown()
+    assert "from the odometry (/odom (nav_msgs/Odometry))" in report.result_markdown(state)
 
     assert state.set_topic("/rear/scan") is None
     log = state.source.log

@@ -311,10 +311,8 @@ def test_the_lesson_step_by_step(browser, tmp_path):
             # the text, with its numbers
             page.get_by_text(sr.text[:60]).first.wait_for(timeout=30000)
             state = session.state
-            assert (
-                state.algorithms == list(step.scenario.params) and state.iteration == sr.iteration
-            )
-            own = {s.label for s in step.layers} | {f"{r}: object scan" for r in state.algorithms}
+            assert state.matchers == list(step.scenario.params) and state.iteration == sr.iteration
+            own = {s.label for s in step.layers} | {f"{r}: object scan" for r in state.matchers}
 
             # what the legend lists: the step's layers, and the grid
             def legend_is_the_steps(own=own) -> bool:

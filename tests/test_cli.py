@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
 from mbicp_viz.core import MATCHERS, field_specs
-from mbicp_viz.readers.params_toml import load_params
+from mbicp_viz.readers.params_toml import make_params
 
 from .conftest import DATA, HOKUYO_BAG, INTEL, LASERAZOS, json_lines
 
@@ -81,7 +81,7 @@ def test_bench_reports_median_p90_and_rate():
 def test_params_file_round_trip(tmp_path, algo):
     path = tmp_path / "p.toml"
     ok("params", "--algo", algo, "--out", path)
-    loaded = load_params(str(path), algo)
+    loaded = make_params(algo, str(path))
     defaults = MATCHERS[algo].params_type()
     for s in field_specs(type(defaults)):
         assert getattr(loaded, s.name) == pytest.approx(getattr(defaults, s.name), rel=1e-12), (

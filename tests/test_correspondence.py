@@ -8,14 +8,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error
-from mbicp_viz.core.correspondence import ReferenceIndex, nearest, point_line_pairs, polar
+from mbicp_viz.core.correspondence import ReferenceIndex, candidates, nearest
 from mbicp_viz.core.events import PairKind
 from mbicp_viz.core.mbicp import rejection_floor
 from mbicp_viz.core.metric import metric_distance_sq
+from mbicp_viz.core.tiers import run
 from mbicp_viz.evaluation.overlap import case_pair, make_cases
 from mbicp_viz.readers import read_log
 
 from .conftest import DATA
+
+
+def polar(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1])
 
 
 def brute_force_nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, L: float) -> np.ndarray:
@@ -56,7 +61,7 @@ def test_nearest_equals_the_brute_force_window_search(scans, which, k, x, y, t, 
     ref = ReferenceIndex.build(ref_scan, L)
     moved = Pose2(x, y, t).apply(obj_scan.points())
     Bw = math.radians(Bw_deg)
-    idx, d2 = nearest(ref, moved, Bw, Br, L)
+    idx, d2 = run(nearest, moved, *polar(moved), ref, Bw, Br, L)
     # a beam exactly at +/-Bw is in or out by round-off: bracket the answer between both windows
     inner, outer = (
         brute_force_nearest(ref, moved, Bw - 1e-9, L),
@@ -90,32 +95,35 @@ def test_point_line_pairs_follow_paper_000(scans, which, k, x, y, t, max_len):
     ref_scan = scans[which][k % len(scans[which])]
     ref = ReferenceIndex.build(ref_scan, 3.0)
     moved = Pose2(x, y, t).apply(scans[which][(k + 1) % len(scans[which])].points())
-    rows = np.arange(len(moved))
-    pairs = point_line_pairs(ref, moved, polar(moved), rows, math.radians(45), 1.0, 3.0, max_len)
-    idx, d2 = nearest(ref, moved, math.radians(45), 1.0, 3.0)
-    np.testing.assert_array_equal(pairs.obj, rows[idx >= 0])
-    np.testing.assert_array_equal(pairs.ref_index[:, 0], idx[idx >= 0])
-    for j in np.unique(pairs.ref_index[:, 0]):
-        group = np.flatnonzero(pairs.ref_index[:, 0] == j)
-        keeper = group[np.argmin(d2[pairs.obj[group]])]
+    Bw = math.radians(45)
+    obj, target, kind, ref_index, pair_d2 = run(
+        candidates, True, moved, *polar(moved), ref, Bw, 1.0, 3.0, max_len
+    )
+    dist = np.sqrt(np.maximum(pair_d2, 0.0))
+    idx, d2 = run(nearest, moved, *polar(moved), ref, Bw, 1.0, 3.0)
+    np.testing.assert_array_equal(obj, np.flatnonzero(idx >= 0))
+    np.testing.assert_array_equal(ref_index[:, 0], idx[idx >= 0])
+    for j in np.unique(ref_index[:, 0]):
+        group = np.flatnonzero(ref_index[:, 0] == j)
+        keeper = group[np.argmin(d2[obj[group]])]
         a = ref.points[j]
         for g in group:
-            p = moved[pairs.obj[g]]
+            p = moved[obj[g]]
             if g == keeper:
-                assert pairs.kind[g] == PairKind.POINT and np.array_equal(pairs.target[g], a)
+                assert kind[g] == PairKind.POINT and np.array_equal(target[g], a)
                 continue
             nbs = [n for n in ref.neighbours[j] if n >= 0]
             d_nb = [metric_distance_sq(p, ref.points[n], 3.0) for n in nbs]
             second = nbs[int(np.argmin(d_nb))] if nbs else -1
             if second < 0 or np.linalg.norm(ref.points[second] - a) > max_len:
-                assert pairs.kind[g] == PairKind.POINT and np.array_equal(pairs.target[g], a)
-                assert pairs.dist[g] == pytest.approx(math.sqrt(d2[pairs.obj[g]]))
+                assert kind[g] == PairKind.POINT and np.array_equal(target[g], a)
+                assert dist[g] == pytest.approx(math.sqrt(d2[obj[g]]))
                 continue
             e = ref.points[second] - a
             foot = a + np.clip(np.dot(p - a, e) / np.dot(e, e), 0.0, 1.0) * e
-            assert pairs.kind[g] == PairKind.INTERPOLATED and pairs.ref_index[g, 1] == second
-            np.testing.assert_allclose(pairs.target[g], foot, atol=1e-12)
-            assert pairs.dist[g] == pytest.approx(
+            assert kind[g] == PairKind.INTERPOLATED and ref_index[g, 1] == second
+            np.testing.assert_allclose(target[g], foot, atol=1e-12)
+            assert dist[g] == pytest.approx(
                 math.sqrt(max(metric_distance_sq(p, foot, 3.0), 0.0)), abs=1e-12
             )
 

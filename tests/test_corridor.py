@@ -13,6 +13,7 @@ from mbicp_viz.evaluation.pairs import stored_truth
 from mbicp_viz.evaluation.single import Setup, match_pair
 from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene, viser_draw
+from mbicp_viz.views.debugger import report
 from mbicp_viz.views.debugger.state import DebugState, Source
 from mbicp_viz.views.rrd import record
 from mbicp_viz.views.text import iteration_text
@@ -66,7 +67,7 @@ def test_held_direction_is_drawn_in_both_front_ends(tmp_path):
         drawn = []
         for k in range(1, state.max_iteration() + 1):
             state.iteration = k
-            for layer in state.layers(state.runs[0]):
+            for layer in report.layers(state, state.runs[0]):
                 if isinstance(layer, scene.Segments) and layer.style is scene.HELD:
                     viser_draw.draw(server.scene, f"/t/{k}", layer)
                     drawn.append(layer)

@@ -144,6 +144,7 @@ def test_odometry_correction_needs_odometry(tmp_path, hokuyo):
 
 def test_the_debugger_shows_the_scans_as_measured_and_the_seam(tmp_path, hokuyo):
     from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger import report
     from mbicp_viz.views.debugger.state import DebugState, Source
 
     path = write(
@@ -157,7 +158,7 @@ def test_the_debugger_shows_the_scans_as_measured_and_the_seam(tmp_path, hokuyo)
     log = read_log(path, ReadOptions(deskew="velocity"))
     state = DebugState(Source("deskewed", log, guess=Pose2()))
     assert state.rematch() is None
-    layers = {getattr(ly, "style", None): ly for ly in state.layers(state.runs[0])}
+    layers = {getattr(ly, "style", None): ly for ly in report.layers(state, state.runs[0])}
     raw = layers[scene.RAW]
     assert len(raw.xy) == log.scans[0].raw.n_valid + log.scans[1].raw.n_valid
     assert scene.SEAM not in layers  # a 239-degree scan has no seam
@@ -165,7 +166,9 @@ def test_the_debugger_shows_the_scans_as_measured_and_the_seam(tmp_path, hokuyo)
     stallo = read_log(DATA.parent.parent / "recordings" / "inputs" / "stallo2.jsonl")
     state = DebugState(Source("360", stallo, guess=Pose2()))
     assert state.rematch() is None
-    seam = {getattr(ly, "style", None): ly for ly in state.layers(state.runs[0])}[scene.SEAM]
+    seam = {getattr(ly, "style", None): ly for ly in report.layers(state, state.runs[0])}[
+        scene.SEAM
+    ]
     assert np.allclose(seam.ends, stallo.scans[0].points()[[0, -1]])
 
 

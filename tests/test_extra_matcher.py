@@ -35,7 +35,7 @@ out["rrd"] = sorted({c.entity_path for c in RrdReader(rrd).stream().to_chunks()}
 server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
 try:
     s = Session(server, Source("laserazos", read_log(log), pair=(5, 6), guess=Pose2(),
-                               algorithms=("p2p",)))
+                               matchers=("p2p",)))
     s.first_match(None)
     out["debugger"] = (list(s.matchers.boxes), s.state.runs[0].result.reason.value)
     s.close()

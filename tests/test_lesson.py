@@ -356,8 +356,8 @@ def test_rerun_viewer_shows_every_step(lesson, tmp_path):
     """rerun's own viewer, moved to each step of the lesson's .rrd: the first matcher's view draws
     the reference scan (red), the second one's draws scans when the step has two matchers and
     nothing when it has one, and the plot beside them is drawn when the step has one."""
-    from mbicp_viz.views.handout import side_plot
-    from mbicp_viz.views.lesson_rrd import record_lesson
+    from mbicp_viz.views.lesson.handout import side_plot
+    from mbicp_viz.views.lesson.recording import record_lesson
 
     path = tmp_path / "lesson.rrd"
     record_lesson(lesson, str(path))

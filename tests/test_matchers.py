@@ -24,7 +24,7 @@ from mbicp_viz.core import (
 )
 from mbicp_viz.evaluation.protocols import displaced_self_matches
 from mbicp_viz.readers import read_log
-from mbicp_viz.readers.params_toml import load_params
+from mbicp_viz.readers.params_toml import make_params
 
 from .conftest import DATA
 
@@ -103,7 +103,7 @@ def test_matching_is_equivariant_under_a_common_rotation(algo, intel, phi):
 
 def protocol(algo: str, n: int = 200):
     scans = read_log(DATA / "laserazosSM3-40.log").scans
-    params = load_params(PROTOCOL_PARAMS, algo)
+    params = make_params(algo, PROTOCOL_PARAMS)
     cases = displaced_self_matches(scans, n, params, seed=24)
     ok = sum(c.error_m < 0.01 and c.error_rad < math.radians(0.1) for c in cases)
     return ok / n, cases
@@ -131,8 +131,8 @@ def test_mbicp_protocol_icp_fails_on_large_rotations():
 
 
 def test_mbicp_protocol_improved():
-    """Improved MbICP on the same protocol; what it misses are large turns (README: full-log
-    figures)."""
+    """Improved MbICP on the same protocol; what it misses are large turns (docs/reference.md:
+    full-log figures)."""
     rate, cases = protocol("improved")
     assert rate >= 0.99
     failures = [c for c in cases if c.error_m >= 0.01 or c.error_rad >= math.radians(0.1)]

@@ -1,6 +1,6 @@
 """The baselines reproduce their originals: poses the original C implementations return on real
-pairs, pinned. How they were obtained (reproduce with README "Faithful baselines"): the original
-code built locally from its public sources, never part of this project —
+pairs, pinned. How they were obtained (reproduce with docs/reference.md, "Faithful baselines"):
+the original code built locally from its public sources, never part of this project —
 
 - MbICP: Minguez's C library as Player ships it (playerproject/player at cb1e0b13,
   server/drivers/position/mbicp), ``gcc -O2``, called as Player's ``mbicp`` driver calls it, with

@@ -8,7 +8,7 @@ from mbicp_viz.cli import app
 from mbicp_viz.core import ImprovedParams, MbicpParams
 from mbicp_viz.evaluation.overlap import case_pair, classify, make_cases, run_overlap, tables
 from mbicp_viz.readers import read_log
-from mbicp_viz.readers.params_toml import load_params
+from mbicp_viz.readers.params_toml import make_params
 
 from .conftest import LASERAZOS
 
@@ -48,7 +48,7 @@ def test_the_reference_loses_the_points_so_object_points_lack_counterparts():
 
 # Standard MbICP as paper 000 runs it: the parameters it shares with improved MbICP identical
 # (§3.1).
-COMMON = load_params("paper000-common", "mbicp")
+COMMON = make_params("mbicp", "paper000-common")
 
 
 def test_thinning_the_reference_is_what_makes_standard_mbicp_degrade():

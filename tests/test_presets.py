@@ -1,5 +1,5 @@
 """The parameter presets: shipped with the package, read by ``--params NAME``, and the ones the
-README and docs/results.md run are the ones that exist, for the matchers they run them with."""
+README and docs/ run are the ones that exist, for the matchers they run them with."""
 
 import fnmatch
 import json
@@ -12,12 +12,12 @@ import pytest
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.readers.params_toml import PRESETS, load_params, preset_names
+from mbicp_viz.readers.params_toml import PRESETS, make_params, preset_names
 
 from .conftest import LASERAZOS
 
 ROOT = Path(__file__).parent.parent
-DOCS = (ROOT / "README.md", ROOT / "docs" / "results.md")
+DOCS = (ROOT / "README.md", ROOT / "docs" / "reference.md", ROOT / "docs" / "results.md")
 runner = CliRunner()
 
 
@@ -45,7 +45,7 @@ def test_every_preset_the_docs_run_exists_and_loads_for_its_matchers():
     runs = set(documented_runs())
     assert {name for name, _ in runs} == set(preset_names())  # none missing, none undocumented
     for name, algo in runs:
-        load_params(name, algo)  # raises on a key the matcher does not have
+        make_params(algo, name)  # raises on a key the matcher does not have
 
 
 def test_the_presets_are_package_data():

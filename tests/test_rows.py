@@ -15,6 +15,7 @@ from mbicp_viz.core import MATCHERS
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.failures import failed, failure_reason, worst_first
 from mbicp_viz.readers.rows import read_rows
+from mbicp_viz.views.debugger import report
 from mbicp_viz.views.debugger.sources import files_source
 from mbicp_viz.views.debugger.state import DebugState
 
@@ -89,13 +90,13 @@ def test_every_failure_reopens_exactly_as_it_failed(rows_file):
     assert state.pair == (first.ref, first.obj) and state.guess == first.guess
     for row in src.failures:
         assert state.open_row(row) is None
-        assert state.algorithms == [row.matcher] and state.params[row.matcher] == row.params
+        assert state.matchers == [row.matcher] and state.params[row.matcher] == row.params
         pose = state.runs[0].result.pose
         assert (
             math.hypot(pose.x - row.result.pose.x, pose.y - row.result.pose.y) < 1e-9
             and abs(pose.theta - row.result.pose.theta) < 1e-9
         )
-        text = state.result_markdown()
+        text = report.result_markdown(state)
         assert (
             f"line {row.line}" in text
             and "this run reproduces it" in text
@@ -103,7 +104,7 @@ def test_every_failure_reopens_exactly_as_it_failed(rows_file):
         )
     # change what the evaluation ran with: the page says the run no longer reproduces it
     assert state.set_params(row.matcher, {"MaxIter": "3"}) is None
-    assert "this run differs from it" in state.result_markdown()
+    assert "this run differs from it" in report.result_markdown(state)
 
 
 def test_rows_from_another_log_are_refused(rows_file, tmp_path):

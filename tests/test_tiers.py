@@ -13,7 +13,7 @@ import pytest
 
 from mbicp_viz.core import MATCHERS, Pose2, Recorder, tiers
 from mbicp_viz.readers import read_log
-from mbicp_viz.readers.params_toml import load_params
+from mbicp_viz.readers.params_toml import make_params
 
 from .conftest import EXAMPLES, INTEL, interpreted_kernels, wait_for
 
@@ -53,7 +53,7 @@ def test_interpreted_kernels_compute_what_the_compiled_ones_do(name):
 @pytest.mark.parametrize("option", ["poor-guess", "hold-corridor"])
 def test_interpreted_kernels_follow_the_compiled_ones_through_improved_mbicps_options(option):
     """The options' code paths too (extrapolated steps, held directions): the same iterations."""
-    params = load_params(option, "improved")
+    params = make_params("improved", option)
     for ref, obj, guess in _cases():
         compiled, events = MATCHERS["improved"].run(ref, obj, guess, params), Recorder()
         with interpreted_kernels():
@@ -196,3 +196,50 @@ def test_the_background_compile_imports_the_package_of_its_parent(tmp_path):
     )
     assert res.returncode == 0, res.stderr
     assert not marker.exists()
+
+
+LOOP_MODULE = """
+from typing import NamedTuple
+
+import numpy as np
+
+from mbicp_viz.core.tiers import kernel
+
+
+class {name}(NamedTuple):
+    scale: float
+    values: np.ndarray
+
+
+@kernel
+def total(p):
+    return p.scale * p.values.sum()
+
+
+print(total({name}(2.0, np.arange(4.0))))
+"""
+
+
+def test_a_cache_naming_a_class_since_renamed_is_compiled_anew(tmp_path):
+    """A kernel that takes a named tuple, cached, then its class renamed (an upgrade): numba's index
+    of the old source names a class that is gone. The next run compiles anew instead of failing
+    (numba unpickles an index before it checks that the index is this source's)."""
+    env = os.environ | {
+        "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+        "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path]),
+    }
+    module = tmp_path / "loop_of_an_old_version.py"
+    outputs = []
+    for name in ("Params", "Params", "RenamedParams"):  # compiled, loaded from cache, renamed
+        module.write_text(LOOP_MODULE.format(name=name))
+        run = subprocess.run(
+            [sys.executable, "-c", "import loop_of_an_old_version"],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert run.returncode == 0, run.stderr
+        outputs.append(run.stdout.strip())
+    assert outputs == ["12.0"] * 3
+    assert any((tmp_path / "cache").rglob("*.nbi"))  # the kernel was cached

@@ -16,7 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.readers.params_toml import load_params
+from mbicp_viz.readers.params_toml import make_params
 from mbicp_viz.readers.rows import read_rows
 from mbicp_viz.views.debugger.sources import files_source
 
@@ -62,7 +62,7 @@ def test_a_study_against_the_scan_poses_with_a_holdout(tmp_path):
     # defaults are trial 0
     assert len(successes(train)) == 2 and successes(train)[1] >= successes(train)[0]
     assert len(successes(held)) == 2
-    best = load_params(tmp_path / "tuned.toml", "improved")  # the TOML reads back
+    best = make_params("improved", tmp_path / "tuned.toml")  # the TOML reads back
     assert any(f"L {best.L:.4g}" in ln for ln in lines)
     for png in ("history.png", "importance.png"):
         assert (tmp_path / "png" / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

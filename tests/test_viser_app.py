@@ -14,6 +14,7 @@ from mbicp_viz.choices import Guess
 from mbicp_viz.core import MATCHERS, Pose2, field_specs, pose_error
 from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene
+from mbicp_viz.views.debugger import report
 from mbicp_viz.views.debugger.camera import TopDownCamera
 from mbicp_viz.views.debugger.session import Session
 from mbicp_viz.views.debugger.sources import files_source, scenario_source
@@ -61,7 +62,7 @@ def test_each_iteration_draws_exactly_the_layers_of_its_own(session, server):
     at_end = set(session.nodes)
     assert "/improved/scene/pairs/point" in at_end
     session.playback.slider.value = 0
-    own = {f"/improved/{ly.path}" for ly in session.state.layers(session.state.runs[0])}
+    own = {f"/improved/{ly.path}" for ly in report.layers(session.state, session.state.runs[0])}
     assert set(session.nodes) <= own and "/improved/scene/pairs/point" not in session.nodes
     gone = at_end - set(session.nodes)
     assert gone and not gone & set(server.scene._handle_from_node_name)  # removed from the scene
@@ -253,7 +254,7 @@ def test_the_servers_memory_stays_flat_over_many_exports(session):
 def test_export_writes_a_readable_rrd_and_params(session, tmp_path):
     from rerun.chunk import RrdReader
 
-    from mbicp_viz.readers.params_toml import load_params, load_search
+    from mbicp_viz.readers.params_toml import make_params, read_params
 
     p = tmp_path / "s.rrd"
     p.write_bytes(session.export_rrd())
@@ -262,8 +263,8 @@ def test_export_writes_a_readable_rrd_and_params(session, tmp_path):
     submit(session.guess.search, window_xy="0.75")
     f = tmp_path / "p.toml"
     f.write_text(session.export_params())
-    assert load_params(str(f), "improved") == session.state.params["improved"]
-    assert load_search(str(f)).window_xy == 0.75
+    assert make_params("improved", str(f)) == session.state.params["improved"]
+    assert read_params(str(f), []).search.window_xy == 0.75
 
 
 def test_log_source_picks_any_pair(server):
@@ -282,7 +283,7 @@ def test_log_source_picks_any_pair(server):
 
 def test_scenario_source_shows_its_note_and_teaching_layers(server):
     src = scenario_source("partial-overlap")
-    assert src.truth is not None and src.algorithms == ("mbicp", "improved") and src.teaching
+    assert src.truth is not None and src.matchers == ("mbicp", "improved") and src.teaching
     s = Session(server, src)
     assert s.state.visible[scene.ISO_METRIC.label]  # teaching = true: on from the start
     assert scene.TRUTH.label in s.h_legend.content
@@ -357,12 +358,12 @@ def test_every_layer_of_every_matcher_has_a_place_in_both_front_ends(server, nam
     from mbicp_viz.views.rrd import record
 
     log = read_log(LASERAZOS)
-    state = DebugState(Source("laserazos", log, guess=Pose2(0.05, 0.0, 0.05), algorithms=(name,)))
+    state = DebugState(Source("laserazos", log, guess=Pose2(0.05, 0.0, 0.05), matchers=(name,)))
     assert state.rematch() is None
     drawn = set()
     for k in range(state.max_iteration() + 1):
         state.iteration = k
-        for layer in state.layers(state.runs[0]):
+        for layer in report.layers(state, state.runs[0]):
             if viser_draw.in_scan_plane(layer):
                 viser_draw.draw(server.scene, f"/t/{layer.path}", layer)
                 drawn.add(layer.path)
@@ -533,7 +534,7 @@ def test_lesson_mode_opens_each_step_and_refuses_a_forged_step(server):
     assert s.lesson is not None and "Step 1 of" in s.lesson.heading.content
     s.lesson.open(5)
     assert (
-        s.state.algorithms == list(steps[5].scenario.params)
+        s.state.matchers == list(steps[5].scenario.params)
         and "Step 6 of" in s.lesson.heading.content
     )
     assert s.lesson.pick.value.startswith("6.")

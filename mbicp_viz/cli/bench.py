@@ -9,8 +9,8 @@ from typing import Annotated
 import typer
 
 from .options import (
-    DEFAULT_ALGO,
-    AlgoOpt,
+    DEFAULT_MATCHER,
+    MatcherOpt,
     PairOpt,
     ParamsOpt,
     TeachOpt,
@@ -25,7 +25,7 @@ from .serve import DEMO_PAIR
 
 def matches(
     log: Annotated[str, typer.Argument(help="scan log")],
-    algo: AlgoOpt = DEFAULT_ALGO,
+    matcher: MatcherOpt = DEFAULT_MATCHER,
     params: ParamsOpt = None,
     limit: Annotated[int, typer.Option("--limit", min=1, help="consecutive pairs to time")] = 50,
     repeat: Annotated[int, typer.Option("--repeat", min=1, help="runs per pair")] = 3,
@@ -53,8 +53,8 @@ def matches(
     from mbicp_viz.readers.params_toml import make_params
 
     lg = read_log_saying(log, read_options(topic))
-    p = make_params(algo.value, params)
-    typer.echo(f"{algo.value} on {log}: {len(lg.scans[0].ranges)} beams; {machine_line()}")
+    p = make_params(matcher.value, params)
+    typer.echo(f"{matcher.value} on {log}: {len(lg.scans[0].ranges)} beams; {machine_line()}")
     before = speed_probe_us()
     moved = None
     if perturb is not None:
@@ -77,7 +77,7 @@ def matches(
         "(median)"
     )
     if rrd:
-        from mbicp_viz.views.rrd import time_recordings
+        from mbicp_viz.views.timing import time_recordings
 
         t, sizes = time_recordings(lg, p, limit, 1, teach)
         typer.echo(t.line())

@@ -14,11 +14,9 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.outputs import write_text
 
 from .options import (
-    ALL_ALGOS,
-    DEFAULT_ALGO,
+    ALL_MATCHERS,
+    DEFAULT_MATCHER,
     SEARCH,
-    AlgoOpt,
-    AlgosOpt,
     CaseGuessOpt,
     CaseTruthOpt,
     DeskewOpt,
@@ -27,6 +25,8 @@ from .options import (
     FrameOpt,
     Guess,
     GuessOpt,
+    MatcherOpt,
+    MatchersOpt,
     MountOpt,
     OffsetOpt,
     PairOpt,
@@ -57,44 +57,62 @@ from .resume import log_identity, matched_rows, settings_of
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the first N pairs")]
+MaxXyOpt = Annotated[
+    float,
+    typer.Option(
+        "--max-xy", min=0.0, callback=finite, help="largest |x|, |y| of a random displacement [m]"
+    ),
+]
+MaxThetaDegOpt = Annotated[
+    float,
+    typer.Option(
+        "--max-theta-deg", min=0.0, max=180.0, help="largest |theta| of a random displacement [deg]"
+    ),
+]
+
+
+RowsOutOpt = Annotated[
+    Path,
+    typer.Option(
+        "--out",
+        help="rows file (JSON lines, one per consecutive pair), written as OUT.partial while "
+        "the pairs are matched; a stopped run resumes from it",
+    ),
+]
+PoseTruthOpt = Annotated[
+    str | None,
+    typer.Option("--truth", help="'pose': score against the log's scan poses (corrected logs)"),
+]
+PngOpt = Annotated[Path | None, typer.Option("--png", help="plot the trajectories and the map")]
+TumOpt = Annotated[
+    Path | None, typer.Option("--tum", help="write the trajectory in TUM format (for evo)")
+]
+TumRefOpt = Annotated[
+    Path | None, typer.Option("--tum-ref", help="write the log's scan poses in TUM format")
+]
+KalmanOpt = Annotated[
+    bool,
+    typer.Option(
+        "--kalman",
+        help="fuse the matches with the log's odometry (EKF, paper 003 §5.3); the TUM file and "
+        "map then use the fused track",
+    ),
+]
 
 
 def sequence(
     log: LogArg,
-    out: Annotated[
-        Path,
-        typer.Option(
-            "--out",
-            help="rows file (JSON lines, one per consecutive pair), written as OUT.partial while "
-            "the pairs are matched; a stopped run resumes from it",
-        ),
-    ],
-    algo: AlgoOpt = DEFAULT_ALGO,
+    out: RowsOutOpt,
+    matcher: MatcherOpt = DEFAULT_MATCHER,
     params: ParamsOpt = None,
     limit: LimitOpt = None,
     rrd: RrdOpt = None,
     guess: GuessOpt = Guess.stored,
-    truth: Annotated[
-        str | None,
-        typer.Option("--truth", help="'pose': score against the log's scan poses (corrected logs)"),
-    ] = None,
-    png: Annotated[
-        Path | None, typer.Option("--png", help="plot the trajectories and the map")
-    ] = None,
-    tum: Annotated[
-        Path | None, typer.Option("--tum", help="write the trajectory in TUM format (for evo)")
-    ] = None,
-    tum_ref: Annotated[
-        Path | None, typer.Option("--tum-ref", help="write the log's scan poses in TUM format")
-    ] = None,
-    kalman: Annotated[
-        bool,
-        typer.Option(
-            "--kalman",
-            help="fuse the matches with the log's odometry (EKF, "
-            "paper 003 §5.3); the TUM file and map then use the fused track",
-        ),
-    ] = False,
+    truth: PoseTruthOpt = None,
+    png: PngOpt = None,
+    tum: TumOpt = None,
+    tum_ref: TumRefOpt = None,
+    kalman: KalmanOpt = False,
     workers: WorkersOpt = None,
     frame: FrameOpt = Frame.base,
     topic: TopicOpt = None,
@@ -105,23 +123,22 @@ def sequence(
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else
     identity)."""
-    from mbicp_viz.evaluation.pairs import MISSING
-    from mbicp_viz.evaluation.sequence import match_sequence, odometry_summary, truth_summary
+    from mbicp_viz.evaluation.sequence import match_sequence
     from mbicp_viz.readers.pair_match import PairMatch, parse_pair_match
-    from mbicp_viz.readers.params_toml import load_search, make_params
+    from mbicp_viz.readers.params_toml import read_params
 
     if truth not in (None, "pose"):
         raise InputError("the only truth a log carries is 'pose'", field="--truth")
-    p = make_params(algo.value, params)
+    pf = read_params(params, [matcher.value])
+    p, search = pf.matchers[matcher.value], pf.search
     reading = read_options(topic, typestore, mount, upside_down, deskew)
     lg = read_log_saying(log, reading)
     pairs = lg.consecutive_pairs(limit)
-    search = load_search(params)
     run = {
         "command": "eval sequence",
         "log": log_identity(log),
         "read": settings_of(reading),
-        "algorithm": algo.value,
+        "algorithm": matcher.value,
         "params": p.as_dict(),
         "search": search.as_dict(),
         "guess": guess.value,
@@ -147,8 +164,36 @@ def sequence(
         PairMatch.to_json,
         parse_pair_match,
     )
-    conv = sum(r.result.converged for r in rows)
-    typer.echo(f"{len(rows)} pairs matched with {algo.value}: {conv} converged; written to {out}")
+    typer.echo(
+        f"{len(rows)} pairs matched with {matcher.value}: "
+        f"{sum(r.result.converged for r in rows)} converged; written to {out}"
+    )
+    _sequence_notes(lg, rows, truth, guess, frame)
+    if png or tum or tum_ref or kalman:
+        _trajectories(lg, rows, png, tum, tum_ref, kalman)
+    if rrd:
+        from mbicp_viz.views.rrd import record_sequence
+
+        record_sequence(lg, rows, str(rrd))
+        say(f"sequence recording written to {rrd}")
+    _failures(log, out)
+
+
+def _failures(log: str, out: Path) -> None:
+    """The rows' failures, read back from the file as ``serve --rows`` will open it."""
+    from mbicp_viz.evaluation.failures import failure_summary
+    from mbicp_viz.readers.rows import read_rows
+
+    for line in failure_summary(read_rows(out), str(out)):
+        typer.echo(line.replace("LOG", str(log)))
+
+
+def _sequence_notes(lg, rows, truth, guess: Guess, frame: Frame) -> None:
+    """The scores against the truth and the odometry, the frame of the poses, and the pairs
+    matched from the identity for want of a guess."""
+    from mbicp_viz.evaluation.pairs import MISSING
+    from mbicp_viz.evaluation.sequence import odometry_summary, truth_summary
+
     if truth:
         typer.echo("\n".join(truth_summary(rows)))
     if odometry := odometry_summary(rows):
@@ -159,19 +204,6 @@ def sequence(
             f"{without} pair(s) with no {guess.value} at one of their scans: matched from the "
             f"identity (their rows' guess says '{MISSING.format(guess.value)}')"
         )
-    if png or tum or tum_ref or kalman:
-        _trajectories(lg, rows, png, tum, tum_ref, kalman)
-    if rrd:
-        from mbicp_viz.views.rrd import record_sequence
-
-        record_sequence(lg, rows, str(rrd))
-        say(f"sequence recording written to {rrd}")
-    from mbicp_viz.evaluation.failures import failure_summary
-    from mbicp_viz.readers.rows import read_rows
-
-    # read back: what `serve --rows` will open
-    for line in failure_summary(read_rows(out), str(out)):
-        typer.echo(line.replace("LOG", str(log)))
 
 
 def _trajectories(lg, rows, png, tum, tum_ref, fuse) -> None:
@@ -199,22 +231,12 @@ def _trajectories(lg, rows, png, tum, tum_ref, fuse) -> None:
 
 def protocol(
     log: LogArg,
-    algo: AlgoOpt = DEFAULT_ALGO,
+    matcher: MatcherOpt = DEFAULT_MATCHER,
     params: ParamsOpt = None,
     cases: Annotated[int, typer.Option("--cases", min=1, help="number of random cases")] = 200,
     seed: SeedOpt = 24,
-    max_xy: Annotated[
-        float,
-        typer.Option(
-            "--max-xy", min=0.0, callback=finite, help="largest |x|, |y| of the guess [m]"
-        ),
-    ] = 0.2,
-    max_theta_deg: Annotated[
-        float,
-        typer.Option(
-            "--max-theta-deg", min=0.0, max=180.0, help="largest |theta| of the guess [deg]"
-        ),
-    ] = 45.0,
+    max_xy: MaxXyOpt = 0.2,
+    max_theta_deg: MaxThetaDegOpt = 45.0,
     topic: TopicOpt = None,
 ):
     """MbICP's own protocol: every case matches a scan against itself from a random guess."""
@@ -223,55 +245,53 @@ def protocol(
 
     scans = read_log_saying(log, read_options(topic)).scans
     res = displaced_self_matches(
-        scans, cases, make_params(algo.value, params), seed, max_xy, math.radians(max_theta_deg)
+        scans, cases, make_params(matcher.value, params), seed, max_xy, math.radians(max_theta_deg)
     )
-    typer.echo(protocol_summary(algo.value, res))
+    typer.echo(protocol_summary(matcher.value, res))
+
+
+ScenesPerLogOpt = Annotated[
+    int, typer.Option("--scenes-per-log", min=1, help="scenes taken from each log")
+]
+ScansOpt = Annotated[
+    str | None, typer.Option("--scans", help="explicit scene numbers I,J,... (one log)")
+]
+RatiosOpt = Annotated[str, typer.Option("--ratios", help="kept fractions in %")]
+RunsOpt = Annotated[
+    int, typer.Option("--runs", min=1, help="random displacements per scene and ratio")
+]
+RemovalOpt = Annotated[
+    Removal, typer.Option("--removal", help="one block (occlusion-like) or random points")
+]
+ThinOpt = Annotated[
+    Thin,
+    typer.Option(
+        "--thin",
+        help="the copy that loses the points: reference (its object points then lack "
+        "counterparts) or object",
+    ),
+]
+CsvOpt = Annotated[Path | None, typer.Option("--csv", help="write every run as CSV")]
+PlotOpt = Annotated[Path | None, typer.Option("--png", help="write a plot")]
 
 
 def overlap(
     logs: Annotated[
         list[str], typer.Argument(help="scan logs; scenes are picked evenly from each")
     ],
-    scenes_per_log: Annotated[
-        int, typer.Option("--scenes-per-log", min=1, help="scenes taken from each log")
-    ] = 1,
-    scans: Annotated[
-        str | None, typer.Option("--scans", help="explicit scene numbers I,J,... (one log)")
-    ] = None,
-    ratios: Annotated[
-        str, typer.Option("--ratios", help="kept fractions in %")
-    ] = "100,90,80,70,60",
-    runs: Annotated[
-        int, typer.Option("--runs", min=1, help="random displacements per scene and ratio")
-    ] = 10,
-    removal: Annotated[
-        Removal, typer.Option("--removal", help="one block (occlusion-like) or random points")
-    ] = Removal.block,
-    thin: Annotated[
-        Thin,
-        typer.Option(
-            "--thin",
-            help="the copy that loses the points: reference (its object "
-            "points then lack counterparts) or object",
-        ),
-    ] = Thin.reference,
-    algos: AlgosOpt = ALL_ALGOS,
+    scenes_per_log: ScenesPerLogOpt = 1,
+    scans: ScansOpt = None,
+    ratios: RatiosOpt = "100,90,80,70,60",
+    runs: RunsOpt = 10,
+    removal: RemovalOpt = Removal.block,
+    thin: ThinOpt = Thin.reference,
+    matchers: MatchersOpt = ALL_MATCHERS,
     params: ParamsOpt = None,
     seed: SeedOpt = 0,
-    max_xy: Annotated[
-        float,
-        typer.Option(
-            "--max-xy", min=0.0, callback=finite, help="largest |x|, |y| of a displacement [m]"
-        ),
-    ] = 0.5,
-    max_theta_deg: Annotated[
-        float,
-        typer.Option(
-            "--max-theta-deg", min=0.0, max=180.0, help="largest |theta| of a displacement [deg]"
-        ),
-    ] = 15.0,
-    csv: Annotated[Path | None, typer.Option("--csv", help="write every run as CSV")] = None,
-    png: Annotated[Path | None, typer.Option("--png", help="write a plot")] = None,
+    max_xy: MaxXyOpt = 0.5,
+    max_theta_deg: MaxThetaDegOpt = 15.0,
+    csv: CsvOpt = None,
+    png: PlotOpt = None,
     workers: WorkersOpt = None,
     topic: TopicOpt = None,
 ):
@@ -289,7 +309,7 @@ def overlap(
     etas = [v / 100.0 for v in number_list(ratios, "--ratios", "100,90,80")]
     if not all(0.0 < e <= 1.0 for e in etas):
         raise InputError("each ratio must lie in (0, 100]", field="--ratios")
-    ps = params_for(algos, params)
+    ps = params_for(matchers, params).matchers
     picked = number_list(scans, "--scans", "3,10,25", int) if scans else None
     scenes = [
         s
@@ -324,7 +344,7 @@ def ceiling(
     log: Annotated[
         str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")
     ],
-    algos: AlgosOpt = ALL_ALGOS,
+    matchers: MatchersOpt = ALL_MATCHERS,
     params: ParamsOpt = None,
     limit: LimitOpt = None,
     workers: WorkersOpt = None,
@@ -335,7 +355,7 @@ def ceiling(
     from mbicp_viz.evaluation.sequence import ceiling as ceiling_of
     from mbicp_viz.evaluation.sequence import ceiling_summary
 
-    by_name = params_for(algos, params)
+    by_name = params_for(matchers, params).matchers
     lg = read_log_saying(log, read_options(topic))
     with Progress(len(lg.consecutive_pairs(limit))) as bar:
         found, kept, doubted, n = ceiling_of(
@@ -350,7 +370,7 @@ def corridor(
     log: Annotated[
         str, typer.Argument(help="scan log whose scan poses are the truth (corrected logs)")
     ],
-    algos: AlgosOpt = ALL_ALGOS,
+    matchers: MatchersOpt = ALL_MATCHERS,
     params: ParamsOpt = None,
     perturb: Annotated[
         tuple[float, float],
@@ -380,7 +400,7 @@ def corridor(
     from mbicp_viz.evaluation.corridor import corridor_summary
 
     moved = check_perturb(perturb)
-    ps = params_for(algos, params)
+    ps = params_for(matchers, params).matchers
     lg = read_log_saying(log, read_options(topic))
     t0 = time.perf_counter()
     with Progress(len(lg.consecutive_pairs(None))) as bar:
@@ -399,7 +419,7 @@ def covariance(
     log: Annotated[
         str, typer.Argument(help="scan log with a truth (its scan poses, or --relations)")
     ],
-    algos: AlgosOpt = ALL_ALGOS,
+    matchers: MatchersOpt = ALL_MATCHERS,
     params: ParamsOpt = None,
     truth: CaseTruthOpt = "pose",
     relations_file: RelationsOpt = None,
@@ -419,11 +439,11 @@ def covariance(
     bounds)."""
     from mbicp_viz.evaluation.cases import cases_for
     from mbicp_viz.evaluation.covariance import consistency_lines, covariance_consistency, nees_png
-    from mbicp_viz.readers.params_toml import load_search
     from mbicp_viz.readers.relations import read_relations
 
     moved = cases_options(truth, relations_file, guess, perturb)
-    ps = params_for(algos, params)
+    pf = params_for(matchers, params)
+    ps = pf.matchers
     lg = read_log_saying(log, read_options(topic))
     cases = cases_for(
         0,
@@ -435,7 +455,7 @@ def covariance(
         guess,
         moved,
         seed,
-        load_search(params),
+        pf.search,
         limit,
     )
     results = {}
@@ -455,7 +475,7 @@ def relations(
     relations_file: Annotated[
         str, typer.Argument(metavar="RELATIONS", help="relations file (t1 t2 x y z roll pitch yaw)")
     ],
-    algo: AlgoOpt = DEFAULT_ALGO,
+    matcher: MatcherOpt = DEFAULT_MATCHER,
     params: ParamsOpt = None,
     offset: OffsetOpt = 0.0,
     tolerance: ToleranceOpt = 0.025,
@@ -485,12 +505,13 @@ def relations(
         stored_summary,
         summary,
     )
-    from mbicp_viz.readers.params_toml import load_search, make_params
+    from mbicp_viz.readers.params_toml import read_params
     from mbicp_viz.readers.relations import read_relations
 
     reading = read_options(topic)
     lg = read_log_saying(log, reading)
-    p, search = make_params(algo.value, params), load_search(params)
+    pf = read_params(params, [matcher.value])
+    p, search = pf.matchers[matcher.value], pf.search
     found, missing = relation_pairs(lg, read_relations(relations_file), offset, tolerance)
     records = lg.record_numbers()
     run = {
@@ -500,7 +521,7 @@ def relations(
         "read": settings_of(reading),
         "offset": offset,
         "tolerance": tolerance,
-        "algorithm": algo.value,
+        "algorithm": matcher.value,
         "params": p.as_dict(),
         "search": search.as_dict(),
         "guess": guess.value,
@@ -514,7 +535,9 @@ def relations(
             lg, found, p, guess, search, on_row=on_row, skip=skip, workers=workers
         ),
     )
-    typer.echo(f"{algo.value}: {summary(rows)} ({missing} relations without a scan at both ends)")
+    typer.echo(
+        f"{matcher.value}: {summary(rows)} ({missing} relations without a scan at both ends)"
+    )
     if stored := stored_summary(rows):
         typer.echo(stored)
 
@@ -531,7 +554,7 @@ def basin(
             help="the answer X Y THETA_DEG (default: the stored poses, else each matcher's own)",
         ),
     ] = None,
-    algos: AlgosOpt = ALL_ALGOS,
+    matchers: MatchersOpt = ALL_MATCHERS,
     params: ParamsOpt = None,
     range_xy: Annotated[
         float,
@@ -558,7 +581,7 @@ def basin(
     from mbicp_viz.evaluation.pairs import load_pair, stored_truth
 
     thetas = [math.radians(v) for v in number_list(thetas_deg, "--thetas-deg", "-15,0,15")]
-    ps = params_for(algos, params)
+    ps = params_for(matchers, params).matchers
     sp = load_pair(first, second, pair, read_options(topic, typestore, mount, upside_down, deskew))
     answer = pose_from_deg(truth, "--truth") or stored_truth(sp.ref, sp.obj)
     t0 = time.perf_counter()

@@ -9,7 +9,7 @@ import typer
 
 from mbicp_viz.outputs import write_text
 
-from .options import DEFAULT_ALGO, AlgoOpt, user_errors
+from .options import DEFAULT_MATCHER, MatcherOpt, user_errors
 
 
 def record(
@@ -38,7 +38,7 @@ def record(
 
 
 def params(
-    algo: AlgoOpt = DEFAULT_ALGO,
+    matcher: MatcherOpt = DEFAULT_MATCHER,
     out: Annotated[Path | None, typer.Option("--out", help="write to this file")] = None,
     presets: Annotated[
         bool,
@@ -63,7 +63,7 @@ def params(
             matchers = ",".join(m for m in MATCHERS if name in presets_for(m))
             typer.echo(f"{name:<18} {matchers:<28} {PRESETS / name}.toml")
         return
-    text = params_to_toml(make_params(algo.value, None), SearchParams())
+    text = params_to_toml(make_params(matcher.value, None), SearchParams())
     if out:
         write_text(out, text)
     else:

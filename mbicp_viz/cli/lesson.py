@@ -52,9 +52,9 @@ def lesson(
 
 
 def _export(steps, out: Path) -> None:
-    from mbicp_viz.views.handout import write_handout
+    from mbicp_viz.views.lesson.handout import write_handout
+    from mbicp_viz.views.lesson.recording import record_lesson
     from mbicp_viz.views.lesson.steps import run_step
-    from mbicp_viz.views.lesson_rrd import record_lesson
 
     if out.exists() and not out.is_dir():
         raise InputError("exists and is not a folder", str(out), field="--export")

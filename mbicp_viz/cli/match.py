@@ -10,10 +10,8 @@ import typer
 from mbicp_viz.choices import DEFAULT_TYPESTORE
 
 from .options import (
-    ALL_ALGOS,
-    DEFAULT_ALGO,
-    AlgoOpt,
-    AlgosOpt,
+    ALL_MATCHERS,
+    DEFAULT_MATCHER,
     ConnectOpt,
     DeskewOpt,
     FirstArg,
@@ -22,6 +20,8 @@ from .options import (
     Guess,
     GuessOpt,
     InitOpt,
+    MatcherOpt,
+    MatchersOpt,
     MountOpt,
     PairOpt,
     ParamsOpt,
@@ -46,10 +46,9 @@ JsonOpt = Annotated[
 ]
 
 
-def _pair_and_setup(first, second, pair, reading, guess, init, search, truth, params):
+def _pair_and_setup(first, second, pair, reading, guess, init, search, truth, search_params):
     from mbicp_viz.evaluation.pairs import load_pair
     from mbicp_viz.evaluation.single import setup
-    from mbicp_viz.readers.params_toml import load_search
 
     sp = load_pair(first, second, pair, reading)
     for note in sp.log.notes:
@@ -60,7 +59,7 @@ def _pair_and_setup(first, second, pair, reading, guess, init, search, truth, pa
         pose_from_deg(init, "--init"),
         search,
         pose_from_deg(truth, "--truth"),
-        load_search(params),
+        search_params,
     )
 
 
@@ -68,7 +67,7 @@ def match_cmd(
     first: FirstArg,
     second: SecondArg = None,
     pair: PairOpt = None,
-    algo: AlgoOpt = DEFAULT_ALGO,
+    matcher: MatcherOpt = DEFAULT_MATCHER,
     guess: GuessOpt = Guess.stored,
     init: InitOpt = None,
     search: SearchFlag = False,
@@ -90,11 +89,12 @@ def match_cmd(
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from mbicp_viz.core import tiers
     from mbicp_viz.evaluation import single
-    from mbicp_viz.readers.params_toml import make_params
+    from mbicp_viz.readers.params_toml import read_params
     from mbicp_viz.views.text import match_report
 
     tiers.quick_start()  # a person waits on this command: never a compile stall
-    p = make_params(algo.value, params)
+    pf = read_params(params, [matcher.value])
+    p = pf.matchers[matcher.value]
     sp, s = _pair_and_setup(
         first,
         second,
@@ -104,7 +104,7 @@ def match_cmd(
         init,
         search,
         truth,
-        params,
+        pf.search,
     )
     base, frames = frame is Frame.base, sp.log.frames
     m = single.match_pair(
@@ -133,7 +133,7 @@ def compare_cmd(
     first: FirstArg,
     second: SecondArg = None,
     pair: PairOpt = None,
-    algos: AlgosOpt = ALL_ALGOS,
+    matchers: MatchersOpt = ALL_MATCHERS,
     guess: GuessOpt = Guess.stored,
     init: InitOpt = None,
     search: SearchFlag = False,
@@ -157,7 +157,8 @@ def compare_cmd(
     from .options import params_for
 
     tiers.quick_start()
-    ps = params_for(algos, params)
+    pf = params_for(matchers, params)
+    ps = pf.matchers
     sp, s = _pair_and_setup(
         first,
         second,
@@ -167,7 +168,7 @@ def compare_cmd(
         init,
         search,
         truth,
-        params,
+        pf.search,
     )
     typer.echo(
         f"{sp.label}\ninitial guess {s.guess} (from: {s.guess_source}); poses: the laser frame"

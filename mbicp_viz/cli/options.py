@@ -18,7 +18,7 @@ from mbicp_viz.core.matchers import MATCHERS
 from mbicp_viz.core.params import ParamError, SearchParams
 from mbicp_viz.errors import InputError
 
-Algo = enum.Enum("Algo", {name: name for name in MATCHERS}, type=str)
+MatcherName = enum.Enum("MatcherName", {name: name for name in MATCHERS}, type=str)
 
 
 class Frame(str, enum.Enum):
@@ -28,14 +28,16 @@ class Frame(str, enum.Enum):
     laser = "laser"
 
 
-DEFAULT_ALGO = Algo["improved"]
-ALL_ALGOS = ",".join(MATCHERS)
+DEFAULT_MATCHER = MatcherName["improved"]
+ALL_MATCHERS = ",".join(MATCHERS)
 SEARCH = SearchParams().window_text()
 
 FirstArg = Annotated[str, typer.Argument(help="reference scan file, or a log with --pair")]
 SecondArg = Annotated[str | None, typer.Argument(help="object scan file")]
-AlgoOpt = Annotated[Algo, typer.Option("--algo", help="matcher")]
-AlgosOpt = Annotated[str, typer.Option("--algos", help=f"comma-separated matchers of: {ALL_ALGOS}")]
+MatcherOpt = Annotated[MatcherName, typer.Option("--algo", help="matcher")]
+MatchersOpt = Annotated[
+    str, typer.Option("--algos", help=f"comma-separated matchers of: {ALL_MATCHERS}")
+]
 ParamsOpt = Annotated[
     Path | None,
     typer.Option(
@@ -382,14 +384,15 @@ def number_list(text: str, field: str, example: str, kind=float) -> list:
     return values
 
 
-def params_for(algos: str, params_file: Path | None) -> dict:
-    """``--algos a,b,c`` with their parameters (defaults, or the file's table for each)."""
-    from mbicp_viz.readers.params_toml import make_params
+def params_for(matchers: str, params_file: Path | None):
+    """``--algos a,b,c`` with their parameters (defaults, or the file's table for each) and the
+    search's: a ``ParamsFile``, the file read once."""
+    from mbicp_viz.readers.params_toml import read_params
 
-    names = [a.strip() for a in algos.split(",") if a.strip()]
+    names = [a.strip() for a in matchers.split(",") if a.strip()]
     if not names:
-        raise InputError(f"name at least one matcher: {ALL_ALGOS}", field="--algos")
-    return {a: make_params(a, params_file) for a in names}
+        raise InputError(f"name at least one matcher: {ALL_MATCHERS}", field="--algos")
+    return read_params(params_file, names)
 
 
 class Progress:

@@ -116,14 +116,14 @@ def load_scenario(path: Path) -> Scenario:
         if spec.get("guess") == "log"
         else (_pose_deg(g, str(path), "guess_deg") if g is not None else Pose2())
     )
-    algos = spec.get("algorithms", list(MATCHERS))
-    unknown = [a for a in algos if a not in MATCHERS]
+    names = spec.get("algorithms", list(MATCHERS))
+    unknown = [a for a in names if a not in MATCHERS]
     if unknown:
         raise InputError(f"unknown algorithm {unknown[0]!r}", str(path), field="algorithms")
     tables = spec.get("params", {})
     params = {
         a: params_from_mapping(MATCHERS[a].params_type, tables.get(a, {}), str(path), f"params.{a}")
-        for a in algos
+        for a in names
     }
     return Scenario(
         path.stem,

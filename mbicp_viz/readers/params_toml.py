@@ -5,8 +5,8 @@ named after the matcher (``[improved]``); the correlative search's parameters si
 ``[search]`` table. A field in radians may be given in degrees instead by suffixing its name with
 ``_deg`` (``Bw_deg = 45``); files written here use that form, since degrees are what people type.
 ``--params`` also takes the name of a preset shipped in ``mbicp_viz/presets`` (``--params
-poor-guess``): the parameter sets the README and docs/results.md measure, each saying in its
-comments what it is for.
+poor-guess``): the parameter sets the README and docs/ measure, each saying in its comments what
+it is for.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from __future__ import annotations
 import functools
 import math
 import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from mbicp_viz.core import MATCHERS, ParamError, Params, SearchParams, field_specs
@@ -37,7 +39,7 @@ def presets_for(algorithm: str) -> dict[str, Params]:
     default, out = MATCHERS[algorithm].params_type(), {}
     for name in preset_names():
         try:
-            params = load_params(name, algorithm)
+            params = make_params(algorithm, name)
         except InputError:
             continue
         if params != default:
@@ -116,37 +118,49 @@ def read_toml(path: str | Path) -> dict:
         raise InputError("invalid TOML: nested too deeply", str(p)) from None
 
 
-def load_params(path: str | Path, algorithm: str) -> Params:
-    """Parameters for ``algorithm`` from a TOML file or preset (flat keys, or a table named after
-    the algorithm)."""
+@dataclass(frozen=True)
+class ParamsFile:
+    """A ``--params`` file, a preset, or none (the defaults), read once: each named matcher's
+    parameters and the correlative search's."""
+
+    matchers: dict[str, Params]
+    search: SearchParams
+
+
+def read_params(path: str | Path | None, matchers: Sequence[str]) -> ParamsFile:
+    """The parameters of ``matchers`` (defaults, or a file's or preset's) and of the search."""
+    for name in matchers:
+        if name not in MATCHERS:
+            raise InputError(
+                f"unknown matcher {name!r}; choose one of {', '.join(MATCHERS)}", field="--algo"
+            )
+    if path is None:
+        return ParamsFile({n: MATCHERS[n].params_type() for n in matchers}, SearchParams())
     path = params_file(path)
     data = read_toml(path)
-    if isinstance(data.get(algorithm), dict):
-        return params_from_mapping(
-            MATCHERS[algorithm].params_type, data[algorithm], str(path), algorithm
-        )
+    return ParamsFile({n: _matcher_table(data, path, n) for n in matchers}, _search(data, path))
+
+
+def make_params(matcher: str, path: str | Path | None) -> Params:
+    """One matcher's parameters: its defaults, or a ``--params`` file's or preset's."""
+    return read_params(path, [matcher]).matchers[matcher]
+
+
+def _matcher_table(data: dict, path: Path, matcher: str) -> Params:
+    """A matcher's parameters in a file: its table (``[improved]``), else the flat keys."""
+    params_type = MATCHERS[matcher].params_type
+    if isinstance(data.get(matcher), dict):
+        return params_from_mapping(params_type, data[matcher], str(path), matcher)
     flat = {k: v for k, v in data.items() if not isinstance(v, dict) and k != "algorithm"}
-    return params_from_mapping(MATCHERS[algorithm].params_type, flat, str(path))
+    return params_from_mapping(params_type, flat, str(path))
 
 
-def load_search(path: str | Path | None) -> SearchParams:
+def _search(data: dict, path: Path) -> SearchParams:
     """The correlative search's parameters: the file's ``[search]`` table, else the defaults."""
-    if path is None:
-        return SearchParams()
-    path = params_file(path)
-    table = read_toml(path).get(SEARCH_TABLE, {})
+    table = data.get(SEARCH_TABLE, {})
     if not isinstance(table, dict):
         raise InputError("expected a table [search]", str(path), field=SEARCH_TABLE)
     return params_from_mapping(SearchParams, table, str(path), SEARCH_TABLE)
-
-
-def make_params(algorithm: str, path: str | Path | None) -> Params:
-    """Defaults of ``algorithm``, or its parameters from a ``--params`` file."""
-    if algorithm not in MATCHERS:
-        raise InputError(
-            f"unknown algorithm {algorithm!r}; choose one of {', '.join(MATCHERS)}", field="--algo"
-        )
-    return load_params(path, algorithm) if path else MATCHERS[algorithm].params_type()
 
 
 def _lines(params: Params) -> list[str]:

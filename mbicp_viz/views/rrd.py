@@ -20,7 +20,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from mbicp_viz.core import Event, FinishEvent, IterationEvent, Params, Pose2, StartEvent
+from mbicp_viz.core import Event, FinishEvent, IterationEvent, Pose2, StartEvent
 from mbicp_viz.errors import InputError
 from mbicp_viz.outputs import written
 from mbicp_viz.readers.pair_match import PairMatch
@@ -133,96 +133,96 @@ def _rgb(c):
     return np.asarray(c, dtype=np.uint8)
 
 
+def _points(layer: scene.Points):
+    colors = layer.colors if layer.colors is not None else _rgb(layer.style.color)
+    yield (
+        "",
+        rr.Points2D(
+            layer.xy,
+            colors=colors,
+            radii=layer.radius,
+            labels=layer.labels,
+            show_labels=False if layer.labels else None,
+            draw_order=layer.style.order,
+        ),
+    )
+
+
+def _line_strips(layer, strips):
+    yield (
+        "",
+        rr.LineStrips2D(
+            strips, colors=_rgb(layer.style.color), radii=layer.width, draw_order=layer.style.order
+        ),
+    )
+
+
+def _segments(layer: scene.Segments):
+    if not len(layer.starts):
+        return _line_strips(layer, np.zeros((0, 2, 2)))
+    return _line_strips(layer, np.stack((layer.starts, layer.ends), axis=1))
+
+
+def _boxes(layer: scene.Boxes):
+    yield (
+        "",
+        rr.Boxes2D(
+            centers=layer.centers,
+            half_sizes=np.full((len(layer.centers), 2), layer.half_size),
+            colors=layer.colors,
+            labels=layer.labels,
+            show_labels=False,
+            radii=0.002,
+            draw_order=layer.style.order,
+        ),
+    )
+
+
+def _frame(layer: scene.Frame):
+    p = layer.pose
+    yield (
+        "",
+        rr.Transform3D(
+            translation=[p.x, p.y, 0.0],
+            rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=p.theta),
+        ),
+    )
+    # the frame's axes as the debugger draws them: x red, y green (the legend says so)
+    yield (
+        "/heading",
+        rr.Arrows2D(
+            origins=[[0.0, 0.0]] * 2,
+            vectors=[[layer.length, 0.0], [0.0, layer.length]],
+            colors=[scene.AXIS_X, scene.AXIS_Y],
+            radii=0.025 * layer.length,
+            draw_order=layer.style.order,
+        ),
+    )
+
+
+# Each layer type as rerun archetypes: (path below the layer's, archetype) pairs
+_ARCHETYPES = {
+    scene.Points: _points,
+    scene.Segments: _segments,
+    scene.Strips: lambda layer: _line_strips(layer, layer.strips),
+    scene.Boxes: _boxes,
+    scene.Scalar: lambda layer: [("", rr.Scalars(layer.value))],
+    scene.Text: lambda layer: [("", rr.TextLog(layer.text, level=layer.level))],
+    scene.Frame: _frame,
+}
+
+
 def log_layer(
     stream: rr.RecordingStream, root: str, layer: scene.Layer, static: bool = False
 ) -> None:
     """One layer as rerun archetypes under ``root``; a layer type it does not know is an error."""
-    path = f"{root}/{layer.path}"
-    if isinstance(layer, scene.Points):
-        colors = layer.colors if layer.colors is not None else _rgb(layer.style.color)
-        stream.log(
-            path,
-            rr.Points2D(
-                layer.xy,
-                colors=colors,
-                radii=layer.radius,
-                labels=layer.labels,
-                show_labels=False if layer.labels else None,
-                draw_order=layer.style.order,
-            ),
-            static=static,
-        )
-    elif isinstance(layer, scene.Segments):
-        strips = (
-            np.stack((layer.starts, layer.ends), axis=1)
-            if len(layer.starts)
-            else np.zeros((0, 2, 2))
-        )
-        stream.log(
-            path,
-            rr.LineStrips2D(
-                strips,
-                colors=_rgb(layer.style.color),
-                radii=layer.width,
-                draw_order=layer.style.order,
-            ),
-            static=static,
-        )
-    elif isinstance(layer, scene.Strips):
-        stream.log(
-            path,
-            rr.LineStrips2D(
-                layer.strips,
-                colors=_rgb(layer.style.color),
-                radii=layer.width,
-                draw_order=layer.style.order,
-            ),
-            static=static,
-        )
-    elif isinstance(layer, scene.Boxes):
-        stream.log(
-            path,
-            rr.Boxes2D(
-                centers=layer.centers,
-                half_sizes=np.full((len(layer.centers), 2), layer.half_size),
-                colors=layer.colors,
-                labels=layer.labels,
-                show_labels=False,
-                radii=0.002,
-                draw_order=layer.style.order,
-            ),
-            static=static,
-        )
-    elif isinstance(layer, scene.Scalar):
-        stream.log(path, rr.Scalars(layer.value), static=static)
-    elif isinstance(layer, scene.Text):
-        stream.log(path, rr.TextLog(layer.text, level=layer.level), static=static)
-    elif isinstance(layer, scene.Frame):
-        p = layer.pose
-        stream.log(
-            path,
-            rr.Transform3D(
-                translation=[p.x, p.y, 0.0],
-                rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=p.theta),
-            ),
-            static=static,
-        )
-        # the frame's axes as the debugger draws them: x red, y green (the legend says so)
-        stream.log(
-            f"{path}/heading",
-            rr.Arrows2D(
-                origins=[[0.0, 0.0]] * 2,
-                vectors=[[layer.length, 0.0], [0.0, layer.length]],
-                colors=[scene.AXIS_X, scene.AXIS_Y],
-                radii=0.025 * layer.length,
-                draw_order=layer.style.order,
-            ),
-            static=static,
-        )
-    else:
+    make = next((f for t, f in _ARCHETYPES.items() if isinstance(layer, t)), None)
+    if make is None:
         raise TypeError(
             f"the rerun front end cannot draw a {type(layer).__name__} layer ({layer.path})"
         )
+    for below, archetype in make(layer):
+        stream.log(f"{root}/{layer.path}{below}", archetype, static=static)
 
 
 class RerunObserver:
@@ -472,29 +472,3 @@ def record_basin(atlas, path: str) -> None:
                     math.degrees(th),
                 ):
                     log_layer(stream, "", layer)
-
-
-def time_recordings(log, params: Params, limit: int | None, repeat: int, teaching: bool):
-    """Time for matching and writing each consecutive pair to an .rrd, and the file sizes
-    [bytes]."""
-    import os
-    import tempfile
-    import time
-
-    from mbicp_viz.evaluation.bench import Timing
-    from mbicp_viz.evaluation.pairs import stored_guess
-    from mbicp_viz.evaluation.single import Setup, match_pair
-
-    times, sizes = [], []
-    with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "bench.rrd")
-        for i, j in log.consecutive_pairs(limit):
-            ref, obj = log.scan(i), log.scan(j)
-            s = Setup(*stored_guess(ref, obj), None, None)
-            for _ in range(repeat):
-                t0 = time.perf_counter()
-                m = match_pair(ref, obj, params, s, log.frames, record=True)
-                record([m], path, teaching=teaching)
-                times.append(1000.0 * (time.perf_counter() - t0))
-                sizes.append(os.path.getsize(path))
-    return Timing("recording to .rrd", np.array(times)), np.array(sizes)

@@ -118,3 +118,30 @@ def yaw_to_wxyz(theta: float) -> tuple[float, float, float, float]:
 def wxyz_to_yaw(wxyz) -> float:
     w, x, y, z = (float(v) for v in wxyz)
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def grid_cell(extent_m: float) -> float:
+    """A round grid cell for a scene ``extent_m`` across: 10 to 40 cells over it."""
+    return next(
+        (c for c in (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0) if extent_m / c <= 40), 100.0
+    )
+
+
+def metric_grid(scene_api, pts: np.ndarray) -> float:
+    """A metric grid in the scan plane under ``pts`` (x right, y up), thicker every five cells,
+    just below the layers; its cell [m], for the legend."""
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    cell = grid_cell(float((hi - lo).max()))
+    size = (np.ceil((hi - lo) / cell) + 4) * cell
+    centre = np.round((lo + hi) / 2 / cell) * cell
+    scene_api.add_grid(
+        "/grid",
+        float(size[0]),
+        float(size[1]),
+        plane="xy",
+        cell_size=cell,
+        section_size=cell * 5,
+        position=(float(centre[0]), float(centre[1]), -0.01),
+        shadow_opacity=0.0,
+    )
+    return cell

@@ -96,7 +96,7 @@ class App:
             state = DebugState(self.source)
             # every step's
             lesson = [name for step in self.source.lesson for name in step.scenario.params]
-            names = list(dict.fromkeys([*state.algorithms, *lesson]))
+            names = list(dict.fromkeys([*state.matchers, *lesson]))
             for name in names:
                 MATCHERS[name].load()
             if tiers.compile_in_background():

@@ -16,8 +16,8 @@ from mbicp_viz.core import MATCHERS, Pose2
 from mbicp_viz.readers.params_toml import presets_for
 
 from .. import scene, viser_draw
-from . import panels
-from .state import DEFAULTS, TYPED
+from . import panels, report
+from .state import DEFAULTS, TYPED, preset_name
 
 
 def set_boxes(control, values: dict) -> None:
@@ -97,17 +97,17 @@ class Matchers:
         self.s, self.gui, self.order = session, gui, order
         self.showing = False
         state = session.state
-        self.edited = state.algorithms[0]
+        self.edited = state.matchers[0]
         with gui.add_folder("Matchers", order=order):
             self.boxes = {
-                name: gui.add_checkbox(name, name in state.algorithms, hint=m.title)
+                name: gui.add_checkbox(name, name in state.matchers, hint=m.title)
                 for name, m in MATCHERS.items()
             }
             self.edit = gui.add_dropdown("parameters of", list(MATCHERS), initial_value=self.edited)
             self.preset = gui.add_dropdown(
                 "preset",
                 self._presets(),
-                initial_value=state.preset_of(self.edited),
+                initial_value=preset_name(self.edited, state.params[self.edited]),
                 hint="the parameter sets shipped with the tool (--params NAME); "
                 f"'{TYPED}': values typed into the boxes",
             )
@@ -136,21 +136,21 @@ class Matchers:
         """The picker names what the edited matcher's parameters are (its choices: that
         matcher's)."""
         self.preset.options = self._presets()
-        self.preset.value = self.s.state.preset_of(self.edited)
+        self.preset.value = preset_name(self.edited, self.s.state.params[self.edited])
 
     def show(self) -> None:
         """The boxes as the model holds them (after a pair was reopened with its own matcher)."""
-        set_boxes(self, {n: n in self.s.state.algorithms for n in self.boxes})
-        self.edited = self.edit.value = self.s.state.algorithms[0]
+        set_boxes(self, {n: n in self.s.state.matchers for n in self.boxes})
+        self.edited = self.edit.value = self.s.state.matchers[0]
         self._build_params()
         self._show_preset()
 
     def _chosen(self) -> None:
         if self.showing:  # the model sets the boxes one by one (``set_boxes``): no match in between
             return
-        error = self.s.state.set_algorithms([n for n, box in self.boxes.items() if box.value])
+        error = self.s.state.set_matchers([n for n, box in self.boxes.items() if box.value])
         if error:
-            set_boxes(self, {n: n in self.s.state.algorithms for n in self.boxes})
+            set_boxes(self, {n: n in self.s.state.matchers for n in self.boxes})
         self.s.clear_scene()
         self.s.after_match(error)
 
@@ -168,7 +168,7 @@ class Matchers:
         """Load the picked preset (or the defaults); picking 'as typed' or what is loaded does
         nothing."""
         state = self.s.state
-        if self.preset.value in (TYPED, state.preset_of(self.edited)):
+        if self.preset.value in (TYPED, preset_name(self.edited, state.params[self.edited])):
             return
         self._applied(state.use_preset(self.edited, self.preset.value))
 
@@ -387,7 +387,9 @@ class Layers:
         o, d = np.asarray(origin, float), np.asarray(direction, float)
         if abs(d[2]) < 1e-9 or not self.s.state.runs:
             return None
-        self.s.state.iso_point = self.s.state.nearest_object_point((o - o[2] / d[2] * d)[:2])
+        self.s.state.iso_point = report.nearest_object_point(
+            self.s.state, (o - o[2] / d[2] * d)[:2]
+        )
         self.iso.show(str(self.s.state.iso_point))
         self._show_teaching()
         return self.s.state.iso_point

@@ -32,7 +32,7 @@ def step_source(step: Step, lesson: tuple[Step, ...]) -> Source:
         s.guess,
         truth=s.truth,
         params=dict(s.params),
-        algorithms=tuple(s.params),
+        matchers=tuple(s.params),
         teaching=True,
         shown=tuple(st.label for st in step.layers),
         lesson=lesson,
@@ -97,7 +97,7 @@ class Lesson:
         self.try_text.content = f"**Try:** {sr.try_text}\n\n{CHANGED}"
         distances = sr.distance_layers()
         if distances:
-            from ..handout import side_plot
+            from ..lesson.handout import side_plot
 
             self.figure.image = plot_image(side_plot(sr))
         self.figure.visible = bool(distances)

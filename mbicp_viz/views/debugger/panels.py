@@ -20,6 +20,7 @@ import viser.uplot as uplot
 from mbicp_viz.core import MATCHERS, ParamError, Params, field_specs
 
 from .. import scene
+from . import report
 from .state import DebugState, box_label, parse_entry, shown_value
 
 
@@ -314,7 +315,7 @@ def histogram_series(state: DebugState) -> tuple[np.ndarray, ...]:
     lines (0 to 1 on the plot's full height) at the median, the threshold and the hard cut; uPlot
     joins consecutive points, so two points at one x make a vertical line."""
     run = state.runs[0]
-    ev = state.event(run)
+    ev = report.event(state, run)
     if ev is None or not len(ev.pairs.distance):
         z, nan = np.zeros(2), np.full(2, np.nan)
         return np.array([0.0, 1.0]), z, nan, nan, nan
@@ -340,7 +341,7 @@ def cost_series(state: DebugState) -> tuple[np.ndarray, ...] | None:
     """PSM/PMWN: the orientation step's cost per shift and the fit at its minimum; None
     otherwise."""
     run = polar_run(state)
-    ev = state.event(run) if run is not None else None
+    ev = report.event(state, run) if run is not None else None
     polar = ev.polar if ev is not None else None
     if polar is None or not np.any(np.isfinite(polar.cost)):
         return None

@@ -16,17 +16,9 @@ from mbicp_viz.core import tiers
 from mbicp_viz.readers.params_toml import params_to_toml
 
 from .. import scene, viser_draw
-from . import controls, lesson, panels
+from . import controls, lesson, panels, report
 from .camera import TopDownCamera
 from .state import DebugState, Source
-
-
-def grid_cell(extent_m: float) -> float:
-    """A round grid cell for a scene ``extent_m`` across: 10 to 40 cells over it."""
-    return next(
-        (c for c in (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0) if extent_m / c <= 40), 100.0
-    )
-
 
 COMPILING = (
     "Compiling the matchers' kernels (the first start after an install takes a few seconds)…"
@@ -136,7 +128,7 @@ class Session:
             return
         self.playback.show(self.state.max_iteration())
         self.redraw()
-        self.h_result.content = self.state.result_markdown()
+        self.h_result.content = report.result_markdown(self.state)
         self.plots.show_runs(self.state)
         self.guess.show()
 
@@ -154,7 +146,7 @@ class Session:
             shown: dict[str, scene.Style] = {}
             drawn: dict[str, object] = {}
             for run in self.state.runs:
-                for layer in self.state.layers(run):
+                for layer in report.layers(self.state, run):
                     if not viser_draw.in_scan_plane(layer):
                         continue
                     visible = self.state.visible.get(layer.style.label, True)
@@ -169,7 +161,7 @@ class Session:
             self.shown = list(shown.values())
             self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
             self.playback.text.content = "  \n".join(
-                f"**{r.matcher}**: {self.state.iteration_text(r)}" for r in self.state.runs
+                f"**{r.matcher}**: {report.iteration_text(self.state, r)}" for r in self.state.runs
             )
             if self.plots.shown is not None:
                 self.plots.iteration(self.state)
@@ -186,21 +178,8 @@ class Session:
         if self.state.source.view is not None:
             pts = np.reshape(self.state.source.view, (2, 2))
         self.camera.fit(pts)
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        self.grid_m = grid_cell(float((hi - lo).max()))
-        size = (np.ceil((hi - lo) / self.grid_m) + 4) * self.grid_m
-        centre = np.round((lo + hi) / 2 / self.grid_m) * self.grid_m
+        self.grid_m = viser_draw.metric_grid(self.client.scene, pts)
         self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
-        self.client.scene.add_grid(
-            "/grid",
-            float(size[0]),
-            float(size[1]),
-            plane="xy",
-            cell_size=self.grid_m,
-            section_size=self.grid_m * 5,
-            position=(float(centre[0]), float(centre[1]), -0.01),
-            shadow_opacity=0.0,
-        )
 
     def guarded(self, fn) -> None:
         """Run a callback under the tab's lock; a bug inside it is shown in the page and the server
@@ -214,7 +193,7 @@ class Session:
 
     # ---- export ---------------------------------------------------------------------------
     def export_rrd(self) -> bytes:
-        data = self.state.session_rrd()
+        data = report.session_rrd(self.state)
         self.client.send_file_download("mbicp-viz-session.rrd", data, save_immediately=True)
         self.h_status.content = f"exported the session: {len(data) / 1e6:.2f} MB .rrd"
         return data

@@ -9,25 +9,24 @@ last good runs and says why.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from mbicp_viz.core import (
     MATCHERS,
     FieldSpec,
-    IterationEvent,
     ParamError,
     Params,
     Pose2,
     ScanError,
     SearchParams,
     field_specs,
-    pose_error,
 )
-from mbicp_viz.core.agreement import INLIER_RADIUS_M
 from mbicp_viz.core.params import check_value
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess, known_answer, pair_guess
@@ -36,7 +35,7 @@ from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.params_toml import presets_for
 
-from .. import scene, text
+from .. import scene
 
 
 @dataclass
@@ -52,7 +51,7 @@ class Source:
     guess_kind: Guess = Guess.stored
     truth: Pose2 | None = None  # None: the stored poses' relative pose, when the log has them
     params: dict[str, Params] = field(default_factory=dict)
-    algorithms: tuple[str, ...] = ("improved",)
+    matchers: tuple[str, ...] = ("improved",)
     search: SearchParams = field(default_factory=SearchParams)
     note: str = ""  # Markdown shown above the panels (a scenario's "what to look at")
     teaching: bool = False  # iso-distance curves on from the start
@@ -137,6 +136,26 @@ def box_label(spec: FieldSpec) -> str:
     return spec.name if unit in ("1", "bool", "count") else f"{spec.name} [{unit}]"
 
 
+# What a user chooses, restored together when a change fails (``DebugState._change``)
+_CHOSEN = ("source", "pair", "opened", "matchers", "params", "guess", "guess_source")
+
+
+def shown_at_first(source: Source) -> dict[str, bool]:
+    """Which layers (by legend label) a tab shows first: the source's, else each style's default
+    (in teaching, the iso-distance curves too)."""
+    if source.shown is not None:
+        return {s.label: s.label in source.shown for s in scene.STYLES}
+    teach = (scene.ISO_METRIC, scene.ISO_EUCLID) if source.teaching else ()
+    return {s.label: s.on or s in teach for s in scene.STYLES}
+
+
+def preset_name(matcher: str, params: Params) -> str:
+    """What a matcher's parameters are: ``DEFAULTS``, the name of a preset, or ``TYPED``."""
+    if params == MATCHERS[matcher].params_type():
+        return DEFAULTS
+    return next((n for n, p in presets_for(matcher).items() if p == params), TYPED)
+
+
 class DebugState:
     """The model of one tab."""
 
@@ -146,7 +165,7 @@ class DebugState:
             n: source.params.get(n, m.params_type()) for n, m in MATCHERS.items()
         }
         self.search = source.search
-        self.algorithms: list[str] = list(source.algorithms)
+        self.matchers: list[str] = list(source.matchers)
         self.pair = source.pair
         self.opened: PairMatch | None = None  # the evaluation row last reopened
         self.guess, self.guess_source = self._pair_guess()
@@ -154,12 +173,7 @@ class DebugState:
             self._apply_row(source.opened)
         self.runs: list[PairMatch] = []  # one per shown matcher, with its events
         self.iteration = 0
-        self.visible = {
-            s.label: s.label in source.shown
-            if source.shown is not None
-            else s.on or (source.teaching and s in (scene.ISO_METRIC, scene.ISO_EUCLID))
-            for s in scene.STYLES
-        }
+        self.visible = shown_at_first(source)  # layer (legend label) -> shown
         self.iso_point: int | None = None
         self.match_ms = 0.0
         self.message = ""  # the last failure, shown to the user
@@ -187,81 +201,64 @@ class DebugState:
             return self.source.guess, "given"
         return pair_guess(self.ref, self.obj, self.source.guess_kind, self.search)
 
+    def _change(self, apply: Callable[[], None]) -> str | None:
+        """Make a change the user asked for and re-match: None, or why either failed, and then
+        everything the user chose is as it was (the last good runs stay shown)."""
+        old = {name: copy.copy(getattr(self, name)) for name in _CHOSEN}
+        try:
+            apply()
+            err = self.rematch()
+        except InputError as e:
+            err = str(e)
+        if err:
+            for name, value in old.items():
+                setattr(self, name, value)
+        return err
+
     def set_pair(self, i: int, j: int) -> str | None:
         """Open scans ``i`` and ``j`` (record numbers) with the source's kind of guess."""
         n = self.source.log.records
         if not (0 <= i < n and 0 <= j < n) or i == j:
             return f"scan numbers must be two different numbers in 0..{n - 1}"
-        old = self.pair
-        try:
+
+        def apply():
             self.pair = (i, j)
             self.ref, self.obj  # noqa: B018 - an unusable scan is refused here
             self.guess, self.guess_source = self._pair_guess()
-        except InputError as e:
-            self.pair = old
-            return str(e)
-        return self.rematch()
+
+        return self._change(apply)
 
     def set_topic(self, topic: str) -> str | None:
         """Read another scan stream of the file (a bag's topic, a CARMEN log's laser message type)
         and open its first consecutive pair."""
-        from dataclasses import replace
-
         src = self.source
+        options = replace(src.options or ReadOptions(), topic=topic)
         try:
-            log = read_log(src.log.path, replace(src.options or ReadOptions(), topic=topic))
+            log = read_log(src.log.path, options)
             if len(log.scans) < 2:
                 raise InputError(
                     f"topic {topic} has fewer than two usable scans", log.path, field="topic"
                 )
         except InputError as e:
             return str(e)
-        old = self.source, self.pair, self.guess, self.guess_source
-        self.source, self.pair = (
-            replace(src, log=log, options=replace(src.options or ReadOptions(), topic=topic)),
-            log.consecutive_pairs(1)[0],
-        )
-        try:
+
+        def apply():
+            self.source = replace(src, log=log, options=options)
+            self.pair = log.consecutive_pairs(1)[0]
             self.guess, self.guess_source = self._pair_guess()
-            err = self.rematch()
-        except InputError as e:
-            err = str(e)
-        if err:
-            self.source, self.pair, self.guess, self.guess_source = old
-        return err
+
+        return self._change(apply)
 
     def _apply_row(self, row: PairMatch) -> None:
         self.pair, self.opened = (row.ref, row.obj), row
         self.ref, self.obj  # noqa: B018 - an unusable scan is refused here
-        self.algorithms, self.params[row.matcher] = [row.matcher], row.params
+        self.matchers, self.params[row.matcher] = [row.matcher], row.params
         self.guess, self.guess_source = row.guess, f"the evaluation's guess ({row.guess_source})"
 
     def open_row(self, row: PairMatch) -> str | None:
         """Reopen an evaluated pair exactly as the evaluation ran it: its scans, matcher,
         parameters and initial guess. None, or why not (then nothing changes)."""
-        old = (
-            self.pair,
-            self.opened,
-            list(self.algorithms),
-            self.params[row.matcher],
-            self.guess,
-            self.guess_source,
-        )
-        try:
-            self._apply_row(row)
-            err = self.rematch()
-        except InputError as e:
-            err = str(e)
-        if err:
-            (
-                self.pair,
-                self.opened,
-                self.algorithms,
-                self.params[row.matcher],
-                self.guess,
-                self.guess_source,
-            ) = old
-        return err
+        return self._change(lambda: self._apply_row(row))
 
     # ---- matching ---------------------------------------------------------------------------
     def rematch(self) -> str | None:
@@ -280,7 +277,7 @@ class DebugState:
                     stream=log.topic,
                     record=True,
                 )
-                for n in self.algorithms
+                for n in self.matchers
             ]
         except MATCH_ERRORS as e:
             self.message = f"The match failed and the last good result is kept: {e}"
@@ -294,15 +291,11 @@ class DebugState:
     def max_iteration(self) -> int:
         return max((len(r.iterations) for r in self.runs), default=0)
 
-    def set_algorithms(self, names: list[str]) -> str | None:
+    def set_matchers(self, names: list[str]) -> str | None:
         unknown = [n for n in names if n not in MATCHERS]
         if not names or unknown:
             return f"choose at least one of {', '.join(MATCHERS)}"
-        old, self.algorithms = self.algorithms, list(names)
-        err = self.rematch()
-        if err:
-            self.algorithms = old
-        return err
+        return self._change(lambda: setattr(self, "matchers", list(names)))
 
     def set_params(self, matcher: str, typed: dict[str, str]) -> str | None:
         """Apply what the user typed into a matcher's parameter boxes (re-matching once when
@@ -321,22 +314,13 @@ class DebugState:
             MATCHERS[matcher].params_type() if name == DEFAULTS else presets_for(matcher)[name],
         )
 
-    def preset_of(self, matcher: str) -> str:
-        """What a matcher's parameters are: ``DEFAULTS``, the name of a preset, or ``TYPED``."""
-        if self.params[matcher] == MATCHERS[matcher].params_type():
-            return DEFAULTS
-        return next(
-            (n for n, p in presets_for(matcher).items() if p == self.params[matcher]), TYPED
-        )
-
     def _use_params(self, matcher: str, new: Params) -> str | None:
         if new == self.params[matcher]:
             return None
-        old, self.params[matcher] = self.params[matcher], new
-        err = self.rematch() if matcher in self.algorithms else None
-        if err:
-            self.params[matcher] = old
-        return err
+        if matcher not in self.matchers:  # not shown: nothing to re-match
+            self.params[matcher] = new
+            return None
+        return self._change(lambda: self.params.__setitem__(matcher, new))
 
     def set_search(self, typed: dict[str, str]) -> str | None:
         """The correlative search's parameters, for the next search (nothing is re-matched)."""
@@ -349,12 +333,11 @@ class DebugState:
     def set_guess(self, guess: Pose2, source: str = "typed") -> str | None:
         if not all(math.isfinite(v) for v in (guess.x, guess.y, guess.theta)):
             return "the initial guess must be finite numbers"
-        old = self.guess, self.guess_source
-        self.guess, self.guess_source = guess, source
-        err = self.rematch()
-        if err:
-            self.guess, self.guess_source = old
-        return err
+
+        def apply():
+            self.guess, self.guess_source = guess, source
+
+        return self._change(apply)
 
     def search_guess(self) -> str | None:
         """Replace the guess by the correlative search's best pose around it (core/search.py)."""
@@ -368,131 +351,6 @@ class DebugState:
             found.pose, f"searched within {self.search.window_text()} of the last guess"
         )
 
-    # ---- what is shown ----------------------------------------------------------------------
-    def event(self, run: PairMatch) -> IterationEvent | None:
-        """The run's event at the current iteration (None at the initial guess)."""
-        if self.iteration == 0 or not run.iterations:
-            return None
-        return run.iterations[min(self.iteration, len(run.iterations)) - 1]
-
-    def layers(self, run: PairMatch) -> list[scene.Layer]:
-        """The scene layers of ``run`` at the current iteration; in compare mode each run's object
-        scan takes its matcher's colour."""
-        return scene.pair_layers(
-            self.ref,
-            self.obj,
-            run.matcher,
-            run.start,
-            run.iterations,
-            self.iteration,
-            run.truth,
-            run.odometry,
-            len(self.runs) > 1,
-            self.iso_point,
-        )
-
-    def iteration_text(self, run: PairMatch) -> str:
-        ev = self.event(run)
-        if ev is None:
-            return f"iteration 0: the initial guess ({self.guess_source})"
-        return text.iteration_text(ev)
-
-    def result_markdown(self) -> str:
-        """Every run's result (the robot base's motion when the laser's mount is known), the
-        agreement of its pose with the data, and the known answer's."""
-        frames, parts = self.source.log.frames, []
-        for run in self.runs:
-            r = run.result
-            lines = [
-                f"**{label}** {value}"
-                for label, value in text.result_fields(r, frames.frame_text())
-            ]
-            lines.append(f"**on ref** {text.agreement_line(run.on_ref, INLIER_RADIUS_M)}")
-            if run.truth is not None:
-                lines.append(
-                    f"**known answer** {text.truth_line(r.pose, frames.reported(run.truth, True))}"
-                )
-            if run.odometry is not None:
-                lines.append(
-                    "**odometry** "
-                    f"{text.pose_distance(r.pose, frames.reported(run.odometry, True))} "
-                    "from "
-                    f"the odometry ({self.source.log.odometry_source or 'the log'})"
-                )
-            parts.append("  \n".join(lines))
-        parts.append(
-            f"initial guess {self.guess} (laser frame; {self.guess_source}); match time "
-            f"{self.match_ms:.1f} ms"
-        )
-        if (row := self.opened) is not None and self.pair == (row.ref, row.obj):
-            parts.append(self._row_markdown(row))
-        return "\n\n".join(parts)
-
-    def _row_markdown(self, row: PairMatch) -> str:
-        """What the evaluation found for this pair, and whether this run reproduces it."""
-        from mbicp_viz.evaluation.failures import failed, failure_reason
-        from mbicp_viz.evaluation.single import reported
-
-        lines = [
-            f"**evaluation** ({self.source.rows_label}, line {row.line}): {row.matcher} gave "
-            f"{row.result.pose} "
-            f"(motion of the {row.frame} frame)"
-        ]
-        if (sc := row.score) is not None:
-            lines.append(
-                f"{sc.error_xy * 1000:.1f} mm, {math.degrees(sc.error_theta):.3f} deg from the "
-                "scan poses"
-            )
-        if failed(row):
-            lines.append(f"failed: {failure_reason(row)}")
-        run = next((r for r in self.runs if r.matcher == row.matcher), None)
-        frames = self.source.log.frames
-        if run is None or row.frame not in (frames.frame_name(True), frames.frame_name(False)):
-            lines.append(
-                f"not comparable with this run (its matcher or its frame differ: this log reads as "
-                f"{frames.frame_name(True)})"
-            )
-        else:
-            laser = run.events.finish.result  # the laser's motion, reported as the row was
-            et, er = pose_error(
-                reported(laser, frames, row.frame == frames.frame_name(True)).pose,
-                row.result.pose,
-            )
-            lines.append(
-                "this run reproduces it (the poses agree within 1 nm and 1 nrad)"
-                if et < 1e-9 and er < 1e-9
-                else f"this run differs from it by {et * 1000:.1f} mm, {math.degrees(er):.3f} deg "
-                "(its "
-                "parameters, guess or scans changed)"
-            )
-        return "  \n".join(lines)
-
     def pair_label(self) -> str:
         """The pair, for a log; a fixed pair's label (the source's) says which scans it is."""
         return f"scans {self.pair[0]} -> {self.pair[1]}" if self.source.pick_pair else ""
-
-    def nearest_object_point(self, xy) -> int:
-        """The object point (index into the start event's points) nearest to ``xy`` where the first
-        run shows it at the current iteration."""
-        run = self.runs[0]
-        ev = self.event(run)
-        moved = (
-            ev.moved_points
-            if ev is not None
-            else run.start.initial_guess.apply(run.start.obj_points[run.start.used])
-        )
-        return int(run.start.used[int(np.argmin(np.hypot(*(moved - np.asarray(xy)).T)))])
-
-    def session_rrd(self) -> bytes:
-        """The session (data, parameters, all iterations of every shown matcher) as an .rrd."""
-        from ..rrd import recorded_bytes
-
-        return recorded_bytes(
-            self.runs,
-            teaching=True,
-            recording_id="mbicp-viz/session",
-            about="# mbicp-viz "
-            f"session\n\n{', '.join(filter(None, (self.source.label, self.pair_label())))}"
-            f"; initial guess "
-            f"{self.guess} ({self.guess_source})\n",
-        )

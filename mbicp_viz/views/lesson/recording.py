@@ -16,9 +16,9 @@ import rerun.blueprint as rrb
 
 from mbicp_viz.views.lesson.steps import StepRun
 
-from . import scene
+from .. import scene
+from ..rrd import log_layer, log_y_up, new_stream, saving, y_up_view
 from .handout import panel_title, side_plot
-from .rrd import log_layer, log_y_up, new_stream, saving, y_up_view
 
 ROOT = "lesson"
 SLOTS = ("first", "second")  # a step shows at most two matchers side by side (steps.MAX_MATCHERS)

@@ -8,8 +8,8 @@ from pathlib import Path
 from mbicp_viz.outputs import write_bytes, write_text
 from mbicp_viz.views.lesson.steps import StepRun
 
-from . import scene
-from .figure import Plot, scene_png
+from .. import scene
+from ..figure import Plot, scene_png
 
 
 def side_plot(sr: StepRun, iteration: int | None = None) -> Plot | None:
