@@ -34,6 +34,9 @@ def app():
         "127.0.0.1",
         0,
     )
+    # a cold numba cache compiles the kernels first (a minute on a loaded 2-core CI): the tabs'
+    # timeouts then time the page, not the compile
+    assert a.ready.wait(600)
     yield a
     a.stop()
 
@@ -78,6 +81,14 @@ def key_to_iteration(page, session, k: int) -> None:
     arrow press at a time, each seen by the server before the next (a loaded machine otherwise
     merges presses with the slider's own echo)."""
     slider = page.get_by_role("slider").first
+    with session.lock:  # the server has shown its last match (a re-match moves the slider) ...
+        shown = (str(session.state.iteration), str(max(session.state.max_iteration(), 1)))
+    # ... and the page has it: a key pressed before would be undone by the late move
+    assert wait_for(
+        lambda: (
+            (slider.get_attribute("aria-valuenow"), slider.get_attribute("aria-valuemax")) == shown
+        )
+    )
     slider.focus()
     slider.press("Home")
     assert wait_for(lambda: session.state.iteration == 0)
