@@ -82,7 +82,7 @@ def key_to_iteration(page, session, k: int) -> None:
     merges presses with the slider's own echo)."""
     slider = page.get_by_role("slider").first
     with session.lock:  # the server has shown its last match (a re-match moves the slider) ...
-        shown = (str(session.state.iteration), str(max(session.state.max_iteration(), 1)))
+        shown = (str(int(session.playback.slider.value)), str(int(session.playback.slider.max)))
     # ... and the page has it: a key pressed before would be undone by the late move
     assert wait_for(
         lambda: (
