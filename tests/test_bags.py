@@ -359,3 +359,30 @@ def test_two_static_mounts_that_disagree_are_said(tmp_path, intel):
             write(tmp_path / "one.bag", intel_robot(intel, 10, 3, MOUNT), "ros1")
         ).notes
     )
+
+
+@pytest.mark.parametrize(
+    "kind, damage, said",
+    [
+        ("mcap", (b"float32[] ranges", b"float32[] rangez"), "field 'ranges' should hold floats"),
+        ("mcap", (b"float32 angle_min", b"int32 angle_min  "), "field 'angle_min' should hold a"),
+        ("mcap", (b"string frame_id", b"string frame_ix"), "field 'header.frame_id' should hold"),
+    ],
+)
+def test_a_bag_whose_own_definition_of_a_type_is_damaged_says_so(
+    tmp_path, intel, kind, damage, said
+):
+    """An MCAP file carries its types' definitions (schemas) and is decoded by them: a damaged one is one line naming the field, never a traceback or a number read
+    as another type (a bare .mcap has no metadata hash that would catch it first)."""
+    bag = write(
+        tmp_path / ("r.bag" if kind == "ros1" else "r"), intel_robot(intel, 0, 3, None), kind
+    )
+    src = bag if kind == "ros1" else next(bag.glob("*.mcap"))
+    data = src.read_bytes()
+    assert damage[0] in data
+    damaged = tmp_path / f"damaged{src.suffix}"
+    damaged.write_bytes(data.replace(*damage))
+    res = CliRunner().invoke(app, ["match", str(damaged), "--pair", "0", "1"])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert said in res.stderr and "the bag's definition of its type is damaged" in res.stderr
+    assert str(damaged) in res.stderr

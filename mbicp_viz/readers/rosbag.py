@@ -116,13 +116,66 @@ def _messages(p: Path, typestore: str, notes: list[str]) -> list[Message]:
     raise InputError(f"not a readable ROS 1 or ROS 2 bag: {reason[:300]}", str(p))
 
 
+# The fields this reader reads of each type, and what each holds (f: a float, i: an integer, s: a
+# string, F: floats). A bag carries its own definitions (MCAP's schemas, ROS 1's connection
+# records) and rosbags decodes by them: a damaged one decodes into a message without the field, or
+# with an integer where a float belongs, which must be said, not met later as a missing attribute
+# or a wrong number.
+_STAMPED = (("header.stamp.sec", "i"), ("header.stamp.nanosec", "i"), ("header.frame_id", "s"))
+_SCAN_FIELDS = ("angle_min", "angle_increment", "time_increment", "range_min", "range_max")
+_FIELDS = {
+    LASER_SCAN: _STAMPED + tuple((f, "f") for f in _SCAN_FIELDS) + (("ranges", "F"),),
+    ODOMETRY: _STAMPED
+    + tuple((f"pose.pose.position.{c}", "f") for c in "xy")
+    + tuple((f"pose.pose.orientation.{c}", "f") for c in "xyzw"),
+    TF: (("transforms", "list"),),
+}
+_TRANSFORM_FIELDS = (
+    _STAMPED
+    + (("child_frame_id", "s"),)
+    + tuple((f"transform.translation.{c}", "f") for c in "xyz")
+    + tuple((f"transform.rotation.{c}", "f") for c in "xyzw")
+)
+_HOLDS = {"f": "a float", "i": "an integer", "s": "a string", "F": "floats", "list": "a list"}
+
+
+def _holds(value, kind: str) -> bool:
+    if kind == "F":
+        return isinstance(value, np.ndarray) and value.dtype.kind == "f"
+    types = {"f": (float, np.floating), "i": (int, np.integer), "s": str, "list": list}[kind]
+    return isinstance(value, types) and not isinstance(value, bool)
+
+
 def _decode(deserialize, raw, msgtype: str, p: Path, n: int):
     try:
-        return deserialize(raw, msgtype)
+        msg = deserialize(raw, msgtype)
     except Exception as e:  # rosbags' serde errors: damaged message data
         raise InputError(
             f"message {n} ({msgtype}) cannot be decoded: {type(e).__name__}: {str(e)[:200]}", str(p)
         ) from None
+    kind = _normalise(msgtype)
+    _has_fields(msg, _FIELDS.get(kind, ()), f"message {n} ({msgtype})", p)
+    if kind == TF:
+        for tr in msg.transforms:
+            _has_fields(tr, _TRANSFORM_FIELDS, f"message {n} ({msgtype}): a transform", p)
+    return msg
+
+
+def _has_fields(msg, fields, what: str, p: Path) -> None:
+    for name, kind in fields:
+        obj = msg
+        for part in name.split("."):
+            obj = getattr(obj, part, _has_fields)
+            if obj is _has_fields:
+                break
+        if not _holds(obj, kind):
+            got = "no such field" if obj is _has_fields else type(obj).__name__
+            raise InputError(
+                f"{what}: field {name!r} should hold {_HOLDS[kind]} ({got}): the bag's definition "
+                "of its type is damaged",
+                str(p),
+                field=name,
+            )
 
 
 def _normalise(msgtype: str) -> str:
