@@ -280,16 +280,19 @@ class PlIcpParams(IcpParams):
 @dataclass(frozen=True)
 class MbicpParams(StopParams):
     """MbICP (Minguez, Lamiraux & Montesano, T-RO 2006). Names and defaults as in the original C
-    code with the defaults of Player's ``mbicp`` driver, which it reproduces."""
+    code with the defaults of Player's ``mbicp`` driver, which it reproduces, but for the range
+    limit (the ``player`` preset has that too)."""
 
     MaxIter: int = param(50, unit="count", lo=1, hi=10000, help="maximum number of iterations")
+    # Player's driver limits the range to 7.9 m (a SICK in its 8 m mode; the `player` preset);
+    # here every reading the scan holds is used, whatever the sensor's range.
     max_range: float = param(
-        7.9,
+        1000.0,
         unit="m",
         lo=0.01,
         hi=1000.0,
-        help="readings at or beyond this range are not used (Player's mbicp driver: "
-        "max_laser_range)",
+        help="readings at or beyond this range are not used (1000: every valid reading, the "
+        "scan's own range; Player's mbicp driver: 7.9, the `player` preset)",
     )
     L: float = param(
         3.0,
@@ -380,15 +383,9 @@ class MbicpParams(StopParams):
 class ImprovedParams(MbicpParams):
     """Improved MbICP (Li et al. 2018, paper 000): MbICP plus three switchable additions. The paper
     gives no parameter values; these defaults are this project's (docs/results.md measures them):
-    wider windows than Player's MbICP, every reading, and the z-buffer projection filter."""
+    wider windows than Player's MbICP and the z-buffer projection filter."""
 
     MaxIter: int = redefault(MbicpParams, "MaxIter", 100)
-    max_range: float = redefault(
-        MbicpParams,
-        "max_range",
-        1000.0,
-        "readings at or beyond this range are not used (1000: every valid reading)",
-    )
     Bw: float = redefault(MbicpParams, "Bw", math.radians(45.0))
     Br: float = redefault(MbicpParams, "Br", 1.0)
     # unused while mad_rejection

@@ -372,8 +372,9 @@ def test_two_static_mounts_that_disagree_are_said(tmp_path, intel):
 def test_a_bag_whose_own_definition_of_a_type_is_damaged_says_so(
     tmp_path, intel, kind, damage, said
 ):
-    """An MCAP file carries its types' definitions (schemas) and is decoded by them: a damaged one is one line naming the field, never a traceback or a number read
-    as another type (a bare .mcap has no metadata hash that would catch it first)."""
+    """An MCAP file carries its types' definitions (schemas) and is decoded by them: a damaged
+    one is one line naming the field, never a traceback or a number read as another type (a bare
+    .mcap has no metadata hash that would catch it first)."""
     bag = write(
         tmp_path / ("r.bag" if kind == "ros1" else "r"), intel_robot(intel, 0, 3, None), kind
     )

@@ -18,8 +18,9 @@ def test_carmen_flaser_intel(intel):
     assert len(intel) == 60 and intel.skipped == {}  # NEFF lines were cut from the excerpt
     s = intel.scans[0]
     assert len(s.ranges) == 180 and s.n_valid > 100
+    # 180 readings: a SICK at 1 degree without its last beam (CARMEN's readlog.c)
     assert s.bearings[0] == pytest.approx(-math.pi / 2) and s.bearings[-1] == pytest.approx(
-        math.pi / 2
+        math.radians(89.0)
     )
     assert s.pose == s.odometry and s.pose.x == pytest.approx(0.600266)
     assert s.source.line is not None and s.stamp == pytest.approx(32.9068)
@@ -173,14 +174,18 @@ def test_plain_text_and_npz_round_trip(tmp_path, intel):
     assert read_npz(str(npz)).scans[1].pose == scans[1].pose
 
 
+def rawlaser_head(s) -> str:
+    """A RAWLASER/ROBOTLASER1 line's fields up to its ranges, for scan ``s``'s own bearings."""
+    n = len(s.ranges)
+    step = s.angular_span() / (n - 1)
+    return f"0 {float(s.bearings[0])!r} {s.angular_span()!r} {step!r} 81.9 0.01 0 {n}"
+
+
 def test_rawlaser_and_robotlaser_lines_read_like_flaser(tmp_path, intel):
     """No shared log has RAWLASER/ROBOTLASER lines: write real Intel scans in those formats."""
     lines_raw, lines_robot = [], []
     for s in intel.scans[:3]:
-        n = len(s.ranges)
-        head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n} " + " ".join(
-            str(float(v)) for v in s.ranges
-        )
+        head = f"{rawlaser_head(s)} " + " ".join(str(float(v)) for v in s.ranges)
         lines_raw.append(f"RAWLASER1 {head} 0 {s.stamp} host {s.stamp}")
         p, o = s.pose, s.odometry
         lines_robot.append(
@@ -209,7 +214,7 @@ def two_lasers(path, intel, n_scans=4):
         n, ranges = len(s.ranges), " ".join(str(float(v)) for v in s.ranges)
         p, o = s.pose, s.odometry
         other = " ".join(str(float(v)) for v in intel.scans[10 + k].ranges)
-        head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n}"
+        head = rawlaser_head(s)
         lines += [
             f"FLASER {n} {ranges} {p.x} {p.y} {p.theta} {o.x} {o.y} {o.theta} {s.stamp} host "
             f"{s.stamp}",
@@ -279,25 +284,122 @@ def test_a_log_with_several_laser_message_types_is_read_one_type_at_a_time(tmp_p
     )
 
 
+def flaser_log(path, n: int, params: str = "", scans: int = 2):
+    """A FLASER log of ``n`` readings a line (ranges of a room, 2-5 m)."""
+    ranges = " ".join(f"{2.0 + 3.0 * abs(math.sin(0.05 * k)):.2f}" for k in range(n))
+    path.write_text(
+        params + "".join(f"FLASER {n} {ranges} 0 0 0 0 0 0 {t} host {t}\n" for t in range(scans))
+    )
+    return path
+
+
 @pytest.mark.parametrize(
-    "n, span_deg, noted",
-    [(361, 180.0, False), (180, 180.0, False), (401, 100.0, False), (682, 180.0, True)],
+    "n, start_deg, step_deg, noted",
+    [
+        (361, -90, 0.5, False),
+        (360, -90, 0.5, False),  # the SICK's 361 without its last beam (CARMEN: 179.5 degrees)
+        (181, -90, 1.0, False),
+        (180, -90, 1.0, False),
+        (401, -50, 0.25, False),
+        (400, -50, 0.25, False),
+        (682, -90, 180 / 681, True),
+    ],
 )
-def test_flaser_bearings_follow_the_beam_count_as_carmen_guesses_them(tmp_path, n, span_deg, noted):
-    """FLASER stores no field of view: a SICK's counts span 180 degrees (CSM), 400-401 readings its
-    100-degree mode (CARMEN's readlog.c); any other count is read over 180 degrees, and said so."""
-    ranges = " ".join(["2.0"] * n)
-    path = tmp_path / "f.log"
-    path.write_text("".join(f"FLASER {n} {ranges} 0 0 0 0 0 0 {t} host {t}\n" for t in (1.0, 2.0)))
-    log = read_log(path)
-    b = log.scans[0].bearings
-    assert np.degrees(b[-1] - b[0]) == pytest.approx(span_deg) and np.degrees(
-        b[0]
-    ) == pytest.approx(-span_deg / 2)
+def test_flaser_bearings_follow_the_beam_count_as_carmen_guesses_them(
+    tmp_path, n, start_deg, step_deg, noted
+):
+    """FLASER stores no field of view: a SICK's counts step as CARMEN's readlog.c guesses (1, 0.5,
+    0.25 degrees: 180 and 360 readings lack the SICK's last beam); any other count is read over
+    180 degrees, as CSM does, and said so."""
+    log = read_log(flaser_log(tmp_path / "f.log", n))
+    b = np.degrees(log.scans[0].bearings)
+    assert b[0] == pytest.approx(start_deg) and np.diff(b) == pytest.approx(step_deg)
     assert (
         any("FLASER stores no field of view" in note and str(n) in note for note in log.notes)
         == noted
     )
+
+
+def test_flaser_bearings_and_maximum_range_follow_the_logs_own_params(tmp_path):
+    """CARMEN's PARAM lines state the front laser's step and maximum range: 360 readings at 0.5
+    degrees span 179.5 degrees, and a reading at or beyond the maximum is no return."""
+    params = (
+        "PARAM laser_front_laser_resolution 0.5 nohost 0\n"
+        "PARAM robot_front_laser_max 4.0 nohost 0\n"
+    )
+    log = read_log(flaser_log(tmp_path / "p.log", 360, params))
+    s = log.scans[0]
+    assert np.degrees(s.bearings[-1] - s.bearings[0]) == pytest.approx(179.5)
+    assert np.all(s.ranges[s.valid] < 4.0) and np.any(s.ranges >= 4.0) and log.notes == []
+    # a step that cannot hold the readings within 180 degrees is said, and the SICK's is used
+    log = read_log(
+        flaser_log(tmp_path / "q.log", 361, "PARAM laser_front_laser_resolution 1 nohost 0\n")
+    )
+    assert np.degrees(np.diff(log.scans[0].bearings)) == pytest.approx(0.5)
+    assert any("cannot hold 361 readings" in note for note in log.notes)
+
+
+def _recoded(intel_path, out, code):
+    """The Intel excerpt with its SICK no-return code (81.83 m) rewritten by ``code(k)``."""
+    import gzip
+
+    lines, k = [], 0
+    for line in gzip.open(intel_path, "rt"):
+        t = line.split()
+        if t and t[0] == "FLASER":
+            for i in range(2, 2 + int(t[1])):
+                if t[i] == "81.83":
+                    t[i], k = code(k), k + 1
+            line = " ".join(t) + "\n"
+        lines.append(line)
+    out.write_text("".join(lines))
+    return out
+
+
+@pytest.mark.parametrize(
+    "code, said",
+    [
+        (lambda k: f"{51.0 + 0.01 * (k % 31):.2f}", "readings of 51.00-51.30 m"),
+        (lambda k: "32.76", "readings of 32.76 m"),
+    ],
+)
+def test_a_logs_own_no_return_code_is_found_and_masked(tmp_path, code, said):
+    """A log that states no maximum range writes its own code for no return (51.0-51.3 m, 32.76 m in
+    field logs): a spike at the top of its readings, masked and said, never a wall of points."""
+    from .conftest import INTEL
+
+    log = read_log(_recoded(INTEL, tmp_path / "coded.log", code))
+    assert any(said in note and "no-return code" in note for note in log.notes), log.notes
+    top = max(s.ranges[s.valid].max() for s in log.scans)
+    assert top < 30.0  # only the excerpt's real readings are left
+    assert sum(s.n_valid for s in log.scans) == sum(s.n_valid for s in read_log(INTEL).scans)
+
+
+def test_real_readings_at_fifty_metres_are_kept_in_a_long_range_log(tmp_path, intel):
+    """The aces log's 50.00 m is its code, not everyone's: in a log of real readings out to 60 m
+    (the Intel excerpt's room, scaled so that its commonest far reading lands on 50.00 m), the
+    readings on 50.00 m stay."""
+    import gzip
+
+    from .conftest import INTEL
+
+    far = np.concatenate([s.ranges[s.valid] for s in intel.scans])
+    values, counts = np.unique(far[(far > 15.0) & (far < 22.0)], return_counts=True)
+    scale = 50.0 / values[np.argmax(counts)]
+    out = []
+    for line in gzip.open(INTEL, "rt"):
+        t = line.split()
+        if t and t[0] == "FLASER":
+            n = int(t[1])
+            t[2 : 2 + n] = [v if v == "81.83" else f"{scale * float(v):.2f}" for v in t[2 : 2 + n]]
+            line = " ".join(t) + "\n"
+        out.append(line)
+    scaled = tmp_path / "large.log"
+    scaled.write_text("".join(out))
+    log = read_log(scaled)
+    readings = np.concatenate([s.ranges[s.valid] for s in log.scans])
+    assert np.count_nonzero(np.isclose(readings, 50.0, atol=0.005)) == counts.max()
+    assert readings.max() > 50.0 and not any("no-return code" in note for note in log.notes)
 
 
 def test_carmen_laser_poses_are_the_lasers_and_odometry_moves_onto_the_laser(tmp_path, intel):
@@ -314,7 +416,7 @@ def test_carmen_laser_poses_are_the_lasers_and_odometry_moves_onto_the_laser(tmp
             f"{base.theta!r} {s.stamp} host {s.stamp}"
         )
         q = base @ mount
-        head = f"0 {-math.pi / 2!r} {math.pi!r} {math.pi / (n - 1)!r} 81.9 0.01 0 {n} {ranges}"
+        head = f"{rawlaser_head(s)} {ranges}"
         robot.append(
             f"ROBOTLASER1 {head} 0 {q.x!r} {q.y!r} {q.theta!r} {base.x!r} {base.y!r} "
             f"{base.theta!r} 0 0 0 0 0 {s.stamp} host {s.stamp}"

@@ -16,10 +16,10 @@ from mbicp_viz.core import (
 
 # (params, the same with the matcher's own rule and the cycle stop out of reach, pair)
 CYCLING = {
-    # the projection filter hides a point every other iteration: two poses ~2 mm apart
-    "improved": (ImprovedParams(), ImprovedParams(IterSmoothConv=100, MaxIter=100), 15),
+    # the projection filter hides a point every other iteration: two poses mm apart
+    "improved": (ImprovedParams(), ImprovedParams(IterSmoothConv=100, MaxIter=100), 23),
     # range comparisons coming and going at the edge of the overlap
-    "pmwn": (PmwnParams(), PmwnParams(stop_after=100, MaxIter=60), 6),
+    "pmwn": (PmwnParams(), PmwnParams(stop_after=100, MaxIter=60), 13),
     "psm": (PsmParams(), PsmParams(stop_after=100, MaxIter=60), 6),
 }
 

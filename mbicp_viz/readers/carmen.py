@@ -1,12 +1,19 @@
 """CARMEN logs: FLASER, RAWLASER1-4, ROBOTLASER1, ODOM, PARAM (plain, .gz, .bz2 or .xz).
 
 Layouts as written by CARMEN's logger (every message ends ``ipc_timestamp ipc_hostname
-logger_timestamp``); CSM's ``laser_data_carmen.c`` is the reference for the bearings of FLASER,
-which stores none: the scan spans 180 degrees from -90 degrees — but for 400 and 401 readings,
-which CARMEN's own reader (``carmen_laser_guess_fov``) takes for a SICK in its 100-degree mode at
-0.25 degrees. Other counts than a SICK's (180, 181, 360, 361, 400, 401) are read over 180 degrees
-with a note, since the file cannot say otherwise. A record must hold exactly the fields its counts
-announce.
+logger_timestamp``). FLASER stores no bearings: they are read as CARMEN's own reader reads them
+(``carmen_laser_guess_angle_increment``), from -90 degrees in the log's stated step (``PARAM
+laser_front_laser_resolution``, degrees) or else the SICK's step for its reading count — 1 degree
+for 180 and 181 readings, 0.5 for 360 and 361 (the 180- and 360-reading scans lack the SICK's last
+beam) — and 0.25 for 400 and 401 (the SICK's 100-degree mode, centred). Other counts than a SICK's
+are read over 180 degrees from -90 with a note, as CSM's ``laser_data_carmen.c`` does, since the
+file cannot say otherwise. A record must hold exactly the fields its counts announce.
+
+No returns: a reading at or beyond the log's ``PARAM robot_front_laser_max`` (FLASER; RAWLASER and
+ROBOTLASER1 state their ``maximum_range``) is no return, like SICK's codes (``NO_RETURN_CODES_M``)
+and the code a log writes for its no returns where it states none: a spike of one value (or a band
+of a few cm) at the top of the stream's readings, with nearly nothing above it (aces: 50.00 m;
+``_ceiling``); a note names what was masked.
 
 Each laser message type is a stream of its own: a log can hold two lasers (RAWLASER1 and
 RAWLASER2) or one laser twice (FLASER from the robot module, RAWLASER1 from the laser module, at
@@ -23,28 +30,26 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass, field
+from typing import ClassVar
 
 from mbicp_viz.core import Pose2, ScanSource, uniform_bearings
 from mbicp_viz.errors import InputError
 
+from .ceiling import mask_ceiling
 from .log import Frames, ScanLog, scan_or_reason
 from .text import Fields, token_lines
 
-# No-return / max-range codes of real logs, masked, never points (see shared/data/README.md):
-# SICK 80 m mode, the aces log's 50.00, SICK 8 m mode.
-NO_RETURN_CODES_M = ((81.83, 81.91), (49.995, 50.005), (8.183, 8.191))
+# No-return / max-range codes of SICK scanners, masked, never points (see shared/data/README.md):
+# the 80 m mode's and the 8 m mode's (no real reading lies beyond those ranges).
+NO_RETURN_CODES_M = ((81.83, 81.91), (8.183, 8.191))
 _MESSAGE = re.compile(r"^[A-Z][A-Z0-9_]*$")
 _RAWLASER = re.compile(r"RAWLASER[1-4]")
 LASER_MESSAGES = "FLASER, RAWLASER1-4 or ROBOTLASER1"
 TRAILER = 3  # ipc_timestamp ipc_hostname logger_timestamp
-# FLASER readings of a SICK over 180 degrees (1 or 0.5 degree steps)
-SICK_180_DEG = (
-    180,
-    181,
-    360,
-    361,
-)
-SICK_100_DEG = (400, 401)  # ... and over 100 degrees at 0.25 degrees (CARMEN's readlog.c)
+# FLASER reading counts of a SICK -> its step [deg] (CARMEN's carmen_laser_guess_angle_increment)
+SICK_STEP_DEG = {180: 1.0, 181: 1.0, 360: 0.5, 361: 0.5, 400: 0.25, 401: 0.25}
+SICK_100_DEG = (400, 401)  # the 100-degree mode, centred on the laser's axis
 # CARMEN's laser 1, the front one, in the order read unnamed
 FRONT_LASER = (
     "ROBOTLASER1",
@@ -53,12 +58,73 @@ FRONT_LASER = (
 )
 
 
+@dataclass
+class FrontLaser:
+    """What a log's PARAM lines say of its front laser, read as they come (a line applies to the
+    scans after it): its offset on the robot [m], its maximum range [m] and, for FLASER, which
+    stores no bearings, its step [deg]."""
+
+    PARAMS: ClassVar = (
+        "robot_frontlaser_offset",
+        "robot_front_laser_max",
+        "laser_front_laser_resolution",
+    )
+    offset: float = 0.0
+    max_range: float = math.inf
+    step_deg: float | None = None
+    contradicted: set[int] = field(default_factory=set)  # counts the stated step cannot hold
+
+    def read(self, fields: Fields) -> None:
+        name = fields.t[1]
+        fields.i = 2
+        value = fields.take(name)
+        if name == "robot_frontlaser_offset":
+            self.offset = value
+        elif not value > 0:
+            raise fields.error(f"must be positive, got {value:g}", name)
+        elif name == "robot_front_laser_max":
+            self.max_range = value
+        else:
+            self.step_deg = value
+
+    def bearings(self, n: int):
+        """A FLASER scan's bearings: from -90 degrees in the stated step, else the SICK's for ``n``
+        readings (the 100-degree mode from -50), else over 180 degrees as CSM reads them."""
+        step = self.step_deg
+        if step is not None and (n - 1) * step > 180.0 + 1e-9:
+            self.contradicted.add(n)
+            step = None
+        start = -90.0
+        if step is None and n in SICK_STEP_DEG:
+            step = SICK_STEP_DEG[n]
+            start = -50.0 if n in SICK_100_DEG else -90.0
+        if step is None:
+            step = 180.0 / (n - 1) if n > 1 else 0.0
+        return uniform_bearings(n, math.radians(start), math.radians(step))
+
+    def notes(self, beams: set[int], path: str) -> list[str]:
+        """What was read otherwise than the log says, or guessed where it says nothing."""
+        out = [
+            f"{path}: PARAM laser_front_laser_resolution {self.step_deg:g} deg cannot hold {n} "
+            "readings within 180 degrees: read at "
+            + (f"the SICK's {SICK_STEP_DEG[n]:g} deg" if n in SICK_STEP_DEG else "180/(n-1)")
+            for n in sorted(self.contradicted)
+        ]
+        guessed = sorted(n for n in beams if n not in SICK_STEP_DEG)
+        if self.step_deg is None and guessed:
+            out.append(
+                f"{path}: FLASER stores no field of view, and {', '.join(map(str, guessed))} "
+                "readings are not a SICK's: read over 180 degrees from -90, as CSM does"
+            )
+        return out
+
+
 def read_carmen(path: str, message: str | None = None) -> ScanLog:
     """The scans of laser message type ``message`` (None: the log's only one, else its front
     laser's, with a note; see ``_stream``)."""
     log = ScanLog(str(path), [])  # odometry, frames and the messages read past
     streams: dict[str, ScanLog] = {}
-    laser_offset = 0.0
+    front = FrontLaser()
     mounts: list[Pose2] = []  # what each ROBOTLASER1 line's two poses imply
     for fields in token_lines(path, comment=None):
         kind = fields.t[0]
@@ -68,10 +134,10 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
             raise fields.error(f"not a CARMEN message name: {kind[:40]!r}", "message")
         fields.i = 1
         if kind == "PARAM":
-            if fields.left >= 2 and fields.t[1] == "robot_frontlaser_offset":
-                fields.i = 2
-                laser_offset = fields.take("robot_frontlaser_offset")
-                log.frames = Frames(Pose2(laser_offset, 0.0, 0.0), "PARAM robot_frontlaser_offset")
+            if fields.left >= 2 and fields.t[1] in FrontLaser.PARAMS:
+                front.read(fields)
+                if fields.t[1] == "robot_frontlaser_offset":
+                    log.frames = Frames(Pose2(front.offset, 0.0, 0.0), f"PARAM {fields.t[1]}")
         elif kind == "ODOM":
             pose = _pose(fields, "odom")
             for name in ("tv", "rv", "accel"):
@@ -79,10 +145,10 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
             log.odometry.append((_trailer(fields, "ODOM x y theta tv rv accel"), pose))
         elif kind == "FLASER":
             stream = streams.setdefault(kind, ScanLog(str(path), []))
-            stream.add(_flaser(fields, stream.records, laser_offset))
+            stream.add(_flaser(fields, stream.records, front))
         elif kind == "ROBOTLASER1" or _RAWLASER.fullmatch(kind):
             stream = streams.setdefault(kind, ScanLog(str(path), []))
-            stream.add(_rawlaser(fields, stream.records, kind, mounts))
+            stream.add(_rawlaser(fields, stream.records, kind, mounts, front))
         else:
             log.skipped[kind] = log.skipped.get(kind, 0) + 1
     if not streams:
@@ -107,12 +173,9 @@ def read_carmen(path: str, message: str | None = None) -> ScanLog:
         if note:
             log.notes.append(note)
     beams = {len(s.ranges) for s in log.scans}
-    if kind == "FLASER" and not beams <= set(SICK_180_DEG + SICK_100_DEG):
-        log.notes.append(
-            f"{path}: FLASER stores no field of view, and {', '.join(map(str, sorted(beams)))} "
-            "readings "
-            "are not a SICK's: read over 180 degrees from -90, as CARMEN and CSM do"
-        )
+    if kind == "FLASER":
+        log.notes += front.notes(beams, path)
+    log.notes += mask_ceiling(log)
     if len(streams) > 1:
         log.topic, log.scan_topics = kind, {k: f"{v.records} scans" for k, v in streams.items()}
     return log
@@ -184,7 +247,7 @@ def _make(fields: Fields, index: int, ranges, bearings, **kw):
     )
 
 
-def _flaser(fields: Fields, index: int, laser_offset: float):
+def _flaser(fields: Fields, index: int, front: FrontLaser):
     n = fields.take_int("num_readings", 1, 100_000)
     ranges = fields.take_floats(n, "range", "num_readings")
     pose = _pose(fields, "laser_pose")
@@ -194,16 +257,25 @@ def _flaser(fields: Fields, index: int, laser_offset: float):
     )
     # x y theta is the laser's pose (CARMEN's laser_pose: the offset is in it already), odom_* the
     # robot's: moved onto the laser
-    if laser_offset:
-        odom = odom @ Pose2(laser_offset, 0.0, 0.0)
-    fov = math.radians(100.0 if n in SICK_100_DEG else 180.0)
-    bearings = uniform_bearings(n, -fov / 2, fov / (n - 1) if n > 1 else 0.0)
-    return _make(fields, index, ranges, bearings, pose=pose, odometry=odom, stamp=stamp)
+    if front.offset:
+        odom = odom @ Pose2(front.offset, 0.0, 0.0)
+    return _make(
+        fields,
+        index,
+        ranges,
+        front.bearings(n),
+        range_max=front.max_range,
+        pose=pose,
+        odometry=odom,
+        stamp=stamp,
+    )
 
 
-def _rawlaser(fields: Fields, index: int, kind: str, mounts: list[Pose2]):
+def _rawlaser(fields: Fields, index: int, kind: str, mounts: list[Pose2], front: FrontLaser):
     """A RAWLASER or ROBOTLASER1 scan; a ROBOTLASER1 line's laser and robot poses (both in the
-    odometry frame) add the mount they imply to ``mounts``, and the laser's is its odometry."""
+    odometry frame) add the mount they imply to ``mounts``, and the laser's is its odometry. Its
+    readings at or beyond its ``maximum_range`` are no return, and for the front laser's streams
+    at or beyond ``PARAM robot_front_laser_max`` too."""
     robot = kind == "ROBOTLASER1"
     fields.take_int("laser_type", -1000, 1000)
     start = fields.take("start_angle")
@@ -240,7 +312,10 @@ def _rawlaser(fields: Fields, index: int, kind: str, mounts: list[Pose2]):
         index,
         ranges,
         bearings,
-        range_max=max_range if max_range > 0 else math.inf,
+        range_max=min(
+            max_range if max_range > 0 else math.inf,
+            front.max_range if kind in FRONT_LASER else math.inf,
+        ),
         pose=pose,
         odometry=odom,
         stamp=stamp,
