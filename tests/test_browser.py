@@ -160,15 +160,20 @@ def test_two_tabs_keep_their_own_state(browser, app):
 
 
 def test_plots_read_numbers_not_dates(browser, app):
-    """uPlot's x axis is a time axis unless told otherwise: hovering a plot must show a distance."""
+    """uPlot's x axis is a time axis unless told otherwise: hovering a plot must show a number.
+    The distance plot's marks are vertical lines, which a live legend reads as "NaN" under the
+    cursor: its legend gives each mark's value at the iteration shown instead."""
     from playwright.sync_api import Error
 
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger import report
+
     page, session = open_tab(browser, app)
-    legend = page.locator(".u-legend").nth(1)
+    legend = page.locator(".u-legend").first
 
     def hovered() -> bool:  # a plot's element is replaced when its data change: find it afresh
         try:
-            plot = page.locator(".u-over").nth(1)  # the pair-distance histogram
+            plot = page.locator(".u-over").first  # error and threshold per iteration
             plot.scroll_into_view_if_needed(timeout=2000)
             box = plot.bounding_box()
             page.mouse.move(box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.5)
@@ -181,10 +186,30 @@ def test_plots_read_numbers_not_dates(browser, app):
 
     assert wait_for(hovered)
     shown = legend.locator(".u-value").first.inner_text().strip()
-    hi = float(np.max(session.state.runs[0].iterations[-1].pairs.distance)) * 1.05
-    assert 0.0 <= float(shown) <= hi, shown  # a distance in metres, not "1970-01-01 12:00am"
-    labels = " ".join(page.locator(".u-legend").first.inner_text().split())
+    assert 0 <= float(shown) <= session.state.max_iteration(), shown  # not "1970-01-01 12:00am"
+    labels = " ".join(legend.inner_text().split())
     assert "mean squared residual [m²]" in labels and "MAD threshold" in labels
+    with session.lock:
+        ev = report.event(session.state, session.state.runs[0])
+        median = scene.histogram(ev.pairs.distance, ev.threshold).median
+    distances = page.locator(".u-legend").nth(1)
+    assert wait_for(lambda: f"median distance: {median:.3g} m" in distances.inner_text())
+    assert "NaN" not in distances.inner_text() and "pairs)" in distances.inner_text()
+    page.close()
+
+
+def test_the_layers_offered_are_the_ones_this_pair_can_have(browser, app):
+    """The bundled pair is neither corrected for motion nor a 360-degree scan: no box offers the
+    scans as measured or the seam; the pairs' boxes are there."""
+    from mbicp_viz.views import scene
+
+    page, session = open_tab(browser, app)
+    rejected = page.get_by_text(scene.PAIR_REJECTED.label, exact=True)
+    rejected.first.scroll_into_view_if_needed()
+    assert rejected.first.is_visible()
+    for label in (scene.RAW.label, scene.SEAM.label):
+        box = page.get_by_text(label, exact=True).first
+        assert wait_for(lambda b=box: not b.is_visible())
     page.close()
 
 

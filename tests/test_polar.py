@@ -331,8 +331,7 @@ def _held_from_the_truth(params, apart: int = 1) -> int:
     ss = scans("intel")
     truths = [relative(a.pose, b.pose) for a, b in zip(ss, ss[apart:])]
     return sum(
-        CONSECUTIVE.judge(match(a, b, t, params).pose, t)
-        for a, b, t in zip(ss, ss[apart:], truths)
+        CONSECUTIVE.judge(match(a, b, t, params).pose, t) for a, b, t in zip(ss, ss[apart:], truths)
     )
 
 

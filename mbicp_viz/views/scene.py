@@ -44,7 +44,8 @@ OBJECT_AFTER = Style("object scan after the step", (150, 180, 245), 2.5)
 HIDDEN = Style("object points hidden by the projection filter", (140, 90, 40), 3.5, on=False)
 PAIR_POINT = Style("pairs to a reference point", (20, 20, 20), 4.0)
 PAIR_INTERPOLATED = Style("pairs to an interpolated point", (0, 160, 90), 4.0)
-PAIR_REJECTED = Style("rejected pairs", (245, 160, 0), 3.8)
+# orange, not amber: amber reads yellow in thin lines
+PAIR_REJECTED = Style("rejected pairs", (235, 85, 0), 3.8)
 GRID = Style("resampling grid (pale: thinned, blue: kept)", (110, 140, 225), -1.0)
 ISO_METRIC = Style("MbICP iso-distance ellipse", (130, 60, 200), 4.5, on=False)
 ISO_EUCLID = Style("Euclidean circle through the same target", (150, 130, 0), 4.5, on=False)
@@ -86,7 +87,7 @@ STYLES = (
 
 # Plot series: the legend of the plots.
 ERROR = Style("mean squared residual [m²]", (90, 90, 90))
-THRESHOLD = Style("rejection threshold [m]", (245, 160, 0))
+THRESHOLD = Style("rejection threshold [m]", PAIR_REJECTED.color)
 HARD_CUT = Style("hard cut [m]", (200, 60, 60))
 METRIC_WEIGHT = Style("PMWN metric weight λ [m/rad]", (210, 0, 130))
 
@@ -207,12 +208,14 @@ def scene_scale(points: np.ndarray) -> float:
 
 
 def ratio_colors(ratio: np.ndarray) -> np.ndarray:
-    """RGBA cell colour by sampling ratio: faint grey for thinned near cells, blue for kept far
-    ones."""
-    r = np.clip(ratio, 0.0, 1.0)[:, None]
-    rgb = (1 - r) * np.array([200, 200, 200]) + r * np.array(GRID.color)
-    alpha = 40 + 100 * r
-    return np.round(np.hstack((rgb, alpha))).astype(np.uint8)
+    """RGBA cell colour by sampling ratio: pale grey for thinned near cells (fainter the more they
+    are thinned), solid blue for the cells kept whole: two kinds a student tells apart at a
+    glance."""
+    r = np.clip(ratio, 0.0, 1.0)
+    kept = r >= 1.0
+    rgb = np.where(kept[:, None], np.array(GRID.color), np.array([165, 165, 165]))
+    alpha = np.where(kept, 170.0, 35.0 + 60.0 * r)
+    return np.round(np.hstack((rgb, alpha[:, None]))).astype(np.uint8)
 
 
 def static_layers(
@@ -333,7 +336,7 @@ def iteration_layers(start: StartEvent, ev: IterationEvent) -> list[Layer]:
         Segments(
             f"{SCANS}/pairs/interpolated", src[inter], p.target[inter], PAIR_INTERPOLATED, 0.004 * s
         ),
-        Segments(f"{SCANS}/pairs/rejected", src[~kept], p.target[~kept], PAIR_REJECTED, 0.003 * s),
+        Segments(f"{SCANS}/pairs/rejected", src[~kept], p.target[~kept], PAIR_REJECTED, 0.004 * s),
         Points(f"{SCANS}/interpolated_targets", p.target[inter], PAIR_INTERPOLATED, 0.012 * s),
         Frame(f"{SCANS}/estimate", ev.estimate_after, length=0.4 * s),
         Scalar(f"{PLOTS}/error", ev.error, ERROR),

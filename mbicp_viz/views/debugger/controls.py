@@ -13,6 +13,7 @@ import threading
 import numpy as np
 
 from mbicp_viz.core import MATCHERS, Pose2
+from mbicp_viz.errors import InputError
 from mbicp_viz.readers.params_toml import presets_for
 
 from .. import scene, viser_draw
@@ -367,6 +368,20 @@ class Layers:
     def show(self) -> None:
         """The boxes as the model holds them (a lesson step opens with its own layers)."""
         set_boxes(self, self.s.state.visible)
+
+    def offered(self, state) -> None:
+        """Only the boxes of layers this pair can have: the scans as measured where one is
+        corrected for motion, the 360-degree seam where the reference closes the circle."""
+        try:
+            ref, obj = state.ref, state.obj
+        except InputError:  # an unusable scan: the page says so, the boxes stay
+            return
+        has = {
+            scene.RAW.label: ref.raw is not None or obj.raw is not None,
+            scene.SEAM.label: ref.is_full_circle(),
+        }
+        for label, box in self.boxes.items():
+            box.visible = has.get(label, True)
 
     def _toggled(self, label: str, value: bool) -> None:
         # the model sets the boxes (``set_boxes``): one redraw after, not one per box

@@ -205,6 +205,7 @@ class Plots:
         self.histogram = self.gui.add_uplot(
             data=histogram_series(state),
             series=histogram_legend(state),
+            legend=uplot.Legend(live=False),
             aspect=1.6,
             title=f"{first.matcher}: pair distances (this iteration)",
             **_numeric(
@@ -213,26 +214,26 @@ class Plots:
         )
         costs = [
             np.nanmax(e.polar.cost)
-            for e in (polar.iterations if polar else [])
+            for r in polar_runs(state)
+            for e in r.iterations
             if np.any(np.isfinite(e.polar.cost))
         ]
+        names = " and ".join(r.matcher for r in polar_runs(state)) or "polar matchers"
         self.cost = self.gui.add_uplot(
-            data=cost_series(state) or (np.zeros(1),) * 3,
+            data=cost_series(state) or (np.zeros(1),) * len(cost_legend(state)),
             aspect=1.6,
             visible=polar is not None,
-            title=f"{polar.matcher if polar else 'polar matchers'}: cost per shift (this "
-            "iteration)",
-            series=(
-                uplot.Series(label="shift [deg]"),
-                _line("cost [m]", "m", scene.COST),
-                _line(scene.FIT.label, "m", scene.FIT),
-            ),
+            title=f"{names}: cost per shift (this iteration)",
+            series=cost_legend(state),
             **_numeric("shift [deg]", ("m", "cost [m]", 3, _top(costs))),
         )
 
     def iteration(self, state: DebugState) -> None:
         """The plots of the current iteration."""
         self.histogram.data = histogram_series(state)
+        legend = histogram_legend(state)
+        if legend != self.histogram.series:
+            self.histogram.series = legend
         cost = cost_series(state)
         if cost is not None:
             self.cost.data = cost
@@ -295,19 +296,53 @@ def error_series(state: DebugState) -> tuple[np.ndarray, ...]:
 
 
 def histogram_legend(state: DebugState) -> tuple[uplot.Series, ...]:
-    params = state.runs[0].start.params
+    """The distance plot's entries, each with its value at the current iteration: the marks are
+    vertical lines, so a value under the cursor would be a gap (uPlot's live legend read "NaN")."""
+    run = state.runs[0]
+    params = run.start.params
     cut = scene.hard_cut(params)
+    ev = report.event(state, run)
+    pairs = len(ev.pairs.distance) if ev is not None else 0
+    h = scene.histogram(ev.pairs.distance, ev.threshold) if pairs else None
+
+    def at(label: str, value: float | None) -> str:
+        shown = "none this iteration" if value is None else f"{value:.3g} m"
+        return f"{label.removesuffix(' [m]')}: {shown}"
+
     return (
         uplot.Series(label="distance [m]"),
-        _line(scene.HIST_BARS.label, "n", scene.HIST_BARS),
-        _line(scene.MEDIAN.label, "mark", scene.MEDIAN),
-        _line(scene.threshold_style(params).label, "mark", scene.THRESHOLD),
+        _line(f"{scene.HIST_BARS.label} ({pairs} pairs)", "n", scene.HIST_BARS),
+        _line(at(scene.MEDIAN.label, h and h.median), "mark", scene.MEDIAN),
+        _line(at(scene.threshold_style(params).label, h and h.threshold), "mark", scene.THRESHOLD),
         _line(cut[0].label if cut else "no hard cut", "mark", scene.HARD_CUT, dash=True),
     )
 
 
+def polar_runs(state: DebugState) -> list:
+    """The runs of the polar matchers (PSM, PMWN): the ones with a cost per shift."""
+    return [r for r in state.runs if r.iterations and r.iterations[0].polar is not None]
+
+
 def polar_run(state: DebugState):
-    return next((r for r in state.runs if r.iterations and r.iterations[0].polar is not None), None)
+    return next(iter(polar_runs(state)), None)
+
+
+def cost_legend(state: DebugState) -> tuple[uplot.Series, ...]:
+    """The shift, then each polar run's cost and fit, in its matcher's colour when there are
+    several (PMWN's V beside PSM's parabola)."""
+    runs = polar_runs(state) or [None]
+    series = [uplot.Series(label="shift [deg]")]
+    for run in runs:
+        name = f"{run.matcher}: " if run is not None and len(runs) > 1 else ""
+        own = MATCHERS[run.matcher].colour if run is not None and len(runs) > 1 else None
+        for label, style, dash in (
+            ("cost [m]", scene.COST, False),
+            (scene.FIT.label, scene.FIT, True),
+        ):
+            drawn = replace(style, color=own) if own else style
+            line = _line(f"{name}{label}", "m", drawn, dash=dash and own is not None)
+            series.append(uplot.Series(**line, spanGaps=True))
+    return tuple(series)
 
 
 def histogram_series(state: DebugState) -> tuple[np.ndarray, ...]:
@@ -338,10 +373,24 @@ def histogram_series(state: DebugState) -> tuple[np.ndarray, ...]:
 
 
 def cost_series(state: DebugState) -> tuple[np.ndarray, ...] | None:
-    """PSM/PMWN: the orientation step's cost per shift and the fit at its minimum; None
-    otherwise."""
-    run = polar_run(state)
-    ev = report.event(state, run) if run is not None else None
+    """PSM/PMWN: each polar run's orientation-step cost per shift and the fit at its minimum, on
+    the shifts of all of them (a run's gaps where its shifts end); None without a cost."""
+    curves = [_cost_curve(state, r) for r in polar_runs(state)]
+    if not curves or all(c is None for c in curves):
+        return None
+    x = np.unique(np.concatenate([c[0] for c in curves if c is not None]))
+    out = [x]
+    for c in curves:
+        for k in (1, 2):
+            y = np.full(len(x), np.nan)
+            if c is not None:
+                y[np.searchsorted(x, c[0])] = c[k]
+            out.append(y)
+    return tuple(out)
+
+
+def _cost_curve(state: DebugState, run) -> tuple[np.ndarray, ...] | None:
+    ev = report.event(state, run)
     polar = ev.polar if ev is not None else None
     if polar is None or not np.any(np.isfinite(polar.cost)):
         return None

@@ -143,6 +143,7 @@ class Session:
     def redraw(self) -> None:
         """Every run's layers at the current iteration, the legend of what is shown, the plots."""
         with self.lock, self.client.atomic():
+            self.layers.offered(self.state)
             shown: dict[str, scene.Style] = {}
             drawn: dict[str, object] = {}
             for run in self.state.runs:
