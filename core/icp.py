@@ -20,10 +20,12 @@ with its iterations recorded (the same numbers: the loop is deterministic).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 
+from . import budget
 from .events import (
     Correspondences,
     FinishEvent,
@@ -52,7 +54,7 @@ _KEPT, _OUTSIDE, _TRIMMED, _DOUBLE = (
 )
 
 # Outcomes of one run of the loop
-_OK, _TOO_FEW, _SINGULAR = 0, 1, 2
+_OK, _TOO_FEW, _SINGULAR, _HALTED = 0, 1, 2, 3
 
 
 class Rays(NamedTuple):
@@ -104,6 +106,7 @@ class IcpLoopParams(NamedTuple):
     mult: float  # ... times outliers_adaptive_mult, and the outliers_maxPerc quantile, trim
     max_perc: float
     doubles: bool  # outliers_remove_doubles
+    halt: np.ndarray  # raised (1) when the match must stop: core/budget.py
 
     @staticmethod
     def of(p: IcpParams) -> IcpLoopParams:
@@ -117,6 +120,7 @@ class IcpLoopParams(NamedTuple):
             float(p.outliers_adaptive_mult),
             float(p.outliers_maxPerc),
             bool(p.outliers_remove_doubles),
+            budget.current().flag,
         )
 
 
@@ -338,6 +342,9 @@ def _loop(S: Rays, x, y, th, lp: IcpLoopParams, trace):
         if converged or (np.hypot(dx, dy) < lp.eps_xy and abs(dth) < lp.eps_th):
             converged = True
             break
+        if lp.halt[0]:
+            code = _HALTED
+            break
     return code, x, y, th, total, valid, it + 1, converged, wx, wy, j1, j2, status
 
 
@@ -392,12 +399,14 @@ def match(
     if code == _OK and params.restart and total / valid > params.restart_threshold_mean_error:
         for start, label in _restarts(params, Pose2(x, y, th)):
             out = _run(rays, start, params)
-            if out[0] != _OK:  # CSM stops restarting at the first failure
+            if out[0] not in (_OK, _HALTED):  # CSM stops restarting at the first failure
                 break
             runs.append((start, f"restart from the first run's result, {label}"))
             outcomes.append(out)
             if out[4] < outcomes[best][4]:
                 best = len(outcomes) - 1
+            if out[0] == _HALTED:
+                break
     if observer is not None:
         _replay(observer, name, params, rays, runs, outcomes, best, initial_guess)
     result = _result(name, rays, params, outcomes, best)
@@ -416,9 +425,11 @@ def _replay(observer, name, params, rays, runs, outcomes, best, initial_guess) -
     count = 0
     for k, ((start, label), out) in enumerate(zip(runs, outcomes)):
         trace = _empty_trace(out[6], len(rays.sx))
-        _run(rays, start, params, trace)
+        with budget.limited(None):  # the same iterations, to where the run ended (halted or not)
+            _run(rays, start, replace(params, max_iterations=out[6]), trace)
         poses, stat, first, second, dists, limits = trace
-        recorded = out[6] if out[0] == _OK else out[6] - 1  # a failed iteration computes no pose
+        # a failed iteration computes no pose
+        recorded = out[6] if out[0] in (_OK, _HALTED) else out[6] - 1
         for it in range(recorded):
             before, after = Pose2(*poses[it, :3]), Pose2(*poses[it, 3:])
             st, j1, j2 = stat[it][obj_valid], first[it][obj_valid], second[it][obj_valid]
@@ -472,17 +483,21 @@ def _feet(a: np.ndarray, b: np.ndarray, p: np.ndarray, clamp: bool) -> np.ndarra
 
 def _result(name, rays, params, outcomes, best) -> MatchResult:
     """The kept run's pose; its last iteration's kept pairs make the final system (as CSM reports
-    their count), for the covariance and the degeneracy indicator."""
+    their count), for the covariance and the degeneracy indicator. A run stopped by the budget
+    ends the match halted, whichever run is kept."""
     code, x, y, th, total, valid, _, converged, wx, wy, j1, j2, status = outcomes[best]
     iterations = sum(o[6] for o in outcomes)
     pose = Pose2(x, y, th)
     ref_pts, ref_of_ray = rays.ref_points()
-    if code != _OK:
+    if code not in (_OK, _HALTED):
         reason = Termination.TOO_FEW_PAIRS if code == _TOO_FEW else Termination.SINGULAR
         return build_result(
             name, pose, reason, iterations, None, ref_pts, rays.full_circle, DEGENERACY_LENGTH_M
         )
-    reason = Termination.CONVERGED if converged else Termination.MAX_ITERATIONS
+    if any(o[0] == _HALTED for o in outcomes):
+        reason = Termination.HALTED
+    else:
+        reason = Termination.CONVERGED if converged else Termination.MAX_ITERATIONS
     line = isinstance(params, PlIcpParams)
     A, err, foot, first = run(_final_system, rays, wx, wy, j1, j2, status, x, y, th, line)
     n_candidates = int(np.count_nonzero(status != PairStatus.OUTSIDE_BR))

@@ -11,10 +11,12 @@ recorded (the same numbers: the loop is deterministic), and the recording become
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 
+from . import budget
 from .correspondence import ReferenceIndex, candidates, visible_from_reference, visible_in_order
 from .events import (
     Correspondences,
@@ -45,8 +47,9 @@ _ENDS = (
     Termination.CYCLE,
     Termination.TOO_FEW_PAIRS,
     Termination.SINGULAR,
+    Termination.HALTED,
 )
-_MAX_ITER, _CONVERGED, _CYCLE, _TOO_FEW, _SINGULAR = range(5)
+_MAX_ITER, _CONVERGED, _CYCLE, _TOO_FEW, _SINGULAR, _HALTED = range(6)
 
 
 @kernel
@@ -104,6 +107,7 @@ class MbicpLoopParams(NamedTuple):
     zbuffer: bool  # ... as a z-buffer of the reference viewpoint, else the C code's scan order
     bin_start: float  # the z-buffer's first bin: the reference's first bearing [rad]
     bin_width: float  # [rad]
+    halt: np.ndarray  # raised (1) when the match must stop: core/budget.py
 
 
 @kernel
@@ -268,6 +272,9 @@ def _loop(P, x, y, th, R: ReferenceIndex, lp: MbicpLoopParams, ref_tangents, tra
         if n_cycle > lp.smooth:
             end = _CYCLE
             break
+        if lp.halt[0]:
+            end = _HALTED
+            break
     return (
         x,
         y,
@@ -421,6 +428,7 @@ def _run(
         zbuffer=bool(params.projection_zbuffer),
         bin_start=float(R.bearings[0]) if len(R.bearings) else 0.0,
         bin_width=float(run(projection_bin_width, R.bearings)),
+        halt=budget.current().flag,
     )
     tangents = (
         surface_tangents(R.points, R.full_circle, np.arange(len(R.points)))
@@ -472,7 +480,8 @@ def match(
 def _replay(observer, R, P, used, guess, params, improved, iterations) -> None:
     """The loop again, recorded, as one IterationEvent per iteration."""
     trace = _trace(iterations, len(P))
-    _run(R, P, guess, params, improved, trace)
+    with budget.limited(None):  # the same iterations, to where the match ended (halted or not)
+        _run(R, P, guess, replace(params, MaxIter=iterations), improved, trace)
     (
         poses,
         visible,

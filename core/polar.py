@@ -16,6 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import budget
 from .events import (
     Correspondences,
     FinishEvent,
@@ -618,7 +619,7 @@ def run_polar(
         observer(StartEvent(strategy.name, params, s.ref_pts, s.obj_pts, used, guess, None))
     est, lam = guess, params.lambda0 if strategy.metric else None
     n_small, it, reason, last = 0, 0, Termination.MAX_ITERATIONS, None
-    cycles, turn = CycleWatch(params), _Turn()
+    cycles, turn, halt = CycleWatch(params), _Turn(), budget.current()
     for it in range(1, params.MaxIter + 1):
         before = est
         proj_ext = project(grid, s.obj, est, K)
@@ -669,6 +670,9 @@ def run_polar(
             break
         if cycles.step(before, est) >= params.stop_after:
             reason = Termination.CYCLE
+            break
+        if halt.raised:
+            reason = Termination.HALTED
             break
     result = _result(strategy, s, est, reason, it, last)
     if observer is not None:

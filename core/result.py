@@ -17,6 +17,7 @@ class Termination(enum.Enum):
     MAX_ITERATIONS = "max_iterations"  # MaxIter reached first
     TOO_FEW_PAIRS = "too_few_pairs"  # fewer pairs than AsocError * points (or fewer than 3)
     SINGULAR = "singular"  # the normal equations could not be solved
+    HALTED = "halted"  # its time budget ran out, or a person stopped it (core/budget.py)
 
     @property
     def converged(self) -> bool:

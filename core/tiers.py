@@ -54,10 +54,12 @@ _KERNELS: list = []  # every kernel (with a cache entry of its own) of the modul
 
 
 def kernel(fn=None, *, inline: str = "never"):
-    """A compiled kernel (numba's njit, cached): ``@kernel`` or ``@kernel(inline="always")``."""
+    """A compiled kernel (numba's njit, cached, releasing the GIL): ``@kernel`` or
+    ``@kernel(inline="always")``."""
     if fn is None:
         return lambda f: kernel(f, inline=inline)
-    k = njit(cache=True, inline=inline)(fn)
+    # nogil: a match's budget timer and a stop pressed on the page run while it does (budget.py)
+    k = njit(cache=True, nogil=True, inline=inline)(fn)
     # an inlined kernel is compiled into its callers only: no cache entry of its own
     if inline == "never":
         _stale_index_reads_as_stale(k)

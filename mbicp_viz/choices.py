@@ -8,6 +8,11 @@ import enum
 # The ROS distro whose message types decode a ROS 2 bag recorded without them (``--typestore``)
 DEFAULT_TYPESTORE = "ROS2_HUMBLE"
 
+# The time budget of one match [s] (``--budget-s``, the debugger's): the bundled pairs take
+# milliseconds and real logs' matches under a second; one still running after a minute is not
+# converging usefully (a 100,000-beam scan under PSM: about 4 s an iteration).
+MATCH_BUDGET_S = 60.0
+
 
 class Guess(str, enum.Enum):
     """Where an initial guess comes from (``--guess``)."""

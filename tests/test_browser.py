@@ -213,6 +213,60 @@ def test_the_layers_offered_are_the_ones_this_pair_can_have(browser, app):
     page.close()
 
 
+def dense(scan, n: int):
+    """A real scan resampled to ``n`` beams over its own field of view (a lidar of that many)."""
+    from mbicp_viz.core import Scan
+
+    b = np.linspace(scan.bearings[0], scan.bearings[-1], n)
+    k = np.clip(np.searchsorted(scan.bearings, b), 1, len(scan.bearings) - 1)
+    near = np.where(b - scan.bearings[k - 1] < scan.bearings[k] - b, k - 1, k)
+    ok = scan.valid
+    return Scan(np.interp(b, scan.bearings[ok], scan.ranges[ok]), b, ok[near])
+
+
+def test_a_long_match_shows_its_time_and_budget_and_stops_from_the_page(browser, tmp_path):
+    """A match that would run for minutes (20,000 beams, stopping thresholds 0): the page says how
+    long it has run and the budget, the stop button ends it at its next iteration, and the result
+    says halted with the pose of the last iteration."""
+    from dataclasses import replace
+
+    from mbicp_viz.core import MATCHERS, Termination
+    from mbicp_viz.readers import ScanLog
+
+    log = read_log(EXAMPLES / "hokuyo-125-130.npz")
+    big = ScanLog("dense", [dense(log.scan(0), 20000), dense(log.scan(1), 20000)])
+    slow = replace(
+        MATCHERS["improved"].params_type(),
+        MaxIter=10000,
+        errx_out=0.0,
+        erry_out=0.0,
+        errt_out=0.0,
+        errorRatio=0.0,
+    )
+    application = App(
+        Source("dense pair", big, guess=Pose2(), params={"improved": slow}), "127.0.0.1", 0
+    )
+    try:
+        assert application.ready.wait(600)
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(f"http://127.0.0.1:{application.port}")
+        stop = page.get_by_role("button", name="stop the match")
+        stop.wait_for(timeout=60000)
+        page.get_by_text("working for").first.wait_for(timeout=10000)
+        assert "budget 60 s a match" in page.inner_text("body")
+        stop.click()
+        page.get_by_text("stopped from the page").first.wait_for(timeout=60000)
+        session = next(iter(application.sessions.values()))
+        r = session.state.runs[0].result
+        assert r.reason is Termination.HALTED and r.iterations < slow.MaxIter
+        assert wait_for(lambda: not stop.is_visible())
+        assert "working for" not in page.inner_text("body")
+        page.screenshot(path=str(tmp_path / "halted.png"))
+        page.close()
+    finally:
+        application.stop()
+
+
 def test_arrow_keys_on_the_slider_leave_the_view_top_down(browser, app):
     from mbicp_viz.views.debugger.camera import TopDownCamera
 
@@ -259,6 +313,8 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
     assert run_style("improved").label in legend.inner_text()
     page.get_by_text("icp: iteration").first.wait_for(timeout=10000)  # each run its own text
     page.get_by_text("improved: iteration").first.wait_for(timeout=10000)
+    for name in ("icp", "improved"):  # each compared run its own distance plot
+        page.get_by_text(f"{name}: pair distances (this iteration)").first.wait_for(timeout=10000)
     shot = tmp_path / "compare.png"
 
     def both_drawn() -> bool:  # the view draws the new nodes on its next frames
@@ -278,8 +334,10 @@ def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app as cli
-    from mbicp_viz.evaluation.failures import failure_label
+    from mbicp_viz.evaluation.failures import failure_kind, failure_label
+    from mbicp_viz.views import scene
     from mbicp_viz.views.debugger.sources import files_source
+    from mbicp_viz.views.debugger.state import WHY_LAYERS
 
     log, rows = DATA / "intel-relations.log", tmp_path / "rows.json"
     res = CliRunner().invoke(
@@ -309,14 +367,23 @@ def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
         page.get_by_role("combobox", name="open").click()
         options = page.get_by_role("option").all_inner_texts()
         assert options == [failure_label(k + 1, r) for k, r in enumerate(src.failures)]
-        page.get_by_role("option").nth(1).click()
-        second = src.failures[1]
+        # a later failure whose reason is seen in the scene (low overlap, degenerate, wrong basin)
+        k = next(k for k, r in enumerate(src.failures) if k and failure_kind(r) in WHY_LAYERS)
+        page.get_by_role("option").nth(k).click()
+        second = src.failures[k]
         page.get_by_text(f"line {second.line}").first.wait_for(timeout=30000)
         page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
         assert (
             session.state.pair == (second.ref, second.obj) and session.state.guess == second.guess
         )
         assert box(page, "reference scan").input_value() == str(second.ref)
+        # it opens on the layers its reason is seen in, and the legend lists only those
+        page.get_by_text("(the Layers panel has the others)").first.wait_for(timeout=10000)
+        entries = page.locator(".mbicp-legend .legend-entry")
+        wanted = {s.label for s in WHY_LAYERS[failure_kind(second)]}
+        shown = lambda: {t for t in entries.all_inner_texts() if not t.startswith("grid:")}  # noqa: E731
+        assert wait_for(lambda: shown() <= wanted)
+        assert {scene.REFERENCE.label, scene.TRUTH.label} <= shown()
         page.close()
     finally:
         application.stop()

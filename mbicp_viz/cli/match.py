@@ -7,11 +7,12 @@ from typing import Annotated
 
 import typer
 
-from mbicp_viz.choices import DEFAULT_TYPESTORE
+from mbicp_viz.choices import DEFAULT_TYPESTORE, MATCH_BUDGET_S
 
 from .options import (
     ALL_MATCHERS,
     DEFAULT_MATCHER,
+    BudgetOpt,
     ConnectOpt,
     DeskewOpt,
     FirstArg,
@@ -85,6 +86,7 @@ def match_cmd(
     mount: MountOpt = None,
     upside_down: UpsideDownOpt = False,
     deskew: DeskewOpt = None,
+    budget_s: BudgetOpt = MATCH_BUDGET_S,
 ):
     """Match two scans and show every iteration (optionally recorded for rerun's viewer)."""
     from mbicp_viz.core import tiers
@@ -118,7 +120,9 @@ def match_cmd(
         indices=(0, 0) if second else (pair or sp.log.consecutive_pairs(1)[0]),
         stream=sp.log.topic,
         record=not as_json or bool(rrd or connect or serve),
+        budget_s=budget_s,
     )
+    _say_if_halted([m], budget_s)
     if as_json:
         typer.echo(m.json_line())
     else:
@@ -149,6 +153,7 @@ def compare_cmd(
     mount: MountOpt = None,
     upside_down: UpsideDownOpt = False,
     deskew: DeskewOpt = None,
+    budget_s: BudgetOpt = MATCH_BUDGET_S,
 ):
     """Run several matchers on one pair and print one table (each under its own root in --rrd)."""
     from mbicp_viz.core import tiers
@@ -177,11 +182,23 @@ def compare_cmd(
         "errors against: "
         f"{s.truth_source or 'nothing (no known answer; give --truth X Y THETA_DEG)'}\n"
     )
-    matches = compare_matches(sp, s, ps)
+    matches = compare_matches(sp, s, ps, budget_s)
+    _say_if_halted(matches, budget_s)
     typer.echo(compare_table(matches))
     _say_if_interpreted()
     if rrd or connect or serve:
         _record(matches, rrd, connect, serve, port, teach)
+
+
+def _say_if_halted(matches, budget_s: float) -> None:
+    from mbicp_viz.core import Termination
+
+    for m in matches:
+        if m.result.reason is Termination.HALTED:
+            say(
+                f"{m.matcher}: stopped after {m.result.iterations} iterations by its time budget "
+                f"of {budget_s:g} s (--budget-s): the pose is its last finished iteration's"
+            )
 
 
 def _say_if_interpreted() -> None:

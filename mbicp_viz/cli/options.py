@@ -130,6 +130,15 @@ FrameOpt = Annotated[
         "--mount or the log), or of the laser",
     ),
 ]
+BudgetOpt = Annotated[
+    float,
+    typer.Option(
+        "--budget-s",
+        min=0.0,
+        help="each match stops after this many seconds and keeps its last finished iteration's "
+        "pose, reported 'halted' (0: no limit)",
+    ),
+]
 RrdOpt = Annotated[Path | None, typer.Option("--rrd", help="write the run to this rerun .rrd file")]
 TeachOpt = Annotated[
     bool,

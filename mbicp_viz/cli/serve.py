@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from mbicp_viz.choices import DEFAULT_TYPESTORE
+from mbicp_viz.choices import DEFAULT_TYPESTORE, MATCH_BUDGET_S
 from mbicp_viz.errors import InputError
 
 from .options import (
+    BudgetOpt,
     DeskewOpt,
     Guess,
     GuessOpt,
@@ -74,6 +76,7 @@ def serve(
             "its failures listed worst first, each opened as it ran",
         ),
     ] = None,
+    budget_s: BudgetOpt = MATCH_BUDGET_S,
 ):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
     from mbicp_viz.views.debugger.sources import files_source, scenario_source
@@ -88,7 +91,7 @@ def serve(
         if scenario is not None
         else files_source(first, second, pair, guess, reading, rows)
     )
-    _serve(source, host, port, tuple(allow_origin or ()), for_seconds)
+    _serve(replace(source, budget_s=budget_s), host, port, tuple(allow_origin or ()), for_seconds)
 
 
 def demo(port: ServePortOpt = 8080, for_seconds: ForOpt = None):

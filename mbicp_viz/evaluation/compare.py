@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from mbicp_viz.choices import MATCH_BUDGET_S
 from mbicp_viz.core import Params
 from mbicp_viz.readers.pair_match import PairMatch
 
@@ -18,11 +19,24 @@ HEADER = (
 )
 
 
-def compare_matches(pair: ScanPair, s: Setup, params: dict[str, Params]) -> list[PairMatch]:
-    """Each matcher on ``pair`` from ``s.guess``, in the laser frame, with its iterations."""
+def compare_matches(
+    pair: ScanPair, s: Setup, params: dict[str, Params], budget_s: float | None = MATCH_BUDGET_S
+) -> list[PairMatch]:
+    """Each matcher on ``pair`` from ``s.guess``, in the laser frame, with its iterations (each
+    within ``budget_s``)."""
     i, j = pair.ref.source.index, pair.obj.source.index
     return [
-        match_pair(pair.ref, pair.obj, p, s, pair.log.frames, False, indices=(i, j), record=True)
+        match_pair(
+            pair.ref,
+            pair.obj,
+            p,
+            s,
+            pair.log.frames,
+            False,
+            indices=(i, j),
+            record=True,
+            budget_s=budget_s,
+        )
         for p in params.values()
     ]
 

@@ -12,6 +12,7 @@ The reasons, checked in this order:
 from __future__ import annotations
 
 import math
+from enum import StrEnum
 
 from mbicp_viz.readers.pair_match import PairMatch
 
@@ -26,19 +27,39 @@ def failed(row: PairMatch) -> bool:
     return not row.score.success if row.score is not None else not row.result.converged
 
 
-def failure_reason(row: PairMatch) -> str:
+class Reason(StrEnum):
+    STOPPED_EARLY = "stopped early"
+    LOW_OVERLAP = "low overlap"
+    DEGENERATE = "degenerate direction"
+    WRONG_BASIN = "wrong basin"
+
+
+def failure_kind(row: PairMatch) -> Reason:
+    """Why a failed row failed, the first of the module's reasons that holds."""
     if not row.result.converged:
-        return f"stopped early ({row.result.reason.value})"
+        return Reason.STOPPED_EARLY
     on_truth = row.score.inliers_truth if row.score is not None else None
     if on_truth is not None and on_truth < LOW_OVERLAP:
-        return (
-            f"low overlap ({100 * on_truth:.0f} % of the object points on the "
-            "reference at the stored pose)"
-        )
+        return Reason.LOW_OVERLAP
     deg = row.result.degeneracy
     if deg is not None and deg.condition_number > DEGENERATE_CONDITION:
-        return f"degenerate direction (condition number {deg.condition_number:.0f})"
-    return "wrong basin (converged elsewhere)"
+        return Reason.DEGENERATE
+    return Reason.WRONG_BASIN
+
+
+def failure_reason(row: PairMatch) -> str:
+    """The reason with the number that decided it."""
+    kind = failure_kind(row)
+    if kind is Reason.STOPPED_EARLY:
+        return f"{kind} ({row.result.reason.value})"
+    if kind is Reason.LOW_OVERLAP:
+        return (
+            f"{kind} ({100 * row.score.inliers_truth:.0f} % of the object points on the "
+            "reference at the stored pose)"
+        )
+    if kind is Reason.DEGENERATE:
+        return f"{kind} (condition number {row.result.degeneracy.condition_number:.0f})"
+    return f"{kind} (converged elsewhere)"
 
 
 def worst_first(rows: list[PairMatch]) -> list[PairMatch]:

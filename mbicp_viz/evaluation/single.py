@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from mbicp_viz.choices import Guess
+from mbicp_viz.choices import MATCH_BUDGET_S, Guess
 from mbicp_viz.core import (
     MatchResult,
     Params,
@@ -19,6 +19,7 @@ from mbicp_viz.core import (
     pose_error,
 )
 from mbicp_viz.core.agreement import inlier_fraction
+from mbicp_viz.core.budget import Halt, limited
 from mbicp_viz.readers.log import Frames
 from mbicp_viz.readers.pair_match import PairMatch, Score
 
@@ -87,17 +88,21 @@ def match_pair(
     indices: tuple[int, int] | None = None,
     stream: str | None = None,
     record: bool = False,
+    budget_s: float | None = MATCH_BUDGET_S,
+    halt: Halt | None = None,
 ) -> PairMatch:
     """Match one pair from ``s.guess`` and make its record: the result reported in the frame
     ``base`` chooses, how well it lays the scans on each other, its distance from the log's
     odometry and, with ``s.truth``, its error; ``record`` keeps every iteration's events.
-    ``indices`` are the record numbers (default: the scans' own)."""
+    ``indices`` are the record numbers (default: the scans' own). The match stops after
+    ``budget_s`` seconds (None or 0: no limit) or when ``halt`` is raised (core/budget.py)."""
     from mbicp_viz.core import tiers
 
     rec = Recorder() if record else None
     compiling = tiers.compiling()  # a compile the match's first kernel starts runs at its end
     t0 = time.perf_counter()
-    result = match(ref, obj, s.guess, params, rec)
+    with limited(budget_s or None, halt):
+        result = match(ref, obj, s.guess, params, rec)
     ms = 1000.0 * (time.perf_counter() - t0)
     shown = reported(result, frames, base)
     odometry, fields = stored_odometry(ref, obj), {}

@@ -20,6 +20,7 @@ from contextlib import contextmanager
 import viser
 
 from mbicp_viz.core import MATCHERS, match, tiers
+from mbicp_viz.core.budget import Halt, limited
 
 from .camera import TopDownCamera
 from .session import Session
@@ -91,7 +92,7 @@ class App:
         install (core/tiers.py's quick start) a background process compiles them while the tabs
         match at once, interpreted; then they are loaded from the cache it wrote."""
         try:
-            from .state import DebugState
+            from .state import MATCH_ERRORS, DebugState
 
             state = DebugState(self.source)
             # every step's
@@ -102,9 +103,15 @@ class App:
             if tiers.compile_in_background():
                 self.ready.set()
                 tiers.wait_compiled()
-            for name in names:  # a match of each, so that its kernels are loaded now
-                match(state.ref, state.obj, state.guess, state.params[name])
-        except Exception:  # the session's own match will show what is wrong
+            # a match of each, so that its kernels are loaded now: one iteration is enough
+            done = Halt()
+            done.stop("warmed up")
+            with limited(None, done):
+                for name in names:
+                    match(state.ref, state.obj, state.guess, state.params[name])
+        except MATCH_ERRORS:  # the session's own match says what is wrong with the input
+            pass
+        except Exception:  # a bug: the session shows its own, the server keeps serving
             traceback.print_exc()
         finally:
             self.ready.set()

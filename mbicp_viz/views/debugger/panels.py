@@ -159,14 +159,15 @@ def _top(values) -> float:
 
 
 class Plots:
-    """Error and threshold of every run per iteration; the pair distances and (PSM, PMWN) the cost
-    per shift of one run at the current iteration. The plots follow the runs: each run its lines,
+    """Error and threshold of every run per iteration; each run's pair distances and (PSM, PMWN)
+    cost per shift at the current iteration. The plots follow the runs: each run its lines,
     each line its legend entry, numeric axes with units."""
 
     def __init__(self, gui, order: float):
         self.gui, self.shown = gui, None
         with gui.add_folder("Plots", order=order) as self.folder:
-            self.error = self.histogram = self.cost = None
+            self.error = self.cost = None
+            self.histograms = []
 
     def show_runs(self, state: DebugState) -> None:
         """Rebuild the plots when the runs (matchers, parameters, pair, guess) change; then fill
@@ -174,7 +175,7 @@ class Plots:
         key = tuple(id(r) for r in state.runs)
         if key != self.shown:
             self.shown = key
-            for handle in (self.error, self.histogram, self.cost):
+            for handle in (self.error, self.cost, *self.histograms):
                 if handle is not None:
                     handle.remove()
             with self.folder:
@@ -185,7 +186,6 @@ class Plots:
     def _build(self, state: DebugState) -> None:
         events = [e for r in state.runs for e in r.iterations]
         polar = polar_run(state)
-        first = state.runs[0]
         self.error = self.gui.add_uplot(
             data=error_series(state),
             series=error_legend(state),
@@ -197,21 +197,7 @@ class Plots:
                 ("m", "threshold [m]", 1, _top(e.threshold for e in events)),
             ),
         )
-        counts = [
-            scene.histogram(e.pairs.distance, e.threshold).counts.max()
-            for e in first.iterations
-            if len(e.pairs.distance)
-        ]
-        self.histogram = self.gui.add_uplot(
-            data=histogram_series(state),
-            series=histogram_legend(state),
-            legend=uplot.Legend(live=False),
-            aspect=1.6,
-            title=f"{first.matcher}: pair distances (this iteration)",
-            **_numeric(
-                "pair distance [m]", ("n", "pairs per bin", 3, _top(counts)), ("mark", "", 1, 1.0)
-            ),
-        )
+        self.histograms = [self._histogram(state, run) for run in state.runs]
         costs = [
             np.nanmax(e.polar.cost)
             for r in polar_runs(state)
@@ -228,12 +214,30 @@ class Plots:
             **_numeric("shift [deg]", ("m", "cost [m]", 3, _top(costs))),
         )
 
+    def _histogram(self, state: DebugState, run):
+        counts = [
+            scene.histogram(e.pairs.distance, e.threshold).counts.max()
+            for e in run.iterations
+            if len(e.pairs.distance)
+        ]
+        return self.gui.add_uplot(
+            data=histogram_series(state, run),
+            series=histogram_legend(state, run),
+            legend=uplot.Legend(live=False),
+            aspect=1.6,
+            title=f"{run.matcher}: pair distances (this iteration)",
+            **_numeric(
+                "pair distance [m]", ("n", "pairs per bin", 3, _top(counts)), ("mark", "", 1, 1.0)
+            ),
+        )
+
     def iteration(self, state: DebugState) -> None:
         """The plots of the current iteration."""
-        self.histogram.data = histogram_series(state)
-        legend = histogram_legend(state)
-        if legend != self.histogram.series:
-            self.histogram.series = legend
+        for plot, run in zip(self.histograms, state.runs):
+            plot.data = histogram_series(state, run)
+            legend = histogram_legend(state, run)
+            if legend != plot.series:
+                plot.series = legend
         cost = cost_series(state)
         if cost is not None:
             self.cost.data = cost
@@ -295,10 +299,9 @@ def error_series(state: DebugState) -> tuple[np.ndarray, ...]:
     return tuple(out)
 
 
-def histogram_legend(state: DebugState) -> tuple[uplot.Series, ...]:
-    """The distance plot's entries, each with its value at the current iteration: the marks are
+def histogram_legend(state: DebugState, run) -> tuple[uplot.Series, ...]:
+    """A run's distance plot entries, each with its value at the current iteration: the marks are
     vertical lines, so a value under the cursor would be a gap (uPlot's live legend read "NaN")."""
-    run = state.runs[0]
     params = run.start.params
     cut = scene.hard_cut(params)
     ev = report.event(state, run)
@@ -345,11 +348,10 @@ def cost_legend(state: DebugState) -> tuple[uplot.Series, ...]:
     return tuple(series)
 
 
-def histogram_series(state: DebugState) -> tuple[np.ndarray, ...]:
-    """The first run's pair distances at the current iteration as a staircase of bars, and vertical
-    lines (0 to 1 on the plot's full height) at the median, the threshold and the hard cut; uPlot
-    joins consecutive points, so two points at one x make a vertical line."""
-    run = state.runs[0]
+def histogram_series(state: DebugState, run) -> tuple[np.ndarray, ...]:
+    """A run's pair distances at the current iteration as a staircase of bars, and vertical lines
+    (0 to 1 on the plot's full height) at the median, the threshold and the hard cut; uPlot joins
+    consecutive points, so two points at one x make a vertical line."""
     ev = report.event(state, run)
     if ev is None or not len(ev.pairs.distance):
         z, nan = np.zeros(2), np.full(2, np.nan)

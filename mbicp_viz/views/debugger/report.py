@@ -8,14 +8,18 @@ import math
 
 import numpy as np
 
-from mbicp_viz.core import IterationEvent, pose_error
+from mbicp_viz.core import IterationEvent, Termination, pose_error
 from mbicp_viz.core.agreement import INLIER_RADIUS_M
-from mbicp_viz.evaluation.failures import failed, failure_reason
+from mbicp_viz.evaluation.failures import failed, failure_kind, failure_reason
 from mbicp_viz.evaluation.single import reported
 from mbicp_viz.readers.pair_match import PairMatch
 
 from .. import scene, text
-from .state import DebugState
+from .state import WHY_LAYERS, DebugState
+
+
+def budget_text(budget_s: float) -> str:
+    return f"budget {budget_s:g} s a match" if budget_s else "no time budget"
 
 
 def result_markdown(state: DebugState) -> str:
@@ -27,6 +31,11 @@ def result_markdown(state: DebugState) -> str:
         lines = [
             f"**{label}** {value}" for label, value in text.result_fields(r, frames.frame_text())
         ]
+        if r.reason is Termination.HALTED:
+            lines.append(
+                f"**halted** {state.halt.why or 'stopped'}: the pose is its last finished "
+                "iteration's"
+            )
         lines.append(f"**on ref** {text.agreement_line(run.on_ref, INLIER_RADIUS_M)}")
         if run.truth is not None:
             lines.append(
@@ -42,7 +51,7 @@ def result_markdown(state: DebugState) -> str:
         parts.append("  \n".join(lines))
     parts.append(
         f"initial guess {state.guess} (laser frame; {state.guess_source}); match time "
-        f"{state.match_ms:.1f} ms"
+        f"{state.match_ms:.1f} ms ({budget_text(state.source.budget_s)})"
     )
     if (row := state.opened) is not None and state.pair == (row.ref, row.obj):
         parts.append(row_markdown(state, row))
@@ -63,6 +72,10 @@ def row_markdown(state: DebugState, row: PairMatch) -> str:
         )
     if failed(row):
         lines.append(f"failed: {failure_reason(row)}")
+        if (why := WHY_LAYERS.get(failure_kind(row))) is not None:
+            lines.append(
+                "shown: " + ", ".join(s.label for s in why) + " (the Layers panel has the others)"
+            )
     run = next((r for r in state.runs if r.matcher == row.matcher), None)
     frames = state.source.log.frames
     if run is None or row.frame not in (frames.frame_name(True), frames.frame_name(False)):

@@ -7,7 +7,9 @@ Callbacks run on viser's threads; one lock per tab orders them.
 from __future__ import annotations
 
 import threading
+import time
 import traceback
+from contextlib import contextmanager
 
 import numpy as np
 import viser
@@ -19,6 +21,9 @@ from .. import scene, viser_draw
 from . import controls, lesson, panels, report
 from .camera import TopDownCamera
 from .state import DebugState, Source
+
+# A callback running longer than this shows how long it has run, the budget and the stop button
+BUSY_AFTER_S = 1.0
 
 COMPILING = (
     "Compiling the matchers' kernels (the first start after an install takes a few seconds)…"
@@ -61,7 +66,7 @@ class Session:
         """The tab's first match, once the kernels are ready (``ready`` set)."""
         if ready is not None:
             ready.wait()
-        with self.lock:
+        with self.lock, self._busy():
             if self.lesson is not None:
                 self.lesson.open(self.state.source.lesson_step)
                 return
@@ -86,7 +91,12 @@ class Session:
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         gui.main_panel.dock_right()  # beside the view, never over it
         gui.add_markdown(f"**mbicp-viz** — {src.label}", order=0)
-        self.h_status = gui.add_markdown("", order=1)
+        self.h_status, self.status = gui.add_markdown("", order=1), ""
+        self.h_stop = gui.add_button(
+            "stop the match", order=1.5, color="red", visible=False, hint="keeps the last iteration"
+        )
+        # not under the tab's lock: the match holds it; the flag is all the loops read
+        self.h_stop.on_click(lambda _: self.state.halt.stop("stopped from the page"))
         self.h_notes = gui.add_markdown("", order=2)
         self.show_notes()
         self.lesson = lesson.Lesson(self, gui, src.lesson, order=2) if src.lesson else None
@@ -113,12 +123,16 @@ class Session:
 
     # ---- showing the model ------------------------------------------------------------------
     def say(self, text: str) -> None:
-        self.h_status.content = panels.warning(text)
+        self.show_status(panels.warning(text))
+
+    def show_status(self, content: str) -> None:
+        """The status line as the model's last news has it (a busy note only covers it)."""
+        self.status = self.h_status.content = content
 
     def compiled(self) -> None:
         """The kernels are ready: the notice that they run interpreted goes (an error stays)."""
         with self.lock:
-            if self.h_status.content == panels.warning(tiers.INTERPRETED):
+            if self.status == panels.warning(tiers.INTERPRETED):
                 self.say("")
 
     def after_match(self, error: str | None) -> None:
@@ -138,6 +152,7 @@ class Session:
         error = self.state.open_row(row)
         if not error:
             self.matchers.show()
+            self.layers.show()  # the layers its failure is seen in
         self.scans.open(error)
 
     def redraw(self) -> None:
@@ -186,17 +201,46 @@ class Session:
         """Run a callback under the tab's lock; a bug inside it is shown in the page and the server
         keeps serving."""
         try:
-            with self.lock:
+            with self.lock, self._busy():
                 fn()
         except Exception as e:
             self.say(f"Internal error (the last good result is kept): {type(e).__name__}: {e}")
             traceback.print_exc()
 
+    @contextmanager
+    def _busy(self):
+        """While a callback runs past ``BUSY_AFTER_S``: how long, each match's budget, and the
+        button that stops the match now; the page's text returns when it ends."""
+        done, t0 = threading.Event(), time.monotonic()
+        limit = report.budget_text(self.state.source.budget_s)
+
+        def tick():
+            if done.wait(BUSY_AFTER_S):
+                return
+            self.h_stop.visible = True
+            while True:
+                self.h_status.content = panels.warning(
+                    f"working for {time.monotonic() - t0:.0f} s ({limit}; the button below "
+                    "stops it at its next iteration)"
+                )
+                if done.wait(0.5):
+                    return
+
+        ticker = threading.Thread(target=tick, daemon=True)
+        ticker.start()
+        try:
+            yield
+        finally:
+            done.set()
+            ticker.join()
+            self.h_stop.visible = False
+            self.h_status.content = self.status
+
     # ---- export ---------------------------------------------------------------------------
     def export_rrd(self) -> bytes:
         data = report.session_rrd(self.state)
         self.client.send_file_download("mbicp-viz-session.rrd", data, save_immediately=True)
-        self.h_status.content = f"exported the session: {len(data) / 1e6:.2f} MB .rrd"
+        self.show_status(f"exported the session: {len(data) / 1e6:.2f} MB .rrd")
         return data
 
     def export_params(self) -> str:
@@ -205,7 +249,7 @@ class Session:
         self.client.send_file_download(
             f"params-{edited}.toml", text.encode(), save_immediately=True
         )
-        self.h_status.content = (
+        self.show_status(
             f"saved the {edited} parameters and the search's (TOML, readable with --params)"
         )
         return text

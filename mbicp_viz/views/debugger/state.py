@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from mbicp_viz.choices import MATCH_BUDGET_S
 from mbicp_viz.core import (
     MATCHERS,
     FieldSpec,
@@ -27,8 +28,10 @@ from mbicp_viz.core import (
     SearchParams,
     field_specs,
 )
+from mbicp_viz.core.budget import Halt
 from mbicp_viz.core.params import check_value
 from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.failures import Reason, failed, failure_kind
 from mbicp_viz.evaluation.pairs import Guess, known_answer, pair_guess
 from mbicp_viz.evaluation.single import Setup, match_pair
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
@@ -65,6 +68,7 @@ class Source:
     )
     lesson: tuple = ()  # the lesson's steps (lesson/steps.py), in lesson mode
     lesson_step: int = 0  # the step a new tab opens (0-based)
+    budget_s: float = MATCH_BUDGET_S  # each match stops after it (0: no limit)
     view: tuple[float, float, float, float] | None = (
         None  # what "fit the view" shows [m]; None: the reference scan
     )
@@ -149,6 +153,25 @@ def shown_at_first(source: Source) -> dict[str, bool]:
     return {s.label: s.on or s in teach for s in scene.STYLES}
 
 
+# The layers that show why a pair failed, and only those (the Layers panel brings the others):
+# low overlap is the reference against the object scan at the known answer; a degenerate or wrong
+# basin match is where the object scan ended against both.
+WHY_LAYERS = {
+    Reason.LOW_OVERLAP: (scene.REFERENCE, scene.TRUTH),
+    Reason.DEGENERATE: (scene.REFERENCE, scene.TRUTH, scene.OBJECT, scene.HELD),
+    Reason.WRONG_BASIN: (scene.REFERENCE, scene.TRUTH, scene.OBJECT),
+}
+
+
+def showing_why(row: PairMatch, visible: dict[str, bool]) -> dict[str, bool]:
+    """The layers a failed row opens with: the ones its reason is seen in (a match that stopped
+    early is seen in its iterations: the layers stay)."""
+    why = WHY_LAYERS.get(failure_kind(row)) if failed(row) else None
+    if why is None:
+        return visible
+    return {label: label in {s.label for s in why} for label in visible}
+
+
 def preset_name(matcher: str, params: Params) -> str:
     """What a matcher's parameters are: ``DEFAULTS``, the name of a preset, or ``TYPED``."""
     if params == MATCHERS[matcher].params_type():
@@ -169,13 +192,14 @@ class DebugState:
         self.pair = source.pair
         self.opened: PairMatch | None = None  # the evaluation row last reopened
         self.guess, self.guess_source = self._pair_guess()
+        self.visible = shown_at_first(source)  # layer (legend label) -> shown
         if source.opened is not None:
             self._apply_row(source.opened)
         self.runs: list[PairMatch] = []  # one per shown matcher, with its events
         self.iteration = 0
-        self.visible = shown_at_first(source)  # layer (legend label) -> shown
         self.iso_point: int | None = None
         self.match_ms = 0.0
+        self.halt = Halt()  # the last match's: the page's stop raises it
         self.message = ""  # the last failure, shown to the user
 
     # ---- the pair ---------------------------------------------------------------------------
@@ -254,6 +278,7 @@ class DebugState:
         self.ref, self.obj  # noqa: B018 - an unusable scan is refused here
         self.matchers, self.params[row.matcher] = [row.matcher], row.params
         self.guess, self.guess_source = row.guess, f"the evaluation's guess ({row.guess_source})"
+        self.visible = showing_why(row, self.visible)
 
     def open_row(self, row: PairMatch) -> str | None:
         """Reopen an evaluated pair exactly as the evaluation ran it: its scans, matcher,
@@ -265,6 +290,7 @@ class DebugState:
         """Re-run every shown matcher; None, or why it failed (the last good runs are kept)."""
         t0 = time.perf_counter()
         log, setup = self.source.log, self.setup()
+        self.halt = Halt()
         try:
             runs = [
                 match_pair(
@@ -276,6 +302,8 @@ class DebugState:
                     indices=self.pair,
                     stream=log.topic,
                     record=True,
+                    budget_s=self.source.budget_s,
+                    halt=self.halt,
                 )
                 for n in self.matchers
             ]
