@@ -497,8 +497,19 @@ def relations(
     ] = None,
     topic: TopicOpt = None,
     workers: WorkersOpt = None,
+    run_rows: Annotated[
+        str | None,
+        typer.Option(
+            "--run",
+            metavar="ROWS",
+            help="score the run of an `eval sequence --out ROWS` instead (Kümmerle et al.'s own "
+            "measure): the matches chained, their Kalman fusion with odometry and the raw "
+            "odometry, beside the published figures",
+        ),
+    ] = None,
 ):
-    """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors."""
+    """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors; or, with
+    --run, score a whole run's trajectory on the relations."""
     from mbicp_viz.evaluation.relations import (
         match_relations,
         relation_pairs,
@@ -510,6 +521,9 @@ def relations(
 
     reading = read_options(topic)
     lg = read_log_saying(log, reading)
+    if run_rows is not None:
+        _score_run(lg, run_rows, relations_file, offset, tolerance)
+        return
     pf = read_params(params, [matcher.value])
     p, search = pf.matchers[matcher.value], pf.search
     found, missing = relation_pairs(lg, read_relations(relations_file), offset, tolerance)
@@ -540,6 +554,37 @@ def relations(
     )
     if stored := stored_summary(rows):
         typer.echo(stored)
+
+
+def _score_run(lg, rows_path: str, relations_file: str, offset: float, tolerance: float) -> None:
+    """``eval relations LOG RELATIONS --run ROWS``: each trajectory of the run, scored."""
+    from mbicp_viz.evaluation.run_score import published_line, run_tracks, score_track
+    from mbicp_viz.readers.relations import read_relations
+    from mbicp_viz.readers.rows import rows_of_log
+
+    relations = read_relations(relations_file)
+    rows = rows_of_log(rows_path, lg)
+    tracks = run_tracks(lg, rows, rows_path, offset)
+    typer.echo(
+        f"{rows_path}: {rows[0].matcher}, {len(rows)} pairs chained ({rows[0].frame} motions); "
+        f"{len(relations)} relations of {relations_file}"
+    )
+    scores = [
+        score_track(name, t, poses, relations, tolerance) for name, (t, poses) in tracks.items()
+    ]
+    for s in scores:
+        typer.echo(f"  {s.line()}")
+    if published := published_line(relations_file):
+        typer.echo(f"  {published}")
+    chained = scores[0]
+    if chained.relations:
+        typer.echo(f"the relations that cost {chained.track} most (translational error):")
+        for k, et, er in chained.worst:
+            rel = relations[k]
+            typer.echo(
+                f"  relation {k + 1} ({rel.t1:.3f} s -> {rel.t2:.3f} s): {et:.3f} m, "
+                f"{math.degrees(er):.2f} deg"
+            )
 
 
 def basin(

@@ -192,3 +192,37 @@ class PartialRows:
         """The run is complete: ``out`` written whole, the partial file gone."""
         write_text(self.out, rows_text(self.rows))
         self.path.unlink()
+
+
+def rows_of_log(path: str | Path, log) -> list[PairMatch]:
+    """``read_rows``, each row checked to belong to ``log`` (a ``ScanLog``) as it is read: its
+    scan records, its scan stream and the frame its poses are in."""
+    path, rows = str(path), read_rows(path)
+    for row in rows:
+        for key, k in (("ref", row.ref), ("obj", row.obj)):
+            if k >= log.records:
+                raise InputError(
+                    f"record {k} is beyond the {log.records} records of {log.path}: rows of "
+                    "another log?",
+                    path,
+                    row.line,
+                    key,
+                )
+    if rows[0].stream != log.topic and rows[0].stream is not None:
+        raise InputError(
+            f"written for the scans of {rows[0].stream!r}, but {log.path} is read as "
+            f"{log.topic or 'its only stream'!r}: open it with --topic {rows[0].stream}",
+            path,
+            rows[0].line,
+            "stream",
+        )
+    frames = log.frames
+    if rows[0].frame not in (frames.frame_name(True), frames.frame_name(False)):
+        raise InputError(
+            f"written for poses in {rows[0].frame!r}, but {log.path} reads as "
+            f"{frames.frame_name(True)!r}: rows of another log, or read with other options?",
+            path,
+            rows[0].line,
+            "frame",
+        )
+    return rows

@@ -8,7 +8,7 @@ from mbicp_viz.evaluation.pairs import Guess
 from mbicp_viz.evaluation.scenarios import find_scenario
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 from mbicp_viz.readers.pair_match import PairMatch
-from mbicp_viz.readers.rows import read_rows
+from mbicp_viz.readers.rows import rows_of_log
 
 from .state import Source
 
@@ -84,35 +84,7 @@ def _failures(path: str, log: ScanLog) -> tuple[list[PairMatch], str]:
     """The failed rows of an evaluation of ``log``, worst first, each checked against the log."""
     from mbicp_viz.evaluation.failures import worst_first
 
-    rows = read_rows(path)
-    for row in rows:
-        for key, k in (("ref", row.ref), ("obj", row.obj)):
-            if k >= log.records:
-                raise InputError(
-                    f"record {k} is beyond the {log.records} records of {log.path}: rows of "
-                    "another "
-                    "log?",
-                    path,
-                    row.line,
-                    key,
-                )
-    if rows[0].stream != log.topic and rows[0].stream is not None:
-        raise InputError(
-            f"written for the scans of {rows[0].stream!r}, but {log.path} is read as "
-            f"{log.topic or 'its only stream'!r}: open it with --topic {rows[0].stream}",
-            path,
-            rows[0].line,
-            "stream",
-        )
-    frames = log.frames
-    if rows[0].frame not in (frames.frame_name(True), frames.frame_name(False)):
-        raise InputError(
-            f"written for poses in {rows[0].frame!r}, but {log.path} reads as "
-            f"{frames.frame_name(True)!r}: rows of another log, or read with other options?",
-            path,
-            rows[0].line,
-            "frame",
-        )
+    rows = rows_of_log(path, log)
     return worst_first(rows), f"{path}: {len(rows)} rows"
 
 
