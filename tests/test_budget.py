@@ -14,7 +14,7 @@ from mbicp_viz.core import MATCHERS, Pose2, Recorder, Termination, match
 from mbicp_viz.core.budget import Halt, limited
 from mbicp_viz.readers import read_log
 
-from .conftest import EXAMPLES
+from .conftest import EXAMPLES, json_lines
 
 PAIR = EXAMPLES / "hokuyo-125-130.npz"
 
@@ -80,3 +80,20 @@ def test_match_budget_on_the_command_line(tmp_path):
     assert "NOT converged: halted" in res.output
     bad = CliRunner().invoke(cli, ["match", str(PAIR), "--budget-s", "-1"])
     assert bad.exit_code != 0 and "--budget-s" in bad.output and "Traceback" not in bad.output
+
+
+def test_eval_sequence_counts_and_records_the_pairs_its_budget_stopped(tmp_path):
+    toml, rows = tmp_path / "slow.toml", tmp_path / "rows.json"
+    toml.write_text(
+        "[improved]\nMaxIter = 10000\nerrx_out = 0.0\nerry_out = 0.0\nerrt_out = 0.0\n"
+        "errorRatio = 0.0\n"
+    )
+    res = CliRunner().invoke(
+        cli,
+        ["eval", "sequence", str(PAIR), "--guess", "identity", "--params", str(toml)]
+        + ["--budget-s", "0.05", "--out", str(rows), "--workers", "1"],
+    )
+    assert res.exit_code == 0, res.output
+    # the pair runs to MaxIter in about a second without a budget (never_settles)
+    assert "1 stopped by the time budget of 0.05 s (--budget-s)" in res.output
+    assert [r["reason"] for r in json_lines(rows)] == ["halted"]

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from mbicp_viz.choices import DEFAULT_TYPESTORE, Removal, Thin
+from mbicp_viz.choices import DEFAULT_TYPESTORE, MATCH_BUDGET_S, Removal, Thin
 from mbicp_viz.errors import InputError
 from mbicp_viz.outputs import write_text
 
@@ -17,6 +17,7 @@ from .options import (
     ALL_MATCHERS,
     DEFAULT_MATCHER,
     SEARCH,
+    BudgetOpt,
     CaseGuessOpt,
     CaseTruthOpt,
     DeskewOpt,
@@ -120,9 +121,11 @@ def sequence(
     mount: MountOpt = None,
     upside_down: UpsideDownOpt = False,
     deskew: DeskewOpt = None,
+    budget_s: BudgetOpt = MATCH_BUDGET_S,
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else
     identity)."""
+    from mbicp_viz.core import Termination
     from mbicp_viz.evaluation.sequence import match_sequence
     from mbicp_viz.readers.pair_match import PairMatch, parse_pair_match
     from mbicp_viz.readers.params_toml import read_params
@@ -144,6 +147,7 @@ def sequence(
         "guess": guess.value,
         "truth": truth,
         "frame": frame.value,
+        "budget_s": budget_s,
     }
     rows = matched_rows(
         out,
@@ -160,13 +164,21 @@ def sequence(
             search=search,
             base=frame is Frame.base,
             skip=skip,
+            budget_s=budget_s,
         ),
         PairMatch.to_json,
         parse_pair_match,
     )
+    halted = sum(r.result.reason is Termination.HALTED for r in rows)
     typer.echo(
         f"{len(rows)} pairs matched with {matcher.value}: "
-        f"{sum(r.result.converged for r in rows)} converged; written to {out}"
+        f"{sum(r.result.converged for r in rows)} converged"
+        + (
+            f", {halted} stopped by the time budget of {budget_s:g} s (--budget-s)"
+            if halted
+            else ""
+        )
+        + f"; written to {out}"
     )
     _sequence_notes(lg, rows, truth, guess, frame)
     if png or tum or tum_ref or kalman:

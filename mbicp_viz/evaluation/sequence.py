@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from mbicp_viz.choices import MATCH_BUDGET_S
 from mbicp_viz.core import Params, SearchParams, match
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
@@ -46,13 +47,15 @@ def match_sequence(
     search: SearchParams | None = None,
     base: bool = True,
     skip: int = 0,
+    budget_s: float | None = MATCH_BUDGET_S,
 ) -> list[PairMatch]:
     """One record per consecutive pair of usable scans, in order: the match's motion (of the robot's
     base when ``base`` and the log knows the laser's mount), how well it lays the scans on each
     other, its distance from the log's odometry when the log has some, and with ``truth="pose"``
     its error against the log's scan poses. The first ``skip`` pairs are left out (a run resumed
-    from its rows). Pairs are spread over ``workers`` processes (default: every core); ``on_row``
-    sees each row as it arrives, and Ctrl-C keeps the rows so far."""
+    from its rows). Each match stops after ``budget_s`` (core/budget.py). Pairs are spread over
+    ``workers`` processes (default: every core); ``on_row`` sees each row as it arrives, and
+    Ctrl-C keeps the rows so far."""
     guess = Guess(guess)
     if truth == "pose" and guess in (Guess.pose, Guess.stored):
         raise InputError(
@@ -74,6 +77,7 @@ def match_sequence(
             log.frames,
             base,
             log.topic,
+            budget_s,
         )
         for i, j in log.consecutive_pairs(limit)[skip:]
     ]
@@ -81,7 +85,7 @@ def match_sequence(
 
 
 def _match_row(job) -> PairMatch:
-    path, i, j, ref, obj, params, guess, truth, search, frames, base, stream = job
+    path, i, j, ref, obj, params, guess, truth, search, frames, base, stream, budget_s = job
     t0 = time.perf_counter()
     g, source = pair_guess(ref, obj, guess, search, missing_ok=True)
     guess_ms = 1000.0 * (time.perf_counter() - t0)
@@ -91,7 +95,9 @@ def _match_row(job) -> PairMatch:
         if answer is None:
             raise InputError(f"scan {i} or {j} has no pose to score against", path, field="--truth")
     s = Setup(g, source, answer, None if answer is None else STORED_ANSWER)
-    m = match_pair(ref, obj, params, s, frames, base, indices=(i, j), stream=stream)
+    m = match_pair(
+        ref, obj, params, s, frames, base, indices=(i, j), stream=stream, budget_s=budget_s
+    )
     return replace(m, guess_ms=guess_ms) if guess is Guess.search else m
 
 
