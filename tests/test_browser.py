@@ -328,6 +328,44 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
     page.close()
 
 
+def test_suspicious_pairs_of_a_run_without_truth_open_as_they_ran(browser, tmp_path):
+    """serve LOG --rows on a run without truth: the pairs flagged without truth are listed, the
+    most suspicious first with their signs; choosing one opens it as it ran, its signs on the
+    page."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+    from mbicp_viz.evaluation.health import flags_text, suspect_label
+    from mbicp_viz.views.debugger.sources import files_source
+
+    log, rows = DATA / "intel-relations.log", tmp_path / "rows.jsonl"
+    res = CliRunner().invoke(
+        cli,
+        ["eval", "sequence", str(log), "--guess", "identity", "--out", str(rows)]
+        + ["--workers", "1"],
+    )
+    assert res.exit_code == 0, res.output
+    src = files_source(str(log), None, rows=str(rows))
+    assert len(src.suspects) >= 2 and all(r.score is None for r in src.suspects)
+    application = App(src, "127.0.0.1", 0)
+    try:
+        page, session = open_tab(browser, application)
+        page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
+        page.get_by_role("combobox", name="open flagged").click()
+        options = page.get_by_role("option").all_inner_texts()
+        assert options == [suspect_label(k + 1, r) for k, r in enumerate(src.suspects)]
+        page.get_by_role("option").nth(1).click()
+        second = src.suspects[1]
+        page.get_by_text(f"line {second.line}").first.wait_for(timeout=30000)
+        page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
+        assert session.state.pair == (second.ref, second.obj)
+        assert f"flagged: {flags_text(second)}" in page.inner_text("body")
+        page.screenshot(path=str(tmp_path / "suspicious-pairs.png"))
+        page.close()
+    finally:
+        application.stop()
+
+
 def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
     """serve LOG --rows: the failures listed worst first with their reason; choosing one opens it
     with the evaluation's own matcher, parameters and guess, and the page says it reproduces."""
@@ -364,7 +402,7 @@ def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
         page, session = open_tab(browser, application)
         page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
         assert f"line {src.failures[0].line}" in page.inner_text("body")
-        page.get_by_role("combobox", name="open").click()
+        page.get_by_role("combobox", name="open", exact=True).click()
         options = page.get_by_role("option").all_inner_texts()
         assert options == [failure_label(k + 1, r) for k, r in enumerate(src.failures)]
         # a later failure whose reason is seen in the scene (low overlap, degenerate, wrong basin)

@@ -153,7 +153,7 @@ def sequence(
         out,
         run,
         pairs,
-        lambda on_row, skip: match_sequence(
+        lambda on_row, done: match_sequence(
             lg,
             p,
             limit,
@@ -163,7 +163,7 @@ def sequence(
             workers=workers,
             search=search,
             base=frame is Frame.base,
-            skip=skip,
+            done=done,
             budget_s=budget_s,
         ),
         PairMatch.to_json,
@@ -192,12 +192,17 @@ def sequence(
 
 
 def _failures(log: str, out: Path) -> None:
-    """The rows' failures, read back from the file as ``serve --rows`` will open it."""
+    """The rows' failures and suspicious pairs, read back from the file as ``serve --rows`` will
+    open them."""
     from mbicp_viz.evaluation.failures import failure_summary
+    from mbicp_viz.evaluation.health import ranked, suspect_summary
     from mbicp_viz.readers.rows import read_rows
 
-    for line in failure_summary(read_rows(out), str(out)):
-        typer.echo(line.replace("LOG", str(log)))
+    rows = read_rows(out)
+    failures = failure_summary(rows)
+    typer.echo("\n".join(failures + suspect_summary(rows)))
+    if failures or ranked(rows):
+        typer.echo(f"open them as they ran: mbicp-viz serve {log} --rows {out}")
 
 
 def _sequence_notes(lg, rows, truth, guess: Guess, frame: Frame) -> None:
@@ -557,8 +562,8 @@ def relations(
         out,
         run,
         pairs,
-        lambda on_row, skip: match_relations(
-            lg, found, p, guess, search, on_row=on_row, skip=skip, workers=workers
+        lambda on_row, done: match_relations(
+            lg, found, p, guess, search, on_row=on_row, skip=len(done), workers=workers
         ),
     )
     typer.echo(
@@ -653,6 +658,61 @@ def basin(
         record_basin(atlas, str(rrd))
 
 
+def flags(
+    log: Annotated[str, typer.Argument(help="the log the run matched")],
+    rows_path: Annotated[
+        str,
+        typer.Argument(
+            metavar="ROWS", help="rows of `eval sequence --out` (with --truth pose: pair by pair)"
+        ),
+    ],
+    relations_file: Annotated[
+        str | None,
+        typer.Option(
+            "--relations",
+            metavar="FILE",
+            help="judge against a relations file's short relations (Kümmerle et al. 2009) instead",
+        ),
+    ] = None,
+    offset: OffsetOpt = 0.0,
+    tolerance: ToleranceOpt = 0.025,
+    topic: TopicOpt = None,
+):
+    """How far the run's flags (suspicious pairs, found without truth) can be trusted: how often a
+    flagged pair is a real failure, and how many failures go unflagged."""
+    from mbicp_viz.evaluation.flag_check import (
+        LOCAL_S,
+        check_relations,
+        check_scored,
+        odometry_is_truth,
+    )
+    from mbicp_viz.evaluation.trajectory import stamps
+    from mbicp_viz.readers.relations import read_relations
+    from mbicp_viz.readers.rows import rows_of_log
+
+    lg = read_log_saying(log, read_options(topic))
+    rows = rows_of_log(rows_path, lg)
+    if relations_file is None:
+        if not any(r.score is not None for r in rows):
+            raise InputError(
+                "no row is scored: run eval sequence with --truth pose, or give --relations",
+                rows_path,
+                field="success",
+            )
+        checks, basis = check_scored(rows), "against each pair's own truth"
+        if odometry_is_truth(rows):
+            basis += (
+                " (the log's odometry is its truth: the signs read from the odometry are left out)"
+            )
+    else:
+        t = [s + offset for s in stamps(lg, rows)]
+        checks = check_relations(rows, t, read_relations(relations_file), tolerance)
+        basis = f"against the relations up to {LOCAL_S:g} s long (a failure: a stretch of pairs)"
+    typer.echo(f"{len(rows)} pairs, {basis}:")
+    for c in checks:
+        typer.echo(f"  {c.line()}")
+
+
 def register(app: typer.Typer) -> None:
     group = typer.Typer(no_args_is_help=True, help="Evaluate matchers on whole logs.")
     for name, fn in (
@@ -664,6 +724,7 @@ def register(app: typer.Typer) -> None:
         ("basin", basin),
         ("corridor", corridor),
         ("covariance", covariance),
+        ("flags", flags),
     ):
         group.command(name)(user_errors(fn))
     app.add_typer(group, name="eval")

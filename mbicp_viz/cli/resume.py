@@ -63,7 +63,7 @@ def matched_rows(
     encode: Callable[[object], dict] = lambda row: row,
     decode: Callable[[dict, str, int], object] = lambda row, path, line: row,
 ) -> list:
-    """Every pair's row, ``match(on_row, skip)`` running the pairs after the first ``skip``. With
+    """Every pair's row, ``match(on_row, done)`` running the pairs after the rows ``done``. With
     ``out``, each row is on disk as it is finished (``OUT.partial``, ``encode``-d to JSON), a
     stopped run ends here with its rows kept and the same command resumes from them (``decode``-d
     from the file, path and line), and ``out`` is written whole at the end; without, the rows stay
@@ -80,10 +80,10 @@ def matched_rows(
             bar.update(1)
 
         if kept is None:
-            match(take, 0)
+            match(take, [])
         else:
             with kept:
-                match(take, len(rows))
+                match(take, list(rows))
     if kept is not None:
         stop_if_interrupted(kept, len(pairs))
         kept.finish()

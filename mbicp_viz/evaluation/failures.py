@@ -79,13 +79,12 @@ def failure_label(rank: int, row: PairMatch) -> str:
     return f"{rank}. scans {row.ref} -> {row.obj}: {error}{failure_reason(row)}"
 
 
-def failure_summary(rows: list[PairMatch], path: str, shown: int = 3) -> list[str]:
+def failure_summary(rows: list[PairMatch], shown: int = 3) -> list[str]:
     """The worst failures, for the end of ``eval sequence``."""
     bad = worst_first(rows)
     if not bad:
         return []
-    lines = [
+    return [
         f"worst failures of {len(bad)}:",
         *(f"  {failure_label(k + 1, r)}" for k, r in enumerate(bad[:shown])),
     ]
-    return lines + [f"open them as they failed: mbicp-viz serve LOG --rows {path}"]

@@ -13,9 +13,10 @@ from mbicp_viz.choices import MATCH_BUDGET_S
 from mbicp_viz.core import Params, SearchParams, match
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
-from mbicp_viz.readers.pair_match import PairMatch
+from mbicp_viz.readers.pair_match import PairMatch, Suspicion
 
 from .criteria import CONSECUTIVE, Criteria
+from .health import out_of_place
 from .pairs import STORED_ANSWER, Guess, pair_guess, stored_truth
 from .pool import ordered_map
 from .single import Setup, match_pair, scored
@@ -46,16 +47,17 @@ def match_sequence(
     workers: int | None = None,
     search: SearchParams | None = None,
     base: bool = True,
-    skip: int = 0,
+    done: list[PairMatch] = (),
     budget_s: float | None = MATCH_BUDGET_S,
 ) -> list[PairMatch]:
     """One record per consecutive pair of usable scans, in order: the match's motion (of the robot's
     base when ``base`` and the log knows the laser's mount), how well it lays the scans on each
     other, its distance from the log's odometry when the log has some, and with ``truth="pose"``
-    its error against the log's scan poses. The first ``skip`` pairs are left out (a run resumed
-    from its rows). Each match stops after ``budget_s`` (core/budget.py). Pairs are spread over
-    ``workers`` processes (default: every core); ``on_row`` sees each row as it arrives, and
-    Ctrl-C keeps the rows so far."""
+    its error against the log's scan poses, and the signs that it went wrong (evaluation/health.py:
+    a pair's own, and whether its first scan is out of place). The pairs of ``done``
+    are left out (a run resumed from its rows). Each match stops after ``budget_s``
+    (core/budget.py). Pairs are spread over ``workers`` processes (default: every core);
+    ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
     guess = Guess(guess)
     if truth == "pose" and guess in (Guess.pose, Guess.stored):
         raise InputError(
@@ -79,9 +81,17 @@ def match_sequence(
             log.topic,
             budget_s,
         )
-        for i, j in log.consecutive_pairs(limit)[skip:]
+        for i, j in log.consecutive_pairs(limit)[len(done) :]
     ]
-    return ordered_map(_match_row, jobs, workers, on_row)
+    steady, rows = Steadiness(log, done), []
+
+    def take(m: PairMatch) -> None:
+        rows.append(steady.amend(m))
+        if on_row is not None:
+            on_row(rows[-1])
+
+    ordered_map(_match_row, jobs, workers, take)
+    return rows
 
 
 def _match_row(job) -> PairMatch:
@@ -99,6 +109,27 @@ def _match_row(job) -> PairMatch:
         ref, obj, params, s, frames, base, indices=(i, j), stream=stream, budget_s=budget_s
     )
     return replace(m, guess_ms=guess_ms) if guess is Guess.search else m
+
+
+class Steadiness:
+    """Marks each row, in the run's order, whose first scan is out of place (health.out_of_place:
+    the motion jumps and returns), from the two rows before it."""
+
+    def __init__(self, log: ScanLog, done: list[PairMatch]):
+        self.log, self.last = log, list(done[-2:])
+
+    def _dt(self, m: PairMatch) -> float | None:
+        a, b = self.log.scan(m.ref).stamp, self.log.scan(m.obj).stamp
+        return b - a if a is not None and b is not None and b > a else None
+
+    def amend(self, m: PairMatch) -> PairMatch:
+        steps = (*self.last, m)
+        if len(steps) == 3 and steps[0].obj == steps[1].ref and steps[1].obj == m.ref:
+            jump = out_of_place(steps, tuple(self._dt(s) for s in steps))
+            if jump is not None:
+                m = replace(m, flags=m.flags | {Suspicion.OUT_OF_PLACE: jump})
+        self.last = [*self.last, m][-2:]
+        return m
 
 
 # Agreement with odometry: paper-independent, a wheel encoder's few centimetres over a scan pair.

@@ -5,7 +5,7 @@ error when the answer is known. Every command and front end that matches a pair 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from mbicp_viz.choices import MATCH_BUDGET_S, Guess
 from mbicp_viz.core import (
@@ -18,12 +18,13 @@ from mbicp_viz.core import (
     match,
     pose_error,
 )
-from mbicp_viz.core.agreement import inlier_fraction
+from mbicp_viz.core.agreement import inlier_fraction, surface_overlap
 from mbicp_viz.core.budget import Halt, limited
 from mbicp_viz.readers.log import Frames
 from mbicp_viz.readers.pair_match import PairMatch, Score
 
 from .criteria import CONSECUTIVE
+from .health import pair_flags
 from .pairs import ScanPair, known_answer, pair_guess, stored_odometry
 
 
@@ -105,12 +106,14 @@ def match_pair(
         result = match(ref, obj, s.guess, params, rec)
     ms = 1000.0 * (time.perf_counter() - t0)
     shown = reported(result, frames, base)
-    odometry, fields = stored_odometry(ref, obj), {}
+    odometry, odometry_shown, fields = stored_odometry(ref, obj), None, {}
     if odometry is not None:
-        et, er = pose_error(shown.pose, frames.reported(odometry, base))
+        odometry_shown = frames.reported(odometry, base)
+        et, er = pose_error(shown.pose, odometry_shown)
         fields = {"odometry": odometry, "odometry_xy": et, "odometry_theta": er}
     i, j = indices if indices is not None else (ref.source.index, obj.source.index)
-    return PairMatch(
+    overlap = surface_overlap(ref, obj, result.pose)
+    m = PairMatch(
         i,
         j,
         params,
@@ -126,5 +129,7 @@ def match_pair(
         truth_source=s.truth_source,
         score=scored(ref, obj, result.pose, s.truth) if s.truth is not None else None,
         events=rec,
+        overlap=overlap,
         **fields,
     )
+    return replace(m, flags=pair_flags(m, overlap, odometry_shown))

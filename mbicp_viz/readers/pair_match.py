@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
@@ -41,6 +42,19 @@ _REGENERATE = (
     "missing (rows are written by `mbicp-viz eval sequence --out`; a file from an older version "
     "lacks the fields that reopen a pair: run it again)"
 )
+
+
+class Suspicion(StrEnum):
+    """A sign, seen without truth, that a pair's match went wrong (evaluation/health.py decides
+    them; their names are the keys of a record's ``flags``)."""
+
+    STOPPED_EARLY = "stopped early"
+    WEAK_DIRECTION = "weak direction"
+    LITTLE_OVERLAP = "little overlap"
+    ODOMETRY_JUMP = "jumps against odometry"
+    SIGMA = "sigma inconsistent with the step"
+    OUT_OF_PLACE = "scan out of place"
+    DISAGREE = "matchers disagree"
 
 
 @dataclass(frozen=True)
@@ -82,6 +96,10 @@ class PairMatch:
     odometry: Pose2 | None = None  # the laser's motion by the log's odometry
     odometry_xy: float | None = None  # [m] the reported motion against the odometry's
     odometry_theta: float | None = None  # [rad]
+    overlap: float | None = None  # share of object points on the reference's surface
+    # the signs, seen without truth, that the match went wrong, each with its deciding numbers
+    # (evaluation/health.py; a pose difference as [m], [rad])
+    flags: dict[Suspicion, tuple[float, ...]] = field(default_factory=dict)
     # the run's events (the debugger, the lesson, the .rrd export replay them); not in JSON
     events: Recorder | None = field(default=None, compare=False, repr=False)
     line: int | None = field(default=None, compare=False)  # where it was read from
@@ -108,6 +126,8 @@ class PairMatch:
             "guess": self.guess_source,
             "guess_pose": _xyt(self.guess),
             "on_ref": self.on_ref,
+            "overlap": self.overlap,
+            "flags": {str(k): list(v) for k, v in self.flags.items()},
             "frame": self.frame,
             "stream": self.stream,
             "params": self.params.as_dict(),
@@ -278,6 +298,25 @@ def _score(f: _Fields) -> Score | None:
     )
 
 
+def _flags(f: _Fields) -> dict[Suspicion, tuple[float, ...]]:
+    v = f.get("flags", (dict,), "an object of signs and their numbers", optional=True) or {}
+    out = {}
+    for name, numbers in v.items():
+        try:
+            key = Suspicion(name)
+        except ValueError:
+            known = ", ".join(s.value for s in Suspicion)
+            raise f.error("flags", f"unknown sign {name!r}; known: {known}") from None
+        if (
+            not isinstance(numbers, list)
+            or not 1 <= len(numbers) <= 2
+            or any(isinstance(c, bool) or not isinstance(c, (int, float)) for c in numbers)
+        ):
+            raise f.error("flags", f"{name}: expected one or two numbers, got {numbers!r:.40}")
+        out[key] = tuple(float(c) for c in numbers)
+    return out
+
+
 def parse_pair_match(obj, path: str, line: int) -> PairMatch:
     """One record's JSON object, every field checked; errors name the file, line and field."""
     if not isinstance(obj, dict):
@@ -287,7 +326,7 @@ def parse_pair_match(obj, path: str, line: int) -> PairMatch:
     ref, obj_ = f.count("ref"), f.count("obj")
     optional = {
         key: f.number(key, optional=True)
-        for key in ("on_ref", "time_ms", "guess_ms", "odometry_xy", "odometry_theta")
+        for key in ("on_ref", "overlap", "time_ms", "guess_ms", "odometry_xy", "odometry_theta")
     }
     return PairMatch(
         ref,
@@ -303,6 +342,7 @@ def parse_pair_match(obj, path: str, line: int) -> PairMatch:
         odometry=f.pose("odometry_pose", optional=True),
         truth_source=f.text("truth", "where the answer came from", optional=True),
         score=_score(f),
+        flags=_flags(f),
         line=line,
         **optional,
     )

@@ -417,30 +417,31 @@ class Layers:
         self.s.redraw()
 
 
-class Failures:
-    """An evaluation's failed pairs (``serve LOG --rows FILE``), worst first with their reason;
-    choosing one reopens it exactly as the evaluation ran it."""
+class PairList:
+    """Pairs of an evaluation to open (``serve LOG --rows FILE``): its failures, worst first, or
+    its suspicious pairs found without truth, the most suspicious first; each with its reason.
+    Choosing one reopens it exactly as the evaluation ran it."""
 
     MAX_LISTED = 500  # a dropdown longer than this is no longer read; the file keeps them all
 
-    def __init__(self, session, gui, order: float):
-        from mbicp_viz.evaluation.failures import failure_label
-
+    def __init__(
+        self, session, gui, order: float, title: str, rows, label, order_text: str, pick: str
+    ):
         self.s = session
-        src = session.state.source
-        rows = src.failures[: self.MAX_LISTED]
-        self.rows = {failure_label(k + 1, r): r for k, r in enumerate(rows)}
-        with gui.add_folder(f"Failures ({src.rows_label})", order=order):
-            if not rows:
-                gui.add_markdown("no failed pair among them")
+        shown = rows[: self.MAX_LISTED]
+        self.rows = {label(k + 1, r): r for k, r in enumerate(shown)}
+        # the file's name inside: a long folder title wraps over the controls above it
+        with gui.add_folder(title, order=order):
+            rows_label = session.state.source.rows_label
+            if not shown:
+                gui.add_markdown(f"no {title.lower()} among {rows_label}")
                 return
             gui.add_markdown(
-                f"{len(src.failures)} failed, worst first (translation error)"
-                + (f"; the first {len(rows)} are listed" if len(src.failures) > len(rows) else "")
+                f"{len(rows)} {order_text}"
+                + (f"; the first {len(shown)} are listed" if len(rows) > len(shown) else "")
+                + f" ({rows_label})"
             )
-            self.pick = gui.add_dropdown(
-                "open", list(self.rows), initial_value=next(iter(self.rows))
-            )
+            self.pick = gui.add_dropdown(pick, list(self.rows), initial_value=next(iter(self.rows)))
         self.pick.on_update(lambda _: session.guarded(self._picked))
 
     def _picked(self) -> None:

@@ -11,6 +11,7 @@ import numpy as np
 from mbicp_viz.core import IterationEvent, Termination, pose_error
 from mbicp_viz.core.agreement import INLIER_RADIUS_M
 from mbicp_viz.evaluation.failures import failed, failure_kind, failure_reason
+from mbicp_viz.evaluation.health import flags_text
 from mbicp_viz.evaluation.single import reported
 from mbicp_viz.readers.pair_match import PairMatch
 
@@ -70,6 +71,8 @@ def row_markdown(state: DebugState, row: PairMatch) -> str:
             f"{sc.error_xy * 1000:.1f} mm, {math.degrees(sc.error_theta):.3f} deg from the "
             "scan poses"
         )
+    if row.flags:
+        lines.append(f"flagged: {flags_text(row)}")
     if failed(row):
         lines.append(f"failed: {failure_reason(row)}")
         if (why := WHY_LAYERS.get(failure_kind(row))) is not None:

@@ -106,7 +106,29 @@ class Session:
             lambda _: self.fit_view()
         )
         if src.rows_label:
-            controls.Failures(self, gui, order=5)
+            from mbicp_viz.evaluation.failures import failure_label
+            from mbicp_viz.evaluation.health import suspect_label
+
+            controls.PairList(
+                self,
+                gui,
+                5,
+                "Failures",
+                src.failures,
+                failure_label,
+                "failed, worst first (translation error)",
+                "open",
+            )
+            controls.PairList(
+                self,
+                gui,
+                6,
+                "Suspicious pairs",
+                src.suspects,
+                suspect_label,
+                "flagged without truth, the most suspicious first",
+                "open flagged",
+            )
         self.playback = controls.Playback(self, gui, order=10)
         with gui.add_folder("Result", order=20):
             self.h_result = gui.add_markdown("")

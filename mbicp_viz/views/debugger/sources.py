@@ -40,7 +40,8 @@ def files_source(
     rows: str | None = None,
 ) -> Source:
     """``serve REF OBJ`` (the first scan of each) or ``serve LOG [--pair I J] [--rows FILE]`` (pick
-    any two; with an evaluation's rows, its failures open as they ran, the worst first)."""
+    any two; with an evaluation's rows, its failures and suspicious pairs open as they ran, the
+    worst first)."""
     if first is None:
         raise InputError("give a log, two scan files, or --scenario NAME", field="FILE")
     if second is not None:
@@ -57,8 +58,8 @@ def files_source(
     log = read_log(first, options)
     if len(log.scans) < 2:
         raise InputError("needs at least two usable scans (or give two files)", first)
-    failed, label = _failures(rows, log) if rows is not None else ([], "")
-    opened = failed[0] if failed and pair is None else None
+    failed, suspects, label = _failures(rows, log) if rows is not None else ([], [], "")
+    opened = (failed or suspects or [None])[0] if pair is None else None
     i, j = (
         pair
         if pair is not None
@@ -74,18 +75,21 @@ def files_source(
         pick_pair=True,
         guess_kind=guess,
         failures=failed,
+        suspects=suspects,
         rows_label=label,
         opened=opened,
         options=options,
     )
 
 
-def _failures(path: str, log: ScanLog) -> tuple[list[PairMatch], str]:
-    """The failed rows of an evaluation of ``log``, worst first, each checked against the log."""
+def _failures(path: str, log: ScanLog) -> tuple[list[PairMatch], list[PairMatch], str]:
+    """The failed rows of an evaluation of ``log``, worst first, and its flagged rows, the most
+    suspicious first, each checked against the log."""
     from mbicp_viz.evaluation.failures import worst_first
+    from mbicp_viz.evaluation.health import ranked
 
     rows = rows_of_log(path, log)
-    return worst_first(rows), f"{path}: {len(rows)} rows"
+    return worst_first(rows), ranked(rows), f"{path}: {len(rows)} rows"
 
 
 def demo_source(path: str) -> Source:

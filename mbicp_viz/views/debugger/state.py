@@ -60,6 +60,8 @@ class Source:
     teaching: bool = False  # iso-distance curves on from the start
     # an evaluation's failed pairs, worst first
     failures: list[PairMatch] = field(default_factory=list)
+    # its flagged pairs (evaluation/health.py), the most suspicious first
+    suspects: list[PairMatch] = field(default_factory=list)
     rows_label: str = ""  # the rows file they come from, and how many rows it holds
     opened: PairMatch | None = None  # the row the first match reopens
     options: ReadOptions | None = None  # how the log was read (to read another of its scan streams)
