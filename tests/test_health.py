@@ -171,3 +171,40 @@ def test_eval_flags_counts_as_a_person_would(tmp_path):
     )
     res = CliRunner().invoke(cli, ["eval", "flags", str(INTEL), str(unscored)])
     assert res.exit_code == 2 and "no row is scored" in res.output
+
+
+def test_the_runs_recording_marks_the_flagged_pair_and_plots_health(hokuyo, tmp_path):
+    """eval sequence --rrd: the flagged pair of a run with a displaced scan sits on the trajectory
+    in its own layer, its log line is a warning naming its signs, and every pair's overlap is
+    plotted; rerun's own viewer draws it (screenshot)."""
+    from rerun.chunk import RrdReader
+
+    from mbicp_viz.evaluation.trajectory import accumulate
+    from mbicp_viz.views.rrd import record_sequence
+
+    from .conftest import viewer_screenshot
+
+    k = 30
+    log = displaced(hokuyo, k, Pose2(0.25, -0.15, math.radians(6.0)))
+    rows = match_sequence(log, IMPROVED, guess="identity", workers=1)
+    path = tmp_path / "run.rrd"
+    record_sequence(log, rows, str(path))
+    data: dict[str, list] = {}
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        rb = chunk.to_record_batch()
+        for name in rb.schema.names:
+            if ":" in name:
+                data.setdefault(f"{chunk.entity_path} {name}", []).extend(
+                    rb.column(name).to_pylist()
+                )
+    flagged = [n for n, r in enumerate(rows) if r.flags]
+    assert k in flagged  # the pair that starts at the displaced scan
+    where = accumulate(rows)
+    last = data["/sequence/sequence/suspects Points2D:positions"][-1]
+    assert np.allclose(last, [[where[n + 1].x, where[n + 1].y] for n in flagged], atol=1e-4)
+    texts = data["/sequence/log TextLog:text"]
+    levels = data["/sequence/log TextLog:level"]
+    assert "flagged: scan out of place" in texts[k][0] and levels[k] == ["WARN"]
+    assert len(data["/sequence/health/overlap Scalars:scalars"]) == len(rows)
+    img = viewer_screenshot(path, tmp_path / "run.png", "1400x900")
+    assert img.std() > 10  # the viewer drew the run, not a blank window

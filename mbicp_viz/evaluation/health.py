@@ -156,6 +156,11 @@ def flag_text(name: Suspicion, value: tuple[float, ...]) -> str:
             )
         case Suspicion.SIGMA:
             return f"{name} (squared Mahalanobis distance from odometry {value[0]:.0f})"
+        case Suspicion.OUT_OF_PLACE:
+            return (
+                f"{name} (the pair's first scan: the motion jumps {100 * value[0]:.1f} cm, "
+                f"{math.degrees(value[1]):.2f} deg there and returns)"
+            )
         case _:
             return f"{name} ({100 * value[0]:.1f} cm, {math.degrees(value[1]):.2f} deg)"
 

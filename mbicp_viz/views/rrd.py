@@ -404,8 +404,8 @@ def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
 def record_sequence(
     log, rows: list[PairMatch], path: str, recording_id: str = "mbicp-viz/sequence"
 ) -> None:
-    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map,
-    per-pair log."""
+    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, the
+    flagged pairs on it, each pair's health plotted, per-pair log."""
     from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
 
     stream = new_stream(recording_id)
@@ -415,8 +415,12 @@ def record_sequence(
         rrb.Horizontal(
             y_up_view(space, "trajectory and map (first scan's frame, m)"),
             rrb.Vertical(
+                rrb.TimeSeriesView(
+                    origin=f"/{root}/{scene.HEALTH}",
+                    name="health: overlap [%], condition number, from odometry [mm]",
+                ),
                 rrb.TimeSeriesView(origin=f"/{root}/{scene.PLOTS}", name="iterations, time [ms]"),
-                rrb.TextLogView(origin=f"/{root}/{scene.LOG}", name="pairs"),
+                rrb.TextLogView(origin=f"/{root}/{scene.LOG}", name="pairs (flagged: WARN)"),
             ),
             column_shares=[3, 2],
         ),
@@ -427,14 +431,19 @@ def record_sequence(
         log_y_up(stream, space)
         poses, stored = accumulate(rows), log_poses(log, rows)
         by_obj = {row.obj: row for row in rows}
+        # a flagged pair is marked where it placed its second scan
+        flagged = [n + 1 for n, row in enumerate(rows) if row.flags]
         for n, k in enumerate(scan_indices(rows)):
             stream.set_time("scan", sequence=k)
             traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
             stored_traj = (
                 None if stored is None else np.array([[p.x, p.y] for p in stored[: n + 1]])
             )
+            suspects = np.array([[poses[f].x, poses[f].y] for f in flagged if f <= n]).reshape(
+                -1, 2
+            )
             for layer in scene.sequence_layers(
-                k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k)
+                k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k), suspects
             ):
                 log_layer(stream, root, layer)
 

@@ -196,6 +196,7 @@ LOG = "log"
 TEACH = "teaching"
 POLAR = "polar"
 SEQUENCE = "sequence"
+HEALTH = "health"  # a run's per-pair health plots
 
 
 def scene_scale(points: np.ndarray) -> float:
@@ -566,6 +567,11 @@ TRAJECTORY = Style("trajectory from the matches", (40, 90, 220), 3.0)
 LOG_TRAJECTORY = Style("trajectory of the log's poses", (0, 190, 190), 2.5)
 ITERATIONS = Style("iterations", (90, 90, 90))
 TIME = Style("match time [ms]", (245, 160, 0))
+# a pair's health (evaluation/health.py), one point per pair on the run's timeline
+SUSPECT = Style("flagged pairs (suspicious, found without truth)", (240, 110, 0), 4.0)
+SURFACE = Style("overlap: object points on the reference's surface [%]", (30, 150, 60))
+CONDITION = Style("condition number", (150, 60, 170))
+FROM_ODOMETRY = Style("difference from odometry [mm]", (120, 120, 0))
 
 
 def sequence_layers(
@@ -575,29 +581,48 @@ def sequence_layers(
     trajectory: np.ndarray,
     log_trajectory: np.ndarray | None,
     row: PairMatch | None,
+    suspects: np.ndarray,
 ) -> list[Layer]:
-    """Scan ``k`` placed at the pose accumulated from the matches (world = first scan's frame)."""
+    """Scan ``k`` placed at the pose accumulated from the matches (world = first scan's frame), the
+    pair that placed it (``row``) with its health, and where the flagged pairs so far end
+    (``suspects``)."""
     layers: list[Layer] = [
         Points(f"{SEQUENCE}/map/scan_{k:05d}", pose.apply(points), MAP, 0.02),
         Points(f"{SEQUENCE}/current", pose.apply(points), CURRENT, 0.03),
         Strips(f"{SEQUENCE}/trajectory", [trajectory], TRAJECTORY, 0.02),
         Frame(f"{SEQUENCE}/robot", pose),
+        Points(f"{SEQUENCE}/suspects", suspects, SUSPECT, 0.08),
     ]
     if log_trajectory is not None:
         layers.append(Strips(f"{SEQUENCE}/log_trajectory", [log_trajectory], LOG_TRAJECTORY, 0.015))
     if row is not None:
-        r = row.result
-        layers += [
-            Scalar(f"{PLOTS}/iterations", float(r.iterations), ITERATIONS),
-            Scalar(f"{PLOTS}/time_ms", float(row.time_ms), TIME),
-            Text(
-                LOG,
-                f"pair {row.ref} -> {row.obj}: ({r.pose.x:+.3f} m, {r.pose.y:+.3f} m, "
-                f"{math.degrees(r.pose.theta):+.2f} deg), {r.iterations} iterations, "
-                f"{r.reason.value}",
-                "INFO" if r.converged else "WARN",
-            ),
-        ]
+        layers += pair_health_layers(row)
+    return layers
+
+
+def pair_health_layers(row: PairMatch) -> list[Layer]:
+    """One pair of a run: its iterations, time, overlap, condition and distance from odometry as
+    plot points, and a log line (a warning with its signs when it is flagged)."""
+    from mbicp_viz.evaluation.health import flags_text
+
+    r = row.result
+    layers: list[Layer] = [
+        Scalar(f"{PLOTS}/iterations", float(r.iterations), ITERATIONS),
+        Scalar(f"{PLOTS}/time_ms", float(row.time_ms), TIME),
+    ]
+    if row.overlap is not None:
+        layers.append(Scalar(f"{HEALTH}/overlap", 100.0 * row.overlap, SURFACE))
+    if r.degeneracy is not None and math.isfinite(r.degeneracy.condition_number):
+        layers.append(Scalar(f"{HEALTH}/condition", r.degeneracy.condition_number, CONDITION))
+    if row.odometry_xy is not None:
+        layers.append(Scalar(f"{HEALTH}/odometry_mm", 1000.0 * row.odometry_xy, FROM_ODOMETRY))
+    words = (
+        f"pair {row.ref} -> {row.obj}: ({r.pose.x:+.3f} m, {r.pose.y:+.3f} m, "
+        f"{math.degrees(r.pose.theta):+.2f} deg), {r.iterations} iterations, {r.reason.value}"
+    )
+    if row.flags:
+        words += f"; flagged: {flags_text(row)}"
+    layers.append(Text(LOG, words, "WARN" if row.flags or not r.converged else "INFO"))
     return layers
 
 
