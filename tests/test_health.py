@@ -51,7 +51,12 @@ def flags_by_pair(rows):
     return {(r.ref, r.obj): set(r.flags) for r in rows}
 
 
-def test_a_real_run_without_odometry_has_no_scan_out_of_place(hokuyo):
+@pytest.mark.parametrize("stamped", [True, False])
+def test_a_real_run_without_odometry_has_no_scan_out_of_place(hokuyo, stamped):
+    if not stamped:
+        hokuyo = dataclasses.replace(
+            hokuyo, scans=[dataclasses.replace(s, stamp=None) for s in hokuyo.scans]
+        )
     rows = match_sequence(hokuyo, IMPROVED, guess="identity", workers=1)
     assert not any(Suspicion.OUT_OF_PLACE in r.flags for r in rows)
 
@@ -63,8 +68,14 @@ def test_a_real_run_without_odometry_has_no_scan_out_of_place(hokuyo):
     dy=st.floats(-0.2, 0.2),
     dth_deg=st.floats(-6.0, 6.0),
     sign=st.sampled_from([-1.0, 1.0]),
+    stamped=st.booleans(),
 )
-def test_a_displaced_scan_is_flagged_without_odometry(hokuyo, k, dx, dy, dth_deg, sign):
+def test_a_displaced_scan_is_flagged_without_odometry(hokuyo, k, dx, dy, dth_deg, sign, stamped):
+    """... with the scans' time stamps, or without (equal steps assumed)."""
+    if not stamped:
+        hokuyo = dataclasses.replace(
+            hokuyo, scans=[dataclasses.replace(s, stamp=None) for s in hokuyo.scans]
+        )
     log = displaced(hokuyo, k, Pose2(sign * dx, dy, math.radians(dth_deg)))
     rows = match_sequence(log, IMPROVED, guess="identity", workers=1)
     out = [pair for pair, f in flags_by_pair(rows).items() if Suspicion.OUT_OF_PLACE in f]

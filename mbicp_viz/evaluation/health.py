@@ -13,8 +13,7 @@ The signs, and why each means what it says:
   match's own covariance and the odometry's noise allow (squared Mahalanobis distance);
 - **scan out of place**: the motion jumps away from the previous pair's (constant velocity over
   the scans' time stamps) and comes back at the next pair: the scan between them does not belong
-  there (a dropped, replayed or displaced scan);
-- **matchers disagree**: a second configuration run on the same pair ends elsewhere.
+  there (a dropped, replayed or displaced scan).
 
 The thresholds were chosen on the shared logs with truth (``mbicp-viz eval flags``; the README
 quotes how often a flagged pair is a real failure and how many failures go unflagged).
@@ -29,7 +28,7 @@ import numpy as np
 from mbicp_viz.core import Pose2, pose_error
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
 
-from .criteria import CONSECUTIVE, Criteria
+from .criteria import Criteria
 from .failures import DEGENERATE_CONDITION
 from .trajectory import ODOMETRY_SIGMA
 
@@ -90,7 +89,6 @@ def out_of_place(
     ok = all(dts)
 
     def scaled(step: Pose2, k: float) -> Pose2:
-        k = k if ok else 1.0
         return Pose2(step.x * k, step.y * k, step.theta * k)
 
     def beyond(pose: Pose2, predicted: Pose2, step: Pose2) -> float:
@@ -107,13 +105,6 @@ def out_of_place(
     return pose_error(a, scaled(p, da / dp if ok else 1.0))
 
 
-def disagree(a: PairMatch, b: PairMatch) -> tuple[float, float] | None:
-    """How far two configurations' matches of one pair end apart ([m], [rad]), when beyond the
-    consecutive-pair criteria (None: they agree)."""
-    et, er = pose_error(a.result.pose, b.result.pose)
-    return None if CONSECUTIVE.correct(et, er) else (et, er)
-
-
 def severity(m: PairMatch) -> float:
     """How suspicious a pair is, to rank them: the number of its signs, then how far beyond its
     threshold the worst one is."""
@@ -127,7 +118,6 @@ def _beyond(name: Suspicion, value: tuple[float, ...]) -> float:
     poses = {
         Suspicion.ODOMETRY_JUMP: ODOMETRY_JUMP,
         Suspicion.OUT_OF_PLACE: STEADY,
-        Suspicion.DISAGREE: CONSECUTIVE,
     }
     if name in poses:
         c = poses[name]

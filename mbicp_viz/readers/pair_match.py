@@ -54,7 +54,6 @@ class Suspicion(StrEnum):
     ODOMETRY_JUMP = "jumps against odometry"
     SIGMA = "sigma inconsistent with the step"
     OUT_OF_PLACE = "scan out of place"
-    DISAGREE = "matchers disagree"
 
 
 @dataclass(frozen=True)
