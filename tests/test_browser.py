@@ -13,7 +13,7 @@ from mbicp_viz.views.debugger.app import App
 from mbicp_viz.views.debugger.state import Source
 from mbicp_viz.views.scene import OBJECT, REFERENCE
 
-from .conftest import DATA, EXAMPLES, interpreted_kernels, wait_for
+from .conftest import DATA, EXAMPLES, INTEL, interpreted_kernels, wait_for
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = [
@@ -326,6 +326,51 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
 
     assert wait_for(both_drawn)
     page.close()
+
+
+def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
+    """serve LOG --rows on a whole run: "show the run" draws the trajectory and the map in the
+    world frame with their legend; "next flagged" moves to the first flagged pair, whose signs the
+    panel names; "open this pair" opens it in the pair debugger as the run matched it."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+    from mbicp_viz.evaluation.health import flags_text
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.sources import files_source
+
+    rows = tmp_path / "rows.jsonl"
+    res = CliRunner().invoke(
+        cli, ["eval", "sequence", str(INTEL), "--guess", "identity", "--out", str(rows)]
+    )
+    assert res.exit_code == 0, res.output
+    src = files_source(str(INTEL), None, rows=str(rows))
+    assert src.run is not None and len(src.run) == 59
+    first = next(n for n, r in enumerate(src.run) if r.flags and n > 0)  # after the slider's
+    application = App(src, "127.0.0.1", 0)
+    try:
+        page, session = open_tab(browser, application)
+        page.get_by_role("button", name="show the run").click()
+        legend = page.locator(".mbicp-legend")
+        legend.get_by_text(scene.RUN_MAP.label).wait_for(timeout=30000)
+        for style in (scene.RUN_TRAJECTORY, scene.RUN_REFERENCE, scene.RUN_OBJECT, scene.SUSPECT):
+            assert style.label in legend.inner_text()
+        assert "the world frame" in legend.inner_text()
+        page.screenshot(path=str(tmp_path / "run-view.png"))
+        page.get_by_role("button", name="next flagged").click()
+        row = src.run[first]
+        page.get_by_text(f"scans {row.ref} → {row.obj}").first.wait_for(timeout=30000)
+        assert f"**flagged**: {flags_text(row)}".replace("**", "") in page.inner_text("body")
+        assert session.run.n == first
+        page.screenshot(path=str(tmp_path / "run-view-flagged.png"))
+        page.get_by_role("button", name="open this pair").click()
+        page.get_by_text(f"line {row.line}").first.wait_for(timeout=30000)
+        assert session.state.pair == (row.ref, row.obj) and session.state.guess == row.guess
+        legend.get_by_text(scene.REFERENCE.label, exact=True).wait_for(timeout=30000)
+        assert scene.RUN_MAP.label not in legend.inner_text()
+        page.close()
+    finally:
+        application.stop()
 
 
 def test_suspicious_pairs_of_a_run_without_truth_open_as_they_ran(browser, tmp_path):

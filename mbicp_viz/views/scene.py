@@ -13,7 +13,7 @@ points there), metres; plots use the units their axes name.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -197,6 +197,7 @@ TEACH = "teaching"
 POLAR = "polar"
 SEQUENCE = "sequence"
 HEALTH = "health"  # a run's per-pair health plots
+RUN = "run"  # the debugger's run view, in the world frame (the first scan's)
 
 
 def scene_scale(points: np.ndarray) -> float:
@@ -416,9 +417,9 @@ def pair_layers(
 
 def has_content(layer: Layer) -> bool:
     """Whether a drawable layer draws anything (an empty one gets no legend entry)."""
-    for field in ("xy", "starts", "strips", "centers"):
-        if hasattr(layer, field):
-            return len(getattr(layer, field)) > 0
+    for name in ("xy", "starts", "strips", "centers"):
+        if hasattr(layer, name):
+            return len(getattr(layer, name)) > 0
     return True
 
 
@@ -623,6 +624,52 @@ def pair_health_layers(row: PairMatch) -> list[Layer]:
     if row.flags:
         words += f"; flagged: {flags_text(row)}"
     layers.append(Text(LOG, words, "WARN" if row.flags or not r.converged else "INFO"))
+    return layers
+
+
+# The debugger's run view: the whole run in the world frame (its first scan's), one pair in view.
+RUN_MAP = Style("map: the scans up to this pair at the chained poses", (150, 150, 150), 0.5)
+RUN_TRAJECTORY = Style("trajectory from the chained matches", (30, 30, 30), 3.0)
+RUN_REFERENCE = Style("this pair: its reference scan", REFERENCE.color, 2.0)
+RUN_OBJECT = Style("this pair: its object scan", OBJECT.color, 2.5)
+RUN_ODOMETRY = Style("trajectory of the odometry", (150, 210, 40), 2.2)
+ROBOT = Style("this pair's pose (x red, y green)", (40, 90, 220), 5.0)
+
+
+@dataclass(frozen=True)
+class RunScene:
+    """What the run view draws at one pair, in the world frame."""
+
+    poses: list[Pose2]  # one per scan the run visits
+    map_xy: np.ndarray  # (M, 2) the map up to this pair
+    ref_xy: np.ndarray  # the pair's two scans at their poses
+    obj_xy: np.ndarray
+    n: int  # the pair in view: from poses[n] to poses[n + 1]
+    stored: list[Pose2] | None = None  # the log's scan poses (its truth), same world frame
+    odometry: list[Pose2] | None = None  # the odometry's, same world frame
+    suspects: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+
+def _track(poses: list[Pose2]) -> np.ndarray:
+    return np.array([[p.x, p.y] for p in poses]).reshape(-1, 2)
+
+
+def run_layers(r: RunScene, scale: float = 1.0) -> list[Layer]:
+    """The run view's layers: the map up to the pair, the trajectories, the flagged pairs, the
+    pair's two scans highlighted and the pose it reached; dots and lines ``scale`` times their size
+    (``scene_scale`` of the whole run)."""
+    layers: list[Layer] = [
+        Points(f"{RUN}/map", r.map_xy, RUN_MAP, 0.01 * scale),
+        Strips(f"{RUN}/trajectory", [_track(r.poses)], RUN_TRAJECTORY, 0.01 * scale),
+        Points(f"{RUN}/suspects", r.suspects, SUSPECT, 0.04 * scale),
+        Points(f"{RUN}/reference", r.ref_xy, RUN_REFERENCE, 0.015 * scale),
+        Points(f"{RUN}/object", r.obj_xy, RUN_OBJECT, 0.015 * scale),
+        Frame(f"{RUN}/robot", r.poses[r.n + 1], ROBOT, 0.15 * scale),
+    ]
+    if r.stored is not None:
+        layers.append(Strips(f"{RUN}/stored", [_track(r.stored)], LOG_TRAJECTORY, 0.006 * scale))
+    if r.odometry is not None:
+        layers.append(Strips(f"{RUN}/odometry", [_track(r.odometry)], RUN_ODOMETRY, 0.006 * scale))
     return layers
 
 

@@ -24,7 +24,9 @@ def in_scan_plane(layer: scene.Layer) -> bool:
     else."""
     if isinstance(layer, (scene.Scalar, scene.Text)) or layer.path.startswith(PLOT_SPACES):
         return False
-    if layer.path.startswith(f"{scene.SCANS}/") and isinstance(layer, scene.DRAWN):
+    if layer.path.startswith((f"{scene.SCANS}/", f"{scene.RUN}/")) and isinstance(
+        layer, scene.DRAWN
+    ):
         return True
     raise TypeError(
         f"the debugger has no place for the {type(layer).__name__} layer {layer.path!r}"

@@ -247,12 +247,16 @@ def _css(rgb) -> str:
     return "rgb({},{},{})".format(*rgb)
 
 
-def legend_html(styles: list[scene.Style], grid_m: float | None = None) -> str:
+def legend_html(
+    styles: list[scene.Style],
+    grid_m: float | None = None,
+    frame: str = "the reference laser frame",
+) -> str:
     """A swatch and a label per style (the layers shown now), and the grid's cell size."""
     grid = (
         '<div class="legend-entry" style="font-size:12px;line-height:1.6;color:#666">grid: '
         f"{grid_m:g} m cells, "
-        f"thicker every {5 * grid_m:g} m; x right, y up (the reference laser frame)</div>"
+        f"thicker every {5 * grid_m:g} m; x right, y up ({frame})</div>"
         if grid_m
         else ""
     )

@@ -105,6 +105,11 @@ class Session:
         gui.add_button("fit the view", order=4, hint="top-down over the reference scan").on_click(
             lambda _: self.fit_view()
         )
+        self.run = None
+        if src.run is not None:
+            from .run import RunModel, RunPanel
+
+            self.run = RunPanel(self, gui, 4.5, RunModel(src.log, src.run))
         if src.rows_label:
             from mbicp_viz.evaluation.failures import failure_label
             from mbicp_viz.evaluation.health import suspect_label
@@ -178,7 +183,10 @@ class Session:
         self.scans.open(error)
 
     def redraw(self) -> None:
-        """Every run's layers at the current iteration, the legend of what is shown, the plots."""
+        """Every run's layers at the current iteration, the legend of what is shown, the plots (the
+        scene only while the run view is not shown)."""
+        if self.run is not None and self.run.active:
+            return
         with self.lock, self.client.atomic():
             self.layers.offered(self.state)
             shown: dict[str, scene.Style] = {}

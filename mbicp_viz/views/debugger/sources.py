@@ -10,6 +10,7 @@ from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.rows import rows_of_log
 
+from .run import is_chain
 from .state import Source
 
 
@@ -58,7 +59,8 @@ def files_source(
     log = read_log(first, options)
     if len(log.scans) < 2:
         raise InputError("needs at least two usable scans (or give two files)", first)
-    failed, suspects, label = _failures(rows, log) if rows is not None else ([], [], "")
+    run = rows_of_log(rows, log) if rows is not None else []
+    failed, suspects, label = _failures(run, rows) if rows is not None else ([], [], "")
     opened = (failed or suspects or [None])[0] if pair is None else None
     i, j = (
         pair
@@ -76,19 +78,19 @@ def files_source(
         guess_kind=guess,
         failures=failed,
         suspects=suspects,
+        run=run if is_chain(run) else None,
         rows_label=label,
         opened=opened,
         options=options,
     )
 
 
-def _failures(path: str, log: ScanLog) -> tuple[list[PairMatch], list[PairMatch], str]:
-    """The failed rows of an evaluation of ``log``, worst first, and its flagged rows, the most
-    suspicious first, each checked against the log."""
+def _failures(rows: list[PairMatch], path: str) -> tuple[list[PairMatch], list[PairMatch], str]:
+    """The failed rows of an evaluation, worst first, and its flagged rows, the most suspicious
+    first."""
     from mbicp_viz.evaluation.failures import worst_first
     from mbicp_viz.evaluation.health import ranked
 
-    rows = rows_of_log(path, log)
     return worst_first(rows), ranked(rows), f"{path}: {len(rows)} rows"
 
 

@@ -1,0 +1,242 @@
+"""The run view (``serve LOG --rows ROWS`` on the rows of ``eval sequence``): the whole run in the
+world frame — the trajectory its chained matches make, the map they build up to the pair in view,
+the log's own poses and odometry where it has them, the flagged pairs — a slider over the pairs,
+each pair's health, and "open this pair" into the pair debugger exactly as the run matched it.
+
+The world frame is the first scan's (the robot base's when the rows report its motion, else the
+laser's), as ``eval sequence --png`` and ``--rrd`` draw it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import viser.uplot as uplot
+
+from mbicp_viz.core import Pose2, relative
+from mbicp_viz.evaluation.health import flags_text
+from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
+from mbicp_viz.readers import ScanLog
+from mbicp_viz.readers.pair_match import PairMatch
+
+from .. import scene, viser_draw
+from . import panels
+
+MAP_POINTS = 150_000  # the most map points sent to the page: the scans are thinned evenly to it
+
+
+def is_chain(rows: list[PairMatch]) -> bool:
+    """Whether the rows are a run: each pair starts at the scan the one before ended at."""
+    return len(rows) > 0 and all(b.ref == a.obj for a, b in zip(rows, rows[1:]))
+
+
+@dataclass
+class RunModel:
+    """A run's rows on their log: the poses and the map, computed once."""
+
+    log: ScanLog
+    rows: list[PairMatch]
+
+    @cached_property
+    def poses(self) -> list[Pose2]:
+        return accumulate(self.rows)
+
+    @cached_property
+    def scans(self) -> list[int]:
+        """The record number of each scan the run visits."""
+        return scan_indices(self.rows)
+
+    @cached_property
+    def mount(self) -> Pose2:
+        """T_base_laser when the rows report the base's motion, else the identity."""
+        return self.log.frames.mount if self.rows[0].frame != "laser" else Pose2()
+
+    @cached_property
+    def stored(self) -> list[Pose2] | None:
+        """The log's scan poses (laser frame) as the base's, in the run's world frame."""
+        laser = log_poses(self.log, self.rows)
+        if laser is None:
+            return None
+        m, inv = self.mount, self.mount.inverse()
+        return [m @ p @ inv for p in laser]
+
+    @cached_property
+    def odometry(self) -> list[Pose2] | None:
+        odo = [self.log.scan(i).odometry for i in self.scans]
+        if any(o is None for o in odo):
+            return None
+        m, inv = self.mount, self.mount.inverse()
+        return [m @ relative(odo[0], o) @ inv for o in odo]
+
+    @cached_property
+    def flagged(self) -> list[int]:
+        return [n for n, r in enumerate(self.rows) if r.flags]
+
+    def world_points(self, k: int) -> np.ndarray:
+        """The points of the run's k-th scan in the world frame."""
+        return (self.poses[k] @ self.mount).apply(self.log.scan(self.scans[k]).points())
+
+    @cached_property
+    def _map(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every ``step``-th scan's points (world frame) and the scan each belongs to."""
+        n = len(self.poses)
+        sizes = [self.log.scan(i).n_valid for i in self.scans]
+        step = max(1, math.ceil(sum(sizes) / MAP_POINTS))
+        parts = [(k, self.world_points(k)) for k in range(0, n, step)]
+        xy = np.concatenate([p for _, p in parts]) if parts else np.zeros((0, 2))
+        owner = np.concatenate([np.full(len(p), k) for k, p in parts]) if parts else np.zeros(0)
+        return xy, owner
+
+    def scene_at(self, n: int) -> scene.RunScene:
+        xy, owner = self._map
+        fp = np.array([[self.poses[f + 1].x, self.poses[f + 1].y] for f in self.flagged])
+        return scene.RunScene(
+            self.poses,
+            xy[owner <= n + 1],
+            self.world_points(n),
+            self.world_points(n + 1),
+            n,
+            self.stored,
+            self.odometry,
+            fp.reshape(-1, 2),
+        )
+
+    def extent(self) -> np.ndarray:
+        xy, _ = self._map
+        track = np.array([[p.x, p.y] for p in self.poses])
+        return np.concatenate([xy, track]) if len(xy) else track
+
+    def health(self, n: int) -> str:
+        """Pair n in words: its motion, how it ended, its numbers and its signs."""
+        row = self.rows[n]
+        r = row.result
+        parts = [
+            f"**pair {n + 1} of {len(self.rows)}**: scans {row.ref} → {row.obj}, {row.matcher}, "
+            f"motion {r.pose} of the {row.frame} frame",
+            f"{r.iterations} iterations, {r.reason.value}; {r.pairs_kept} pairs kept, "
+            f"{r.pairs_rejected} rejected",
+        ]
+        if row.overlap is not None:
+            parts.append(f"{100 * row.overlap:.0f} % of the object points on the reference")
+        if r.degeneracy is not None:
+            parts.append(f"condition number {r.degeneracy.condition_number:.0f}")
+        if row.odometry_xy is not None:
+            parts.append(
+                f"{1000 * row.odometry_xy:.1f} mm, {math.degrees(row.odometry_theta):.2f} deg "
+                "from the odometry"
+            )
+        parts.append(f"**flagged**: {flags_text(row)}" if row.flags else "not flagged")
+        return "  \n".join(parts)
+
+    def series(self) -> tuple[np.ndarray, ...]:
+        """The health timeline: pair number, overlap [%], distance from odometry [mm], flagged
+        (100 where a pair is, else 0)."""
+        x = np.arange(1, len(self.rows) + 1, dtype=float)
+        overlap = [100 * r.overlap if r.overlap is not None else np.nan for r in self.rows]
+        odo = [1000 * r.odometry_xy if r.odometry_xy is not None else np.nan for r in self.rows]
+        flagged = [100.0 if r.flags else 0.0 for r in self.rows]
+        return x, np.array(overlap), np.array(odo), np.array(flagged)
+
+
+class RunPanel:
+    """The run view's controls; in the scene it replaces the pair's layers while it is shown."""
+
+    def __init__(self, session, gui, order: float, model: RunModel):
+        self.s, self.model, self.active, self.scale = session, model, False, 1.0
+        self.nodes: dict[str, object] = {}
+        rows = model.rows
+        with gui.add_folder("Run", order=order):
+            gui.add_markdown(
+                f"{len(rows)} pairs matched with {rows[0].matcher}; {len(model.flagged)} flagged "
+                f"without truth. World frame: the first scan's ({rows[0].frame})."
+            )
+            self.toggle = gui.add_button("show the run", hint="the whole run, or back to the pair")
+            self.slider = gui.add_slider("pair", 1, len(rows), 1, 1)
+            self.prev_flagged = gui.add_button("previous flagged")
+            self.next_flagged = gui.add_button("next flagged")
+            self.text = gui.add_markdown("")
+            self.open = gui.add_button("open this pair", hint="as the run matched it")
+            x, overlap, odo, flagged = model.series()
+            top = float(np.nanmax(odo)) * 1.08 if np.any(np.isfinite(odo)) else 1.0
+            self.plot = gui.add_uplot(
+                data=(x, overlap, odo, flagged),
+                series=(
+                    uplot.Series(label="pair"),
+                    panels._line("overlap [%]", "pct", scene.SURFACE),
+                    panels._line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
+                    panels._line("flagged", "pct", scene.SUSPECT),
+                ),
+                aspect=1.6,
+                title="health of every pair",
+                **panels._numeric(
+                    "pair", ("pct", "overlap [%]", 3, 105.0), ("mm", "from odometry [mm]", 1, top)
+                ),
+            )
+        self.toggle.on_click(lambda _: session.guarded(self.switch))
+        self.slider.on_update(lambda _: session.guarded(self.draw))
+        self.prev_flagged.on_click(lambda _: session.guarded(lambda: self.step_flagged(-1)))
+        self.next_flagged.on_click(lambda _: session.guarded(lambda: self.step_flagged(+1)))
+        self.open.on_click(lambda _: session.guarded(self.open_pair))
+        self.text.content = model.health(0)
+
+    @property
+    def n(self) -> int:
+        return int(self.slider.value) - 1
+
+    def switch(self) -> None:
+        """Into the run view, or back to the pair."""
+        if self.active:
+            self.leave()
+        else:
+            self.enter()
+
+    def enter(self) -> None:
+        self.active = True
+        self.toggle.label = "back to the pair"
+        for handle in self.s.nodes.values():
+            handle.visible = False
+        pts = self.model.extent()
+        self.scale = scene.scene_scale(pts)
+        self.s.camera.fit(pts)
+        self.s.grid_m = viser_draw.metric_grid(self.s.client.scene, pts)
+        self.draw()
+
+    def leave(self) -> None:
+        self.active = False
+        self.toggle.label = "show the run"
+        for handle in self.nodes.values():
+            handle.remove()
+        self.nodes = {}
+        self.s.fit_view()
+        self.s.redraw()
+
+    def draw(self) -> None:
+        """The run at the slider's pair: the scene (when shown), the pair's health."""
+        self.text.content = self.model.health(self.n)
+        if not self.active:
+            return
+        layers = scene.run_layers(self.model.scene_at(self.n), self.scale)
+        with self.s.client.atomic():
+            for layer in layers:
+                name = f"/{layer.path}"
+                self.nodes[name] = viser_draw.draw(self.s.client.scene, name, layer)
+        shown = [layer.style for layer in layers if scene.has_content(layer)]
+        self.s.h_legend.content = panels.legend_html(
+            shown, self.s.grid_m, "the world frame: the run's first scan"
+        )
+
+    def step_flagged(self, direction: int) -> None:
+        """The slider to the next (or previous) flagged pair."""
+        flagged = self.model.flagged
+        ahead = [f for f in flagged if (f - self.n) * direction > 0]
+        if ahead:
+            self.slider.value = (ahead[0] if direction > 0 else ahead[-1]) + 1
+
+    def open_pair(self) -> None:
+        """The pair in view, in the pair debugger, as the run matched it."""
+        if self.active:
+            self.leave()
+        self.s.open_row(self.model.rows[self.n])
