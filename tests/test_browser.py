@@ -331,7 +331,8 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
 def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
     """serve LOG --rows on a whole run: "show the run" draws the trajectory and the map in the
     world frame with their legend; "next flagged" moves to the first flagged pair, whose signs the
-    panel names; "open this pair" opens it in the pair debugger as the run matched it."""
+    panel names; a click on the trajectory brings the pair that ends there; "open this pair"
+    opens it in the pair debugger as the run matched it."""
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app as cli
@@ -346,7 +347,6 @@ def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
     assert res.exit_code == 0, res.output
     src = files_source(str(INTEL), None, rows=str(rows))
     assert src.run is not None and len(src.run) == 59
-    first = next(n for n, r in enumerate(src.run) if r.flags and n > 0)  # after the slider's
     application = App(src, "127.0.0.1", 0)
     try:
         page, session = open_tab(browser, application)
@@ -357,7 +357,25 @@ def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
             assert style.label in legend.inner_text()
         assert "the world frame" in legend.inner_text()
         page.screenshot(path=str(tmp_path / "run-view.png"))
+        # a click on the trajectory brings the pair that ends there: the pose farthest from the
+        # others, projected through the tab's own top-down camera onto the page
+        track = np.array([[p.x, p.y] for p in session.run.model.poses])
+        apart = [np.sort(np.hypot(*(track - t).T))[1] for t in track]
+        k = int(np.argmax(apart[2:])) + 2  # not the first pair: the slider starts there
+        cam = session.client.camera
+        canvas = page.locator("canvas").first.bounding_box()
+        half_h = (cam.position[2] - 0.0) * np.tan(cam.fov / 2)
+        u = 0.5 + (track[k, 0] - cam.look_at[0]) / (2 * half_h * cam.aspect)
+        v = 0.5 - (track[k, 1] - cam.look_at[1]) / (2 * half_h)
+        page.mouse.click(canvas["x"] + u * canvas["width"], canvas["y"] + v * canvas["height"])
+        assert wait_for(lambda: session.run.n == k - 1)
+        row = src.run[k - 1]
+        page.get_by_text(f"scans {row.ref} → {row.obj}").first.wait_for(timeout=30000)
+        page.get_by_role("button", name="previous flagged").click()
+        first = max(n for n, r in enumerate(src.run) if r.flags and n < k - 1)
+        assert wait_for(lambda: session.run.n == first)
         page.get_by_role("button", name="next flagged").click()
+        first = min(n for n, r in enumerate(src.run) if r.flags and n > first)
         row = src.run[first]
         page.get_by_text(f"scans {row.ref} → {row.obj}").first.wait_for(timeout=30000)
         assert f"**flagged**: {flags_text(row)}".replace("**", "") in page.inner_text("body")

@@ -103,3 +103,12 @@ class TopDownCamera:
             self._place(cam, c, height)
         else:  # the tab has not shown its first view yet: a view placed now would race it
             self.pending = pts
+
+
+def on_scan_plane(origin, direction) -> np.ndarray | None:
+    """Where a view ray (a click) meets the scan plane z = 0, (x, y) [m]; None if it runs along
+    it."""
+    o, d = np.asarray(origin, float), np.asarray(direction, float)
+    if abs(d[2]) < 1e-9:
+        return None
+    return (o - o[2] / d[2] * d)[:2]

@@ -18,6 +18,7 @@ from mbicp_viz.readers.params_toml import presets_for
 
 from .. import scene, viser_draw
 from . import panels, report
+from .camera import on_scan_plane
 from .state import DEFAULTS, TYPED, preset_name
 
 
@@ -398,13 +399,12 @@ class Layers:
         self._show_teaching()
 
     def click(self, origin, direction) -> int | None:
-        """Choose the object point nearest to where a view ray meets the scan plane (z = 0)."""
-        o, d = np.asarray(origin, float), np.asarray(direction, float)
-        if abs(d[2]) < 1e-9 or not self.s.state.runs:
+        """Choose the object point nearest to where a view ray meets the scan plane (z = 0); in
+        the run view the run's click is the one that counts."""
+        at = on_scan_plane(origin, direction)
+        if at is None or not self.s.state.runs or (self.s.run is not None and self.s.run.active):
             return None
-        self.s.state.iso_point = report.nearest_object_point(
-            self.s.state, (o - o[2] / d[2] * d)[:2]
-        )
+        self.s.state.iso_point = report.nearest_object_point(self.s.state, at)
         self.iso.show(str(self.s.state.iso_point))
         self._show_teaching()
         return self.s.state.iso_point

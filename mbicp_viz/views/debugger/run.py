@@ -24,6 +24,7 @@ from mbicp_viz.readers.pair_match import PairMatch
 
 from .. import scene, viser_draw
 from . import panels
+from .camera import on_scan_plane
 
 MAP_POINTS = 150_000  # the most map points sent to the page: the scans are thinned evenly to it
 
@@ -180,6 +181,9 @@ class RunPanel:
         self.prev_flagged.on_click(lambda _: session.guarded(lambda: self.step_flagged(-1)))
         self.next_flagged.on_click(lambda _: session.guarded(lambda: self.step_flagged(+1)))
         self.open.on_click(lambda _: session.guarded(self.open_pair))
+        session.client.scene.on_click()(
+            lambda ev: session.guarded(lambda: self.click(ev.ray_origin, ev.ray_direction))
+        )
         self.text.content = model.health(0)
 
     @property
@@ -227,6 +231,17 @@ class RunPanel:
         self.s.h_legend.content = panels.legend_html(
             shown, self.s.grid_m, "the world frame: the run's first scan"
         )
+
+    def click(self, origin, direction) -> int | None:
+        """In the run view, the pair that ends nearest to a click on the trajectory comes into
+        view (the first pair for its start); returns its number (0-based)."""
+        at = on_scan_plane(origin, direction)
+        if not self.active or at is None:
+            return None
+        track = np.array([[p.x, p.y] for p in self.model.poses])
+        k = int(np.argmin(np.hypot(*(track - at).T)))
+        self.slider.value = max(k, 1)
+        return max(k, 1) - 1
 
     def step_flagged(self, direction: int) -> None:
         """The slider to the next (or previous) flagged pair."""
