@@ -349,8 +349,7 @@ def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
     assert src.run is not None and len(src.run) == 59
     application = App(src, "127.0.0.1", 0)
     try:
-        page, session = open_tab(browser, application)
-        page.get_by_role("button", name="show the run").click()
+        page, session = open_tab(browser, application)  # the rows of a run open on the run
         legend = page.locator(".mbicp-legend")
         legend.get_by_text(scene.RUN_MAP.label).wait_for(timeout=30000)
         for style in (scene.RUN_TRAJECTORY, scene.RUN_REFERENCE, scene.RUN_OBJECT, scene.SUSPECT):
@@ -386,6 +385,10 @@ def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
         assert session.state.pair == (row.ref, row.obj) and session.state.guess == row.guess
         legend.get_by_text(scene.REFERENCE.label, exact=True).wait_for(timeout=30000)
         assert scene.RUN_MAP.label not in legend.inner_text()
+        # and back to the run, at the same pair
+        page.get_by_role("button", name="show the run").click()
+        legend.get_by_text(scene.RUN_MAP.label).wait_for(timeout=30000)
+        assert session.run.n == first and session.run.active
         page.close()
     finally:
         application.stop()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -55,6 +56,7 @@ from .options import (
     user_errors,
 )
 from .resume import log_identity, matched_rows, settings_of
+from .serve import ServePortOpt, open_debugger
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the first N pairs")]
@@ -122,6 +124,15 @@ def sequence(
     upside_down: UpsideDownOpt = False,
     deskew: DeskewOpt = None,
     budget_s: BudgetOpt = MATCH_BUDGET_S,
+    serve: Annotated[
+        bool,
+        typer.Option(
+            "--serve",
+            help="then open the run in the debugger (its run view) on 127.0.0.1, as `serve LOG "
+            "--rows OUT` does",
+        ),
+    ] = False,
+    port: ServePortOpt = 8080,
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else
     identity)."""
@@ -189,6 +200,11 @@ def sequence(
         record_sequence(lg, rows, str(rrd))
         say(f"sequence recording written to {rrd}")
     _failures(log, out)
+    if serve:
+        from mbicp_viz.views.debugger.sources import files_source
+
+        source = files_source(log, None, None, guess, reading, str(out))
+        open_debugger(replace(source, budget_s=budget_s), "127.0.0.1", port, (), None)
 
 
 def _failures(log: str, out: Path) -> None:

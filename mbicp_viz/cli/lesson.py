@@ -10,7 +10,7 @@ import typer
 from mbicp_viz.errors import InputError
 
 from .options import user_errors
-from .serve import ForOpt, ServePortOpt, _serve
+from .serve import ForOpt, ServePortOpt, open_debugger
 
 
 def lesson(
@@ -48,7 +48,7 @@ def lesson(
         return
     from mbicp_viz.views.debugger.lesson import step_source
 
-    _serve(step_source(steps[step - 1], steps), "127.0.0.1", port, (), for_seconds)
+    open_debugger(step_source(steps[step - 1], steps), "127.0.0.1", port, (), for_seconds)
 
 
 def _export(steps, out: Path) -> None:

@@ -91,7 +91,9 @@ def serve(
         if scenario is not None
         else files_source(first, second, pair, guess, reading, rows)
     )
-    _serve(replace(source, budget_s=budget_s), host, port, tuple(allow_origin or ()), for_seconds)
+    open_debugger(
+        replace(source, budget_s=budget_s), host, port, tuple(allow_origin or ()), for_seconds
+    )
 
 
 def demo(port: ServePortOpt = 8080, for_seconds: ForOpt = None):
@@ -99,12 +101,13 @@ def demo(port: ServePortOpt = 8080, for_seconds: ForOpt = None):
     identity."""
     from mbicp_viz.views.debugger.sources import demo_source
 
-    _serve(demo_source(str(DEMO_PAIR)), "127.0.0.1", port, (), for_seconds)
+    open_debugger(demo_source(str(DEMO_PAIR)), "127.0.0.1", port, (), for_seconds)
 
 
-def _serve(
+def open_debugger(
     source, host: str, port: int, origins: tuple[str, ...], for_seconds: float | None
 ) -> None:
+    """The debugger on ``source`` until Ctrl-C (or ``for_seconds``)."""
     from mbicp_viz.views.debugger.app import App
 
     if host != "127.0.0.1":

@@ -252,6 +252,4 @@ class RunPanel:
 
     def open_pair(self) -> None:
         """The pair in view, in the pair debugger, as the run matched it."""
-        if self.active:
-            self.leave()
         self.s.open_row(self.model.rows[self.n])

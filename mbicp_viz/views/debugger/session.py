@@ -72,6 +72,8 @@ class Session:
                 return
             self.after_match(self.state.rematch())
             self.fit_view()
+            if self.run is not None:  # the rows of a run open on the whole run
+                self.run.enter()
 
     def load(self, source: Source, iteration: int | None = None) -> None:
         """Open another source (a lesson's step) in this tab: its pair, matchers, parameters and
@@ -174,8 +176,10 @@ class Session:
         self.guess.show()
 
     def open_row(self, row) -> None:
-        """Reopen an evaluated pair as it ran; the controls then show its matcher, pair and
-        guess."""
+        """Reopen an evaluated pair as it ran (out of the run view); the controls then show its
+        matcher, pair and guess."""
+        if self.run is not None and self.run.active:
+            self.run.leave()
         error = self.state.open_row(row)
         if not error:
             self.matchers.show()
