@@ -394,6 +394,48 @@ def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
         application.stop()
 
 
+def test_two_runs_in_the_run_view(browser, tmp_path):
+    """serve LOG --rows A --versus B: run B's trajectory is drawn beside A's with its own legend
+    entry, the verdict is on the page, the pairs where they differ are listed farthest first, and
+    "open run B's match" opens B's row of the pair in view."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+    from mbicp_viz.evaluation.health import suspect_label
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.sources import files_source
+
+    paths = []
+    for algo in ("improved", "plicp"):
+        paths.append(tmp_path / f"{algo}.jsonl")
+        res = CliRunner().invoke(
+            cli,
+            ["eval", "sequence", str(INTEL), "--algo", algo, "--guess", "identity"]
+            + ["--out", str(paths[-1]), "--workers", "1"],
+        )
+        assert res.exit_code == 0, res.output
+    src = files_source(str(INTEL), None, rows=str(paths[0]), versus=str(paths[1]))
+    v = src.versus
+    application = App(src, "127.0.0.1", 0)
+    try:
+        page, session = open_tab(browser, application)
+        legend = page.locator(".mbicp-legend")
+        legend.get_by_text(f"{scene.RUN_OTHER.label}: {paths[1]}").wait_for(timeout=30000)
+        assert v.verdict()[0] in page.inner_text("body")
+        page.screenshot(path=str(tmp_path / "two-runs.png"))
+        page.get_by_role("combobox", name="open where they differ").click()
+        options = page.get_by_role("option").all_inner_texts()
+        assert options == [suspect_label(k + 1, r) for k, r in enumerate(v.differing())]
+        page.keyboard.press("Escape")
+        page.get_by_role("button", name="open run B's match of this pair").click()
+        b = v.b[0]
+        page.get_by_text(f"line {b.line}").first.wait_for(timeout=30000)
+        assert session.state.pair == (b.ref, b.obj) and session.state.matchers == ["plicp"]
+        page.close()
+    finally:
+        application.stop()
+
+
 def test_suspicious_pairs_of_a_run_without_truth_open_as_they_ran(browser, tmp_path):
     """serve LOG --rows on a run without truth: the pairs flagged without truth are listed, the
     most suspicious first with their signs; choosing one opens it as it ran, its signs on the

@@ -13,6 +13,7 @@ import time
 import urllib.request
 
 import numpy as np
+import pytest
 
 from mbicp_viz.core import MATCHERS
 from mbicp_viz.evaluation.sequence import match_sequence
@@ -67,3 +68,54 @@ def test_eval_sequence_serve_opens_the_run_and_stops_on_ctrl_c(tmp_path):
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
+
+
+def test_two_runs_side_by_side_count_as_a_person_would(tmp_path):
+    """Improved MbICP and PL-ICP on the Intel excerpt from the identity, scored: where they end
+    apart, who is right where the other is wrong, and each disagreeing pair flagged in both."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+    from mbicp_viz.core import pose_error
+    from mbicp_viz.errors import InputError
+    from mbicp_viz.evaluation.criteria import CONSECUTIVE
+    from mbicp_viz.evaluation.versus import versus
+    from mbicp_viz.readers.pair_match import Suspicion
+    from mbicp_viz.readers.rows import read_rows
+
+    paths = {}
+    for algo in ("improved", "plicp"):
+        paths[algo] = tmp_path / f"{algo}.jsonl"
+        res = CliRunner().invoke(
+            cli,
+            ["eval", "sequence", str(INTEL), "--algo", algo, "--guess", "identity"]
+            + ["--truth", "pose", "--out", str(paths[algo]), "--workers", "1"],
+        )
+        assert res.exit_code == 0, res.output
+    a, b = read_rows(paths["improved"]), read_rows(paths["plicp"])
+    v = versus(a, b, "improved", "plicp")
+    apart = [not CONSECUTIVE.judge(x.result.pose, y.result.pose) for x, y in zip(a, b)]
+    assert v.differ == [k for k, d in enumerate(apart) if d] and v.differ
+    assert all(Suspicion.DISAGREE in v.b[k].flags for k in v.differ)
+    b_wins = sum(y.score.success and not x.score.success for x, y in zip(a, b))
+    a_wins = sum(x.score.success and not y.score.success for x, y in zip(a, b))
+    verdict = "\n".join(v.verdict())
+    assert (
+        f"B is right where A is wrong on {b_wins} pairs, A right where B is wrong on {a_wins}"
+        in (verdict)
+    )
+    assert f"{len(v.differ)} of {len(a)} pairs end more than" in verdict
+    far = v.differing()[0]
+    assert far.flags[Suspicion.DISAGREE][0] == max(
+        pose_error(x.result.pose, y.result.pose)[0] for x, y in zip(a, b)
+    )
+    # rows of another frame are refused in one line
+    laser = tmp_path / "laser.jsonl"
+    CliRunner().invoke(
+        cli,
+        ["eval", "sequence", str(INTEL), "--frame", "laser", "--limit", "3", "--out", str(laser)],
+    )
+    assert read_rows(laser)[0].frame != a[0].frame
+    with pytest.raises(InputError) as e:
+        versus(a, read_rows(laser), "a", str(laser))
+    assert e.value.field == "frame" and str(laser) in str(e.value)

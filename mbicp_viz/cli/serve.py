@@ -76,6 +76,15 @@ def serve(
             "its failures listed worst first, each opened as it ran",
         ),
     ] = None,
+    versus: Annotated[
+        str | None,
+        typer.Option(
+            "--versus",
+            metavar="ROWS",
+            help="a second run of the same log (another matcher or parameters, `eval sequence "
+            "--out`): drawn beside the --rows run, where they differ listed, and which does better",
+        ),
+    ] = None,
     budget_s: BudgetOpt = MATCH_BUDGET_S,
 ):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
@@ -89,7 +98,7 @@ def serve(
     source = (
         scenario_source(scenario)
         if scenario is not None
-        else files_source(first, second, pair, guess, reading, rows)
+        else files_source(first, second, pair, guess, reading, rows, versus)
     )
     open_debugger(
         replace(source, budget_s=budget_s), host, port, tuple(allow_origin or ()), for_seconds

@@ -13,7 +13,9 @@ The signs, and why each means what it says:
   match's own covariance and the odometry's noise allow (squared Mahalanobis distance);
 - **scan out of place**: the motion jumps away from the previous pair's (constant velocity over
   the scans' time stamps) and comes back at the next pair: the scan between them does not belong
-  there (a dropped, replayed or displaced scan).
+  there (a dropped, replayed or displaced scan);
+- **matchers disagree**: a second configuration's run ends elsewhere on the same pair
+  (evaluation/versus.py).
 
 The thresholds were chosen on the shared logs with truth (``mbicp-viz eval flags``; the README
 quotes how often a flagged pair is a real failure and how many failures go unflagged).
@@ -28,7 +30,7 @@ import numpy as np
 from mbicp_viz.core import Pose2, pose_error
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
 
-from .criteria import Criteria
+from .criteria import CONSECUTIVE, Criteria
 from .failures import DEGENERATE_CONDITION
 from .trajectory import ODOMETRY_SIGMA
 
@@ -118,6 +120,7 @@ def _beyond(name: Suspicion, value: tuple[float, ...]) -> float:
     poses = {
         Suspicion.ODOMETRY_JUMP: ODOMETRY_JUMP,
         Suspicion.OUT_OF_PLACE: STEADY,
+        Suspicion.DISAGREE: CONSECUTIVE,
     }
     if name in poses:
         c = poses[name]

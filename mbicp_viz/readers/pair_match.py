@@ -54,6 +54,7 @@ class Suspicion(StrEnum):
     ODOMETRY_JUMP = "jumps against odometry"
     SIGMA = "sigma inconsistent with the step"
     OUT_OF_PLACE = "scan out of place"
+    DISAGREE = "matchers disagree"  # two configurations' runs (evaluation/versus.py)
 
 
 @dataclass(frozen=True)

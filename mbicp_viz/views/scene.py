@@ -633,6 +633,7 @@ RUN_TRAJECTORY = Style("trajectory from the chained matches", (30, 30, 30), 3.0)
 RUN_REFERENCE = Style("this pair: its reference scan", REFERENCE.color, 2.0)
 RUN_OBJECT = Style("this pair: its object scan", OBJECT.color, 2.5)
 RUN_ODOMETRY = Style("trajectory of the odometry", (150, 210, 40), 2.2)
+RUN_OTHER = Style("trajectory of run B", (200, 0, 160), 2.9)
 ROBOT = Style("this pair's pose (x red, y green)", (40, 90, 220), 5.0)
 
 
@@ -648,6 +649,8 @@ class RunScene:
     stored: list[Pose2] | None = None  # the log's scan poses (its truth), same world frame
     odometry: list[Pose2] | None = None  # the odometry's, same world frame
     suspects: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    other: list[Pose2] | None = None  # a second configuration's run of the same pairs
+    other_label: str = ""
 
 
 def _track(poses: list[Pose2]) -> np.ndarray:
@@ -670,6 +673,9 @@ def run_layers(r: RunScene, scale: float = 1.0) -> list[Layer]:
         layers.append(Strips(f"{RUN}/stored", [_track(r.stored)], LOG_TRAJECTORY, 0.006 * scale))
     if r.odometry is not None:
         layers.append(Strips(f"{RUN}/odometry", [_track(r.odometry)], RUN_ODOMETRY, 0.006 * scale))
+    if r.other is not None:
+        style = replace(RUN_OTHER, label=f"{RUN_OTHER.label}: {r.other_label}")
+        layers.append(Strips(f"{RUN}/other", [_track(r.other)], style, 0.01 * scale))
     return layers
 
 

@@ -19,8 +19,9 @@ import viser.uplot as uplot
 from mbicp_viz.core import Pose2, relative
 from mbicp_viz.evaluation.health import flags_text
 from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
+from mbicp_viz.evaluation.versus import Versus
 from mbicp_viz.readers import ScanLog
-from mbicp_viz.readers.pair_match import PairMatch
+from mbicp_viz.readers.pair_match import PairMatch, Suspicion
 
 from .. import scene, viser_draw
 from . import panels
@@ -40,10 +41,15 @@ class RunModel:
 
     log: ScanLog
     rows: list[PairMatch]
+    versus: Versus | None = None  # a second configuration's run of the same pairs (run B)
 
     @cached_property
     def poses(self) -> list[Pose2]:
         return accumulate(self.rows)
+
+    @cached_property
+    def other(self) -> list[Pose2] | None:
+        return accumulate(self.versus.b) if self.versus is not None else None
 
     @cached_property
     def scans(self) -> list[int]:
@@ -103,6 +109,8 @@ class RunModel:
             self.stored,
             self.odometry,
             fp.reshape(-1, 2),
+            self.other,
+            self.versus.name_b if self.versus is not None else "",
         )
 
     def extent(self) -> np.ndarray:
@@ -134,12 +142,15 @@ class RunModel:
 
     def series(self) -> tuple[np.ndarray, ...]:
         """The health timeline: pair number, overlap [%], distance from odometry [mm], flagged
-        (100 where a pair is, else 0)."""
+        (100 where a pair is, else 0) and, beside a run B, how far A and B end apart where they
+        disagree [mm]."""
         x = np.arange(1, len(self.rows) + 1, dtype=float)
+        apart = [r.flags.get(Suspicion.DISAGREE, (0.0,))[0] * 1000 for r in self.rows]
         overlap = [100 * r.overlap if r.overlap is not None else np.nan for r in self.rows]
         odo = [1000 * r.odometry_xy if r.odometry_xy is not None else np.nan for r in self.rows]
         flagged = [100.0 if r.flags else 0.0 for r in self.rows]
-        return x, np.array(overlap), np.array(odo), np.array(flagged)
+        out = (x, np.array(overlap), np.array(odo), np.array(flagged))
+        return out + ((np.array(apart),) if self.versus is not None else ())
 
 
 class RunPanel:
@@ -160,20 +171,30 @@ class RunPanel:
             self.next_flagged = gui.add_button("next flagged")
             self.text = gui.add_markdown("")
             self.open = gui.add_button("open this pair", hint="as the run matched it")
-            x, overlap, odo, flagged = model.series()
-            top = float(np.nanmax(odo)) * 1.08 if np.any(np.isfinite(odo)) else 1.0
+            if model.versus is not None:
+                gui.add_markdown("  \n".join(model.versus.verdict()))
+                self.open_b = gui.add_button("open run B's match of this pair")
+                self.open_b.on_click(lambda _: session.guarded(self.open_pair_b))
+            data = model.series()
+            top = max(
+                (float(np.nanmax(v)) for v in (data[2], *data[4:]) if np.any(np.isfinite(v))),
+                default=1.0,
+            )
+            series = [
+                uplot.Series(label="pair"),
+                panels._line("overlap [%]", "pct", scene.SURFACE),
+                panels._line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
+                panels._line("flagged", "pct", scene.SUSPECT),
+            ]
+            if model.versus is not None:
+                series.append(panels._line("A and B apart [mm]", "mm", scene.RUN_OTHER))
             self.plot = gui.add_uplot(
-                data=(x, overlap, odo, flagged),
-                series=(
-                    uplot.Series(label="pair"),
-                    panels._line("overlap [%]", "pct", scene.SURFACE),
-                    panels._line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
-                    panels._line("flagged", "pct", scene.SUSPECT),
-                ),
+                data=data,
+                series=tuple(series),
                 aspect=1.6,
                 title="health of every pair",
                 **panels._numeric(
-                    "pair", ("pct", "overlap [%]", 3, 105.0), ("mm", "from odometry [mm]", 1, top)
+                    "pair", ("pct", "overlap [%]", 3, 105.0), ("mm", "[mm]", 1, top * 1.08)
                 ),
             )
         self.toggle.on_click(lambda _: session.guarded(self.switch))
@@ -253,3 +274,7 @@ class RunPanel:
     def open_pair(self) -> None:
         """The pair in view, in the pair debugger, as the run matched it."""
         self.s.open_row(self.model.rows[self.n])
+
+    def open_pair_b(self) -> None:
+        """The pair in view as run B matched it."""
+        self.s.open_row(self.model.versus.b[self.n])

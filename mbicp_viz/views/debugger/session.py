@@ -53,6 +53,34 @@ class Session:
         elif not ready.is_set():
             self.say(COMPILING)
 
+    def _pair_lists(self, gui, src: Source) -> None:
+        """An evaluation's pairs to open: its failures, its suspicious pairs, and beside a run B
+        where the two differ."""
+        from mbicp_viz.evaluation.failures import failure_label
+        from mbicp_viz.evaluation.health import suspect_label
+
+        lists = [
+            ("Failures", src.failures, failure_label, "failed, worst first (translation error)"),
+            (
+                "Suspicious pairs",
+                src.suspects,
+                suspect_label,
+                "flagged without truth, the most suspicious first",
+            ),
+        ]
+        if src.versus is not None:
+            lists.append(
+                (
+                    "Where runs A and B differ",
+                    src.versus.differing(),
+                    suspect_label,
+                    "pairs end apart, the farthest first (run A's match opens)",
+                )
+            )
+        picks = ("open", "open flagged", "open where they differ")
+        for k, ((title, rows, label, order_text), pick) in enumerate(zip(lists, picks)):
+            controls.PairList(self, gui, 5 + 0.5 * k, title, rows, label, order_text, pick)
+
     def show_notes(self) -> None:
         """What to look at, and how the log on screen was read (a scan stream picked is read
         anew)."""
@@ -111,31 +139,9 @@ class Session:
         if src.run is not None:
             from .run import RunModel, RunPanel
 
-            self.run = RunPanel(self, gui, 4.5, RunModel(src.log, src.run))
+            self.run = RunPanel(self, gui, 4.5, RunModel(src.log, src.run, src.versus))
         if src.rows_label:
-            from mbicp_viz.evaluation.failures import failure_label
-            from mbicp_viz.evaluation.health import suspect_label
-
-            controls.PairList(
-                self,
-                gui,
-                5,
-                "Failures",
-                src.failures,
-                failure_label,
-                "failed, worst first (translation error)",
-                "open",
-            )
-            controls.PairList(
-                self,
-                gui,
-                6,
-                "Suspicious pairs",
-                src.suspects,
-                suspect_label,
-                "flagged without truth, the most suspicious first",
-                "open flagged",
-            )
+            self._pair_lists(gui, src)
         self.playback = controls.Playback(self, gui, order=10)
         with gui.add_folder("Result", order=20):
             self.h_result = gui.add_markdown("")

@@ -6,6 +6,7 @@ from mbicp_viz.core import Pose2
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess
 from mbicp_viz.evaluation.scenarios import find_scenario
+from mbicp_viz.evaluation.versus import versus as compare_runs
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.rows import rows_of_log
@@ -39,10 +40,11 @@ def files_source(
     guess: Guess = Guess.stored,
     options: ReadOptions | None = None,
     rows: str | None = None,
+    versus: str | None = None,
 ) -> Source:
     """``serve REF OBJ`` (the first scan of each) or ``serve LOG [--pair I J] [--rows FILE]`` (pick
     any two; with an evaluation's rows, its failures and suspicious pairs open as they ran, the
-    worst first)."""
+    worst first; with ``versus``, a second run's rows of the same pairs beside them)."""
     if first is None:
         raise InputError("give a log, two scan files, or --scenario NAME", field="FILE")
     if second is not None:
@@ -60,6 +62,14 @@ def files_source(
     if len(log.scans) < 2:
         raise InputError("needs at least two usable scans (or give two files)", first)
     run = rows_of_log(rows, log) if rows is not None else []
+    both = None
+    if versus is not None:
+        if rows is None:
+            raise InputError(
+                "--versus compares with the run of --rows: give both", field="--versus"
+            )
+        both = compare_runs(run, rows_of_log(versus, log), rows, versus)
+        run = both.a
     failed, suspects, label = _failures(run, rows) if rows is not None else ([], [], "")
     opened = (failed or suspects or [None])[0] if pair is None else None
     i, j = (
@@ -79,6 +89,7 @@ def files_source(
         failures=failed,
         suspects=suspects,
         run=run if is_chain(run) else None,
+        versus=both,
         rows_label=label,
         opened=opened,
         options=options,
