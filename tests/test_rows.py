@@ -237,3 +237,17 @@ def test_a_bad_field_of_a_json_lines_file_names_its_line(rows_file, tmp_path):
     with pytest.raises(InputError) as e:
         read_rows(path)
     assert e.value.line == len(rows) and "invalid JSON" in e.value.message
+
+
+def test_a_parameter_set_seen_before_is_not_trusted_on_another_line(rows_file, tmp_path):
+    """Rows repeat one parameter set, which is checked once; a later row whose set differs by one
+    bad value is still refused, naming its own line."""
+    rows = [r for r in json_lines(rows_file) if "ref" in r]
+    bad = json.loads(json.dumps(rows[2]))
+    key = next(k for k, v in bad["params"].items() if isinstance(v, float))
+    bad["params"][key] = float("nan")
+    path = tmp_path / "rows.jsonl"
+    path.write_text("\n".join(json.dumps(r) for r in [rows[0], rows[1], bad]) + "\n")
+    with pytest.raises(InputError) as e:
+        read_rows(path)
+    assert e.value.line == 3 and key in str(e.value)
