@@ -2,6 +2,7 @@
 and what the boxes really send."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -431,6 +432,52 @@ def test_two_runs_in_the_run_view(browser, tmp_path):
         b = v.b[0]
         page.get_by_text(f"line {b.line}").first.wait_for(timeout=30000)
         assert session.state.pair == (b.ref, b.obj) and session.state.matchers == ["plicp"]
+        page.close()
+    finally:
+        application.stop()
+
+
+def test_the_relations_a_run_misses_most_open_in_the_run_view(browser, tmp_path):
+    """serve LOG --rows ROWS --relations F: the run's score on the relations is the one `eval
+    relations --run` prints; the costliest relation, chosen, is drawn (its legend entry) and the
+    slider goes to the pair that ends at its later scan."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.sources import files_source
+
+    log, relations, offset = (
+        DATA / "intel-relations.log",
+        DATA / "intel-relations.relations",
+        976052857.337,
+    )
+    rows = tmp_path / "rows.jsonl"
+    res = CliRunner().invoke(
+        cli, ["eval", "sequence", str(log), "--guess", "odometry", "--out", str(rows)]
+    )
+    assert res.exit_code == 0, res.output
+    score = CliRunner().invoke(
+        cli,
+        ["eval", "relations", str(log), str(relations), "--offset", str(offset), "--run"]
+        + [str(rows)],
+    )
+    chained = next(x for x in score.output.splitlines() if x.strip().startswith("matches chained"))
+    mean_sd = re.search(r"translation (\S+ ± \S+) m", chained).group(1)
+    src = files_source(str(log), None, rows=str(rows), relations=str(relations), offset=offset)
+    application = App(src, "127.0.0.1", 0)
+    try:
+        page, session = open_tab(browser, application)
+        page.get_by_text(f"translation {mean_sd} m").first.wait_for(timeout=30000)
+        model = session.run.model
+        worst = model.costliest()[0]
+        label = model.relation_label(1, worst)
+        page.get_by_role("combobox", name="relations, costliest first").click()
+        page.get_by_role("option", name=label).click()
+        page.locator(".mbicp-legend").get_by_text(scene.RELATION.label).wait_for(timeout=30000)
+        j = int(model.relation_errors.ends[worst][1])
+        assert wait_for(lambda: session.run.n == j - 1)
+        page.screenshot(path=str(tmp_path / "relation.png"))
         page.close()
     finally:
         application.stop()

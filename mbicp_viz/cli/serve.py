@@ -18,6 +18,7 @@ from .options import (
     Guess,
     GuessOpt,
     MountOpt,
+    OffsetOpt,
     PairOpt,
     TopicOpt,
     TypestoreOpt,
@@ -85,6 +86,16 @@ def serve(
             "--out`): drawn beside the --rows run, where they differ listed, and which does better",
         ),
     ] = None,
+    relations: Annotated[
+        str | None,
+        typer.Option(
+            "--relations",
+            metavar="FILE",
+            help="score the --rows run on a relations file (Kümmerle et al. 2009) and list the "
+            "relations it misses most, each drawn in the run view",
+        ),
+    ] = None,
+    offset: OffsetOpt = 0.0,
     budget_s: BudgetOpt = MATCH_BUDGET_S,
 ):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
@@ -98,7 +109,7 @@ def serve(
     source = (
         scenario_source(scenario)
         if scenario is not None
-        else files_source(first, second, pair, guess, reading, rows, versus)
+        else files_source(first, second, pair, guess, reading, rows, versus, relations, offset)
     )
     open_debugger(
         replace(source, budget_s=budget_s), host, port, tuple(allow_origin or ()), for_seconds

@@ -15,12 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mbicp_viz.core import pose_error, relative
+from mbicp_viz.core import pose_error
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
 from mbicp_viz.readers.relations import Relation
 
 from .criteria import CONSECUTIVE
-from .relations import nearest_scan
+from .run_score import relation_errors
 from .trajectory import accumulate
 
 LOCAL_S = 10.0  # a relation this short covers a few dozen pairs, no loop
@@ -83,15 +83,13 @@ def check_relations(
 ) -> list[FlagCheck]:
     """Against the short relations: each covers the pairs between its two scans (``stamps``: one
     per scan the rows visit, on the relations' clock)."""
-    t, poses = np.asarray(stamps, float), accumulate(rows)
-    stretches = []
-    for rel in relations:
-        if not 0.0 < rel.t2 - rel.t1 <= LOCAL_S:
-            continue
-        i, j = nearest_scan(t, rel.t1, tolerance), nearest_scan(t, rel.t2, tolerance)
-        if i is not None and j is not None and i < j:
-            failed = not CONSECUTIVE.correct(*pose_error(relative(poses[i], poses[j]), rel.pose))
-            stretches.append((i, j, failed))
+    local = [rel for rel in relations if 0.0 < rel.t2 - rel.t1 <= LOCAL_S]
+    e = relation_errors(np.asarray(stamps, float), accumulate(rows), local, tolerance)
+    stretches = [
+        (i, j, not CONSECUTIVE.correct(et, er))
+        for (i, j), et, er in zip(e.ends, e.trans, e.rot)
+        if i < j
+    ]
     covered, bad = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
     for i, j, failed in stretches:
         covered[i:j] = True

@@ -73,18 +73,31 @@ class RunScore:
         )
 
 
+@dataclass(frozen=True)
+class RelationErrors:
+    """The relations a trajectory covers (a pose at both stamps): their index in the file, the
+    poses at their two ends, translational error [m] and rotational error [rad]."""
+
+    index: np.ndarray
+    ends: np.ndarray  # (n, 2) pose indices
+    trans: np.ndarray
+    rot: np.ndarray
+
+
 def relation_errors(
     stamps: np.ndarray, poses: list[Pose2], relations: list[Relation], tolerance: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per relation covered: its index, translational error [m] and rotational error [rad]."""
-    index, et, er = [], [], []
+) -> RelationErrors:
+    """Each relation covered, scored (Kümmerle et al.'s e = d*^-1 d)."""
+    index, ends, et, er = [], [], [], []
     for k, rel in enumerate(relations):
         i, j = nearest_scan(stamps, rel.t1, tolerance), nearest_scan(stamps, rel.t2, tolerance)
         if i is None or j is None:
             continue
         t, r = pose_error(relative(poses[i], poses[j]), rel.pose)
-        index.append(k), et.append(t), er.append(r)
-    return np.array(index, int), np.array(et), np.array(er)
+        index.append(k), ends.append((i, j)), et.append(t), er.append(r)
+    return RelationErrors(
+        np.array(index, int), np.array(ends, int).reshape(-1, 2), np.array(et), np.array(er)
+    )
 
 
 def score_track(
@@ -96,7 +109,8 @@ def score_track(
     worst: int = 5,
 ) -> RunScore:
     """The score of one trajectory (a pose per stamp, any world frame: only motions count)."""
-    index, et, er = relation_errors(np.asarray(stamps, float), poses, relations, tolerance)
+    e = relation_errors(np.asarray(stamps, float), poses, relations, tolerance)
+    index, et, er = e.index, e.trans, e.rot
 
     def stats(v: np.ndarray) -> tuple[float, float]:
         # the sample standard deviation, as the benchmark's own scorer reports it

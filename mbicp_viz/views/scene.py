@@ -634,6 +634,9 @@ RUN_REFERENCE = Style("this pair: its reference scan", REFERENCE.color, 2.0)
 RUN_OBJECT = Style("this pair: its object scan", OBJECT.color, 2.5)
 RUN_ODOMETRY = Style("trajectory of the odometry", (150, 210, 40), 2.2)
 RUN_OTHER = Style("trajectory of run B", (200, 0, 160), 2.9)
+RELATION = Style(
+    "relation: from its earlier scan to where it puts the later one", (255, 190, 0), 4.5
+)
 ROBOT = Style("this pair's pose (x red, y green)", (40, 90, 220), 5.0)
 
 
@@ -651,6 +654,8 @@ class RunScene:
     suspects: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     other: list[Pose2] | None = None  # a second configuration's run of the same pairs
     other_label: str = ""
+    # a relation (Kümmerle et al.): the earlier end's pose and where it puts the later one
+    relation: tuple[Pose2, Pose2] | None = None
 
 
 def _track(poses: list[Pose2]) -> np.ndarray:
@@ -676,6 +681,11 @@ def run_layers(r: RunScene, scale: float = 1.0) -> list[Layer]:
     if r.other is not None:
         style = replace(RUN_OTHER, label=f"{RUN_OTHER.label}: {r.other_label}")
         layers.append(Strips(f"{RUN}/other", [_track(r.other)], style, 0.01 * scale))
+    if r.relation is not None:
+        layers += [
+            Strips(f"{RUN}/relation", [_track(list(r.relation))], RELATION, 0.012 * scale),
+            Points(f"{RUN}/relation_end", _track([r.relation[1]]), RELATION, 0.05 * scale),
+        ]
     return layers
 
 

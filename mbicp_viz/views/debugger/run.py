@@ -18,15 +18,18 @@ import viser.uplot as uplot
 
 from mbicp_viz.core import Pose2, relative
 from mbicp_viz.evaluation.health import flags_text
-from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
+from mbicp_viz.evaluation.run_score import RelationErrors, relation_errors
+from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices, stamps
 from mbicp_viz.evaluation.versus import Versus
 from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
+from mbicp_viz.readers.relations import Relation
 
 from .. import scene, viser_draw
 from . import panels
 from .camera import on_scan_plane
 
+RELATION_TOLERANCE_S = 0.025  # a relation's stamp meets a scan within this (eval relations')
 MAP_POINTS = 150_000  # the most map points sent to the page: the scans are thinned evenly to it
 
 
@@ -42,6 +45,8 @@ class RunModel:
     log: ScanLog
     rows: list[PairMatch]
     versus: Versus | None = None  # a second configuration's run of the same pairs (run B)
+    relations: list[Relation] | None = None  # Kümmerle et al.'s, on the log's clock + offset
+    offset: float = 0.0
 
     @cached_property
     def poses(self) -> list[Pose2]:
@@ -97,7 +102,37 @@ class RunModel:
         owner = np.concatenate([np.full(len(p), k) for k, p in parts]) if parts else np.zeros(0)
         return xy, owner
 
-    def scene_at(self, n: int) -> scene.RunScene:
+    @cached_property
+    def relation_errors(self) -> RelationErrors | None:
+        """The relations the run covers, scored on its chained poses."""
+        if self.relations is None:
+            return None
+        t = np.array([s + self.offset for s in stamps(self.log, self.rows)])
+        return relation_errors(t, self.poses, self.relations, RELATION_TOLERANCE_S)
+
+    def costliest(self, most: int = 100) -> list[int]:
+        """Positions in ``relation_errors`` of the relations the run misses most, worst first."""
+        e = self.relation_errors
+        return [int(k) for k in np.argsort(-e.trans, kind="stable")[:most]]
+
+    def relation_label(self, rank: int, k: int) -> str:
+        e = self.relation_errors
+        i, j = e.ends[k]
+        rel = self.relations[e.index[k]]
+        return (
+            f"{rank}. relation {e.index[k] + 1}: scans {self.scans[i]} → {self.scans[j]} "
+            f"({rel.t2 - rel.t1:.0f} s apart): missed by {e.trans[k]:.3f} m, "
+            f"{math.degrees(e.rot[k]):.2f} deg"
+        )
+
+    def relation_ends(self, k: int) -> tuple[Pose2, Pose2]:
+        """A relation's earlier end where the run put it, and where the relation puts the later
+        one from there (base frame: the relations are the robot's)."""
+        e = self.relation_errors
+        start = self.poses[e.ends[k][0]]
+        return start, start @ self.relations[e.index[k]].pose
+
+    def scene_at(self, n: int, relation: int | None = None) -> scene.RunScene:
         xy, owner = self._map
         fp = np.array([[self.poses[f + 1].x, self.poses[f + 1].y] for f in self.flagged])
         return scene.RunScene(
@@ -111,6 +146,7 @@ class RunModel:
             fp.reshape(-1, 2),
             self.other,
             self.versus.name_b if self.versus is not None else "",
+            self.relation_ends(relation) if relation is not None else None,
         )
 
     def extent(self) -> np.ndarray:
@@ -171,6 +207,9 @@ class RunPanel:
             self.next_flagged = gui.add_button("next flagged")
             self.text = gui.add_markdown("")
             self.open = gui.add_button("open this pair", hint="as the run matched it")
+            self.relation = None  # the relation drawn (a position in model.relation_errors)
+            if model.relation_errors is not None:
+                self._relations(gui)
             if model.versus is not None:
                 gui.add_markdown("  \n".join(model.versus.verdict()))
                 self.open_b = gui.add_button("open run B's match of this pair")
@@ -206,6 +245,34 @@ class RunPanel:
             lambda ev: session.guarded(lambda: self.click(ev.ray_origin, ev.ray_direction))
         )
         self.text.content = model.health(0)
+
+    def _relations(self, gui) -> None:
+        """The relations the run misses most, to bring into view."""
+        e = self.model.relation_errors
+        if not len(e.index):
+            gui.add_markdown("no relation has a scan of this run at both ends")
+            return
+        worst = self.model.costliest()
+        self.relation_labels = {self.model.relation_label(r + 1, k): k for r, k in enumerate(worst)}
+        gui.add_markdown(
+            f"{len(e.index)} relations scored: translation {e.trans.mean():.3f} ± "
+            f"{e.trans.std(ddof=1) if len(e.index) > 1 else 0.0:.3f} m (Kümmerle et al.)"
+        )
+        self.pick_relation = gui.add_dropdown(
+            "relations, costliest first", ["(none)", *self.relation_labels], "(none)"
+        )
+        self.pick_relation.on_update(lambda _: self.s.guarded(self.relation_picked))
+
+    def relation_picked(self) -> None:
+        """The chosen relation drawn, the slider at the pair that ends at its later scan."""
+        self.relation = self.relation_labels.get(self.pick_relation.value)
+        if self.relation is None:
+            self.draw()
+            return
+        j = int(self.model.relation_errors.ends[self.relation][1])
+        if int(self.slider.value) == max(j, 1):
+            self.draw()
+        self.slider.value = max(j, 1)
 
     @property
     def n(self) -> int:
@@ -243,14 +310,18 @@ class RunPanel:
         self.text.content = self.model.health(self.n)
         if not self.active:
             return
-        layers = scene.run_layers(self.model.scene_at(self.n), self.scale)
+        layers = scene.run_layers(self.model.scene_at(self.n, self.relation), self.scale)
         with self.s.client.atomic():
+            drawn = {}
             for layer in layers:
                 name = f"/{layer.path}"
-                self.nodes[name] = viser_draw.draw(self.s.client.scene, name, layer)
-        shown = [layer.style for layer in layers if scene.has_content(layer)]
+                drawn[name] = viser_draw.draw(self.s.client.scene, name, layer)
+            for name in self.nodes.keys() - drawn.keys():  # a relation no longer chosen
+                self.nodes[name].remove()
+            self.nodes = drawn
+        shown = {layer.style.label: layer.style for layer in layers if scene.has_content(layer)}
         self.s.h_legend.content = panels.legend_html(
-            shown, self.s.grid_m, "the world frame: the run's first scan"
+            list(shown.values()), self.s.grid_m, "the world frame: the run's first scan"
         )
 
     def click(self, origin, direction) -> int | None:

@@ -139,7 +139,8 @@ class Session:
         if src.run is not None:
             from .run import RunModel, RunPanel
 
-            self.run = RunPanel(self, gui, 4.5, RunModel(src.log, src.run, src.versus))
+            model = RunModel(src.log, src.run, src.versus, src.relations, src.offset)
+            self.run = RunPanel(self, gui, 4.5, model)
         if src.rows_label:
             self._pair_lists(gui, src)
         self.playback = controls.Playback(self, gui, order=10)

@@ -9,6 +9,7 @@ from mbicp_viz.evaluation.scenarios import find_scenario
 from mbicp_viz.evaluation.versus import versus as compare_runs
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 from mbicp_viz.readers.pair_match import PairMatch
+from mbicp_viz.readers.relations import read_relations
 from mbicp_viz.readers.rows import rows_of_log
 
 from .run import is_chain
@@ -41,10 +42,13 @@ def files_source(
     options: ReadOptions | None = None,
     rows: str | None = None,
     versus: str | None = None,
+    relations: str | None = None,
+    offset: float = 0.0,
 ) -> Source:
     """``serve REF OBJ`` (the first scan of each) or ``serve LOG [--pair I J] [--rows FILE]`` (pick
     any two; with an evaluation's rows, its failures and suspicious pairs open as they ran, the
-    worst first; with ``versus``, a second run's rows of the same pairs beside them)."""
+    worst first; with ``versus``, a second run's rows of the same pairs beside them; with
+    ``relations``, the run scored on them, the costliest to bring into view)."""
     if first is None:
         raise InputError("give a log, two scan files, or --scenario NAME", field="FILE")
     if second is not None:
@@ -70,6 +74,11 @@ def files_source(
             )
         both = compare_runs(run, rows_of_log(versus, log), rows, versus)
         run = both.a
+    if relations is not None and (rows is None or not is_chain(run)):
+        raise InputError(
+            "--relations scores a run: give the rows of `eval sequence` with --rows",
+            field="--relations",
+        )
     failed, suspects, label = _failures(run, rows) if rows is not None else ([], [], "")
     opened = (failed or suspects or [None])[0] if pair is None else None
     i, j = (
@@ -90,6 +99,8 @@ def files_source(
         suspects=suspects,
         run=run if is_chain(run) else None,
         versus=both,
+        relations=read_relations(relations) if relations is not None else None,
+        offset=offset,
         rows_label=label,
         opened=opened,
         options=options,

@@ -64,6 +64,8 @@ class Source:
     suspects: list[PairMatch] = field(default_factory=list)
     run: list[PairMatch] | None = None  # its rows when they are a run (eval sequence): run view
     versus: object | None = None  # evaluation/versus.Versus: a second run of the same pairs
+    relations: list | None = None  # Kümmerle et al.'s relations to score the run on (run view)
+    offset: float = 0.0  # added to the log's stamps to meet the relations'
     rows_label: str = ""  # the rows file they come from, and how many rows it holds
     opened: PairMatch | None = None  # the row the first match reopens
     options: ReadOptions | None = None  # how the log was read (to read another of its scan streams)
