@@ -36,6 +36,13 @@ def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses():
         assert np.allclose(at.obj_xy, pose.apply(log.scan(rows[n].obj).points()))
         expected = sum(log.scan(i).n_valid for i in [rows[0].ref, *(r.obj for r in rows[: n + 1])])
         assert len(at.map_xy) == expected
+    # the health timeline: one point per pair, each as its record says
+    x, overlap, odo, flagged, residual = model.series()
+    assert list(x) == list(range(1, len(rows) + 1))
+    assert np.allclose(overlap, [100 * r.overlap for r in rows])
+    assert np.allclose(odo, [1000 * r.odometry_xy for r in rows])
+    assert np.allclose(residual, [1000 * np.sqrt(r.result.error) for r in rows])
+    assert [f > 0 for f in flagged] == [bool(r.flags) for r in rows]
     # the log's own poses start where the run does: the first scan's frame
     first = model.stored[0]
     assert np.allclose([first.x, first.y, first.theta], 0.0, atol=1e-12)

@@ -573,6 +573,7 @@ SUSPECT = Style("flagged pairs (suspicious, found without truth)", (240, 110, 0)
 SURFACE = Style("overlap: object points on the reference's surface [%]", (30, 150, 60))
 CONDITION = Style("condition number", (150, 60, 170))
 FROM_ODOMETRY = Style("difference from odometry [mm]", (120, 120, 0))
+RESIDUAL = Style("residual: RMS of the kept pairs' distances [mm]", (90, 90, 90))
 
 
 def sequence_layers(

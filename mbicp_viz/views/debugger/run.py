@@ -178,14 +178,16 @@ class RunModel:
 
     def series(self) -> tuple[np.ndarray, ...]:
         """The health timeline: pair number, overlap [%], distance from odometry [mm], flagged
-        (100 where a pair is, else 0) and, beside a run B, how far A and B end apart where they
-        disagree [mm]."""
+        (100 where a pair is, else 0), residual (RMS of the kept pairs' distances) [mm] and,
+        beside a run B, how far A and B end apart where they disagree [mm]."""
         x = np.arange(1, len(self.rows) + 1, dtype=float)
         apart = [r.flags.get(Suspicion.DISAGREE, (0.0,))[0] * 1000 for r in self.rows]
         overlap = [100 * r.overlap if r.overlap is not None else np.nan for r in self.rows]
+        # the RMS of the kept pairs' distances (the record's error is their mean square)
+        residual = [1000 * math.sqrt(r.result.error) for r in self.rows]
         odo = [1000 * r.odometry_xy if r.odometry_xy is not None else np.nan for r in self.rows]
         flagged = [100.0 if r.flags else 0.0 for r in self.rows]
-        out = (x, np.array(overlap), np.array(odo), np.array(flagged))
+        out = (x, np.array(overlap), np.array(odo), np.array(flagged), np.array(residual))
         return out + ((np.array(apart),) if self.versus is not None else ())
 
 
@@ -224,6 +226,7 @@ class RunPanel:
                 panels._line("overlap [%]", "pct", scene.SURFACE),
                 panels._line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
                 panels._line("flagged", "pct", scene.SUSPECT),
+                panels._line("residual [mm]", "mm", scene.RESIDUAL),
             ]
             if model.versus is not None:
                 series.append(panels._line("A and B apart [mm]", "mm", scene.RUN_OTHER))
