@@ -23,19 +23,28 @@ from mbicp_viz.views.debugger.run import RunModel, is_chain
 from .conftest import INTEL
 
 
-def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses():
+@pytest.mark.parametrize("chunks", [100, 7])
+def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses(chunks, monkeypatch):
+    """... with a chunk a scan (60 scans), or chunks of several whose last part follows the pair."""
+    from mbicp_viz.views.debugger import run
+
+    monkeypatch.setattr(run, "MAP_CHUNKS", chunks)
     log = read_log(str(INTEL))
     rows = match_sequence(log, MATCHERS["improved"].params_type(), guess="odometry", workers=1)
     assert is_chain(rows) and not is_chain(rows[:3] + rows[4:])
     model = RunModel(log, rows)
     mount = log.frames.mount
-    for n in (0, 17, len(rows) - 1):
-        at = model.scene_at(n)
+    for n in (0, 17, 30, len(rows) - 1):
+        at = model.pair_at(n)
         # the pair's two scans where the chained matches put them (base pose @ mount: the laser)
         pose = model.poses[n + 1] @ mount
         assert np.allclose(at.obj_xy, pose.apply(log.scan(rows[n].obj).points()))
-        expected = sum(log.scan(i).n_valid for i in [rows[0].ref, *(r.obj for r in rows[: n + 1])])
-        assert len(at.map_xy) == expected
+        # the map up to it: the whole chunks it has passed and the part since, every scan once
+        shown = [xy for _, xy in model.chunks[: model.whole_chunks(n)]] + [at.map_xy]
+        expected = [
+            (p @ mount).apply(log.scan(i).points()) for p, i in zip(model.poses, model.scans)
+        ]
+        assert np.allclose(np.concatenate(shown), np.concatenate(expected[: n + 2]))
     # the health timeline: one point per pair, each as its record says
     x, overlap, odo, flagged, residual = model.series()
     assert list(x) == list(range(1, len(rows) + 1))

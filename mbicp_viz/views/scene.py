@@ -642,19 +642,27 @@ ROBOT = Style("this pair's pose (x red, y green)", (40, 90, 220), 5.0)
 
 
 @dataclass(frozen=True)
-class RunScene:
-    """What the run view draws at one pair, in the world frame."""
+class RunTracks:
+    """What the run view draws once, in the world frame: the run's trajectories and where its
+    flagged pairs end."""
 
     poses: list[Pose2]  # one per scan the run visits
-    map_xy: np.ndarray  # (M, 2) the map up to this pair
-    ref_xy: np.ndarray  # the pair's two scans at their poses
-    obj_xy: np.ndarray
-    n: int  # the pair in view: from poses[n] to poses[n + 1]
     stored: list[Pose2] | None = None  # the log's scan poses (its truth), same world frame
     odometry: list[Pose2] | None = None  # the odometry's, same world frame
     suspects: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     other: list[Pose2] | None = None  # a second configuration's run of the same pairs
     other_label: str = ""
+
+
+@dataclass(frozen=True)
+class RunPair:
+    """What the run view draws at one pair: the map's last part up to it (the rest are whole
+    chunks, ``run_map_layers``), its two scans, the pose it reached, a chosen relation."""
+
+    map_xy: np.ndarray  # (M, 2)
+    ref_xy: np.ndarray
+    obj_xy: np.ndarray
+    pose: Pose2
     # a relation (Kümmerle et al.): the earlier end's pose and where it puts the later one
     relation: tuple[Pose2, Pose2] | None = None
 
@@ -663,17 +671,12 @@ def _track(poses: list[Pose2]) -> np.ndarray:
     return np.array([[p.x, p.y] for p in poses]).reshape(-1, 2)
 
 
-def run_layers(r: RunScene, scale: float = 1.0) -> list[Layer]:
-    """The run view's layers: the map up to the pair, the trajectories, the flagged pairs, the
-    pair's two scans highlighted and the pose it reached; dots and lines ``scale`` times their size
+def run_track_layers(r: RunTracks, scale: float = 1.0) -> list[Layer]:
+    """The run's trajectories and flagged pairs; dots and lines ``scale`` times their size
     (``scene_scale`` of the whole run)."""
     layers: list[Layer] = [
-        Points(f"{RUN}/map", r.map_xy, RUN_MAP, 0.01 * scale),
         Strips(f"{RUN}/trajectory", [_track(r.poses)], RUN_TRAJECTORY, 0.01 * scale),
         Points(f"{RUN}/suspects", r.suspects, SUSPECT, 0.04 * scale),
-        Points(f"{RUN}/reference", r.ref_xy, RUN_REFERENCE, 0.015 * scale),
-        Points(f"{RUN}/object", r.obj_xy, RUN_OBJECT, 0.015 * scale),
-        Frame(f"{RUN}/robot", r.poses[r.n + 1], ROBOT, 0.15 * scale),
     ]
     if r.stored is not None:
         layers.append(Strips(f"{RUN}/stored", [_track(r.stored)], LOG_TRAJECTORY, 0.006 * scale))
@@ -682,6 +685,23 @@ def run_layers(r: RunScene, scale: float = 1.0) -> list[Layer]:
     if r.other is not None:
         style = replace(RUN_OTHER, label=f"{RUN_OTHER.label}: {r.other_label}")
         layers.append(Strips(f"{RUN}/other", [_track(r.other)], style, 0.01 * scale))
+    return layers
+
+
+def run_map_layers(chunks: list[np.ndarray], scale: float = 1.0) -> list[Layer]:
+    """The map in chunks of consecutive scans, each shown once the pair in view has passed it."""
+    return [Points(f"{RUN}/map/{c:05d}", xy, RUN_MAP, 0.01 * scale) for c, xy in enumerate(chunks)]
+
+
+def run_pair_layers(r: RunPair, scale: float = 1.0) -> list[Layer]:
+    """The pair in view: the map's part since the last whole chunk, its two scans highlighted,
+    the pose it reached and a chosen relation."""
+    layers: list[Layer] = [
+        Points(f"{RUN}/map_last", r.map_xy, RUN_MAP, 0.01 * scale),
+        Points(f"{RUN}/reference", r.ref_xy, RUN_REFERENCE, 0.015 * scale),
+        Points(f"{RUN}/object", r.obj_xy, RUN_OBJECT, 0.015 * scale),
+        Frame(f"{RUN}/robot", r.pose, ROBOT, 0.15 * scale),
+    ]
     if r.relation is not None:
         layers += [
             Strips(f"{RUN}/relation", [_track(list(r.relation))], RELATION, 0.012 * scale),

@@ -31,6 +31,9 @@ from .camera import on_scan_plane
 
 RELATION_TOLERANCE_S = 0.025  # a relation's stamp meets a scan within this (eval relations')
 MAP_POINTS = 150_000  # the most map points sent to the page: the scans are thinned evenly to it
+# The map goes to the page once, in chunks whose visibility follows the slider (a step sends the
+# pair's own scans and a few flags, not the map: 4.6 s a step on the full Intel run before)
+MAP_CHUNKS = 100
 
 
 def is_chain(rows: list[PairMatch]) -> bool:
@@ -132,20 +135,39 @@ class RunModel:
         start = self.poses[e.ends[k][0]]
         return start, start @ self.relations[e.index[k]].pose
 
-    def scene_at(self, n: int, relation: int | None = None) -> scene.RunScene:
+    @cached_property
+    def chunks(self) -> list[tuple[int, np.ndarray]]:
+        """The map in ``MAP_CHUNKS`` chunks of consecutive scans: (its last scan, its points)."""
         xy, owner = self._map
+        cuts = np.array_split(np.arange(len(self.poses)), min(MAP_CHUNKS, len(self.poses)))
+        return [(int(c[-1]), xy[(owner >= c[0]) & (owner <= c[-1])]) for c in cuts if len(c)]
+
+    def whole_chunks(self, n: int) -> int:
+        """How many chunks the pair n has passed whole (their scans all up to its second)."""
+        return sum(last <= n + 1 for last, _ in self.chunks)
+
+    def tracks(self) -> scene.RunTracks:
         fp = np.array([[self.poses[f + 1].x, self.poses[f + 1].y] for f in self.flagged])
-        return scene.RunScene(
+        return scene.RunTracks(
             self.poses,
-            xy[owner <= n + 1],
-            self.world_points(n),
-            self.world_points(n + 1),
-            n,
             self.stored,
             self.odometry,
             fp.reshape(-1, 2),
             self.other,
             self.versus.name_b if self.versus is not None else "",
+        )
+
+    def pair_at(self, n: int, relation: int | None = None) -> scene.RunPair:
+        """Pair n: the map's scans since the last whole chunk, up to its second scan, its scans
+        and pose, and a chosen relation (a position in ``relation_errors``)."""
+        xy, owner = self._map
+        shown = self.whole_chunks(n)
+        first = self.chunks[shown - 1][0] + 1 if shown else 0
+        return scene.RunPair(
+            xy[(owner >= first) & (owner <= n + 1)],
+            self.world_points(n),
+            self.world_points(n + 1),
+            self.poses[n + 1],
             self.relation_ends(relation) if relation is not None else None,
         )
 
@@ -196,7 +218,11 @@ class RunPanel:
 
     def __init__(self, session, gui, order: float, model: RunModel):
         self.s, self.model, self.active, self.scale = session, model, False, 1.0
-        self.nodes: dict[str, object] = {}
+        self.nodes: dict[str, object] = {}  # drawn once per showing of the run
+        self.pair_nodes: dict[str, object] = {}  # drawn at each pair
+        self.chunk_nodes: list = []  # the map's chunks, shown as the pair passes them
+        self.still: list = []
+        self.chunks_shown = 0
         rows = model.rows
         with gui.add_folder("Run", order=order):
             gui.add_markdown(
@@ -289,6 +315,8 @@ class RunPanel:
             self.enter()
 
     def enter(self) -> None:
+        """The run drawn whole once (trajectories, flagged pairs, the map's chunks hidden), then
+        at the slider's pair."""
         self.active = True
         self.toggle.label = "back to the pair"
         for handle in self.s.nodes.values():
@@ -297,32 +325,53 @@ class RunPanel:
         self.scale = scene.scene_scale(pts)
         self.s.camera.fit(pts)
         self.s.grid_m = viser_draw.metric_grid(self.s.client.scene, pts)
+        api = self.s.client.scene
+        with self.s.client.atomic():
+            self.still = scene.run_track_layers(self.model.tracks(), self.scale)
+            for layer in self.still:
+                self.nodes[f"/{layer.path}"] = viser_draw.draw(api, f"/{layer.path}", layer)
+            self.chunk_nodes = [
+                viser_draw.draw(api, f"/{layer.path}", layer, visible=False)
+                for layer in scene.run_map_layers([xy for _, xy in self.model.chunks], self.scale)
+            ]
+        self.chunks_shown = 0
         self.draw()
 
     def leave(self) -> None:
         self.active = False
         self.toggle.label = "show the run"
-        for handle in self.nodes.values():
+        for handle in [*self.nodes.values(), *self.pair_nodes.values(), *self.chunk_nodes]:
             handle.remove()
-        self.nodes = {}
+        self.nodes, self.pair_nodes, self.chunk_nodes = {}, {}, []
         self.s.fit_view()
         self.s.redraw()
 
     def draw(self) -> None:
-        """The run at the slider's pair: the scene (when shown), the pair's health."""
+        """The run at the slider's pair: the map's chunks it has passed shown (only those that
+        change), its own layers sent, its health in words."""
         self.text.content = self.model.health(self.n)
         if not self.active:
             return
-        layers = scene.run_layers(self.model.scene_at(self.n, self.relation), self.scale)
+        layers = scene.run_pair_layers(self.model.pair_at(self.n, self.relation), self.scale)
+        whole = self.model.whole_chunks(self.n)
         with self.s.client.atomic():
+            for c in range(min(whole, self.chunks_shown), max(whole, self.chunks_shown)):
+                self.chunk_nodes[c].visible = c < whole
+            self.chunks_shown = whole
             drawn = {}
             for layer in layers:
                 name = f"/{layer.path}"
                 drawn[name] = viser_draw.draw(self.s.client.scene, name, layer)
-            for name in self.nodes.keys() - drawn.keys():  # a relation no longer chosen
-                self.nodes[name].remove()
-            self.nodes = drawn
-        shown = {layer.style.label: layer.style for layer in layers if scene.has_content(layer)}
+            for name in self.pair_nodes.keys() - drawn.keys():  # a relation no longer chosen
+                self.pair_nodes[name].remove()
+            self.pair_nodes = drawn
+        shown = {
+            layer.style.label: layer.style
+            for layer in [*self.still, *layers]
+            if scene.has_content(layer)
+        }
+        if whole:
+            shown.setdefault(scene.RUN_MAP.label, scene.RUN_MAP)
         self.s.h_legend.content = panels.legend_html(
             list(shown.values()), self.s.grid_m, "the world frame: the run's first scan"
         )
