@@ -18,7 +18,7 @@ import pytest
 from mbicp_viz.core import MATCHERS
 from mbicp_viz.evaluation.sequence import match_sequence
 from mbicp_viz.readers import read_log
-from mbicp_viz.views.debugger.run import RunModel, is_chain
+from mbicp_viz.views.debugger.run_model import RunModel, is_chain
 
 from .conftest import INTEL
 
@@ -26,7 +26,7 @@ from .conftest import INTEL
 @pytest.mark.parametrize("chunks", [100, 7])
 def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses(chunks, monkeypatch):
     """... with a chunk a scan (60 scans), or chunks of several whose last part follows the pair."""
-    from mbicp_viz.views.debugger import run
+    from mbicp_viz.views.debugger import run_model as run
 
     monkeypatch.setattr(run, "MAP_CHUNKS", chunks)
     log = read_log(str(INTEL))

@@ -442,7 +442,12 @@ class PairList:
                 + f" ({rows_label})"
             )
             self.pick = gui.add_dropdown(pick, list(self.rows), initial_value=next(iter(self.rows)))
+        self.picked = self.pick.value
         self.pick.on_update(lambda _: session.guarded(self._picked))
 
     def _picked(self) -> None:
+        # a list opened and closed again sends its value unchanged: that opens nothing
+        if self.pick.value == self.picked:
+            return
+        self.picked = self.pick.value
         self.s.open_row(self.rows[self.pick.value])

@@ -137,7 +137,8 @@ class Session:
         )
         self.run = None
         if src.run is not None:
-            from .run import RunModel, RunPanel
+            from .run import RunPanel
+            from .run_model import RunModel
 
             model = RunModel(src.log, src.run, src.versus, src.relations, src.offset)
             self.run = RunPanel(self, gui, 4.5, model)

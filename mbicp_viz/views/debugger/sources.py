@@ -12,7 +12,7 @@ from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.relations import read_relations
 from mbicp_viz.readers.rows import rows_of_log
 
-from .run import is_chain
+from .run_model import is_chain
 from .state import Source
 
 

@@ -1,0 +1,210 @@
+"""A run's model for the run view (views/debugger/run.py): the rows of ``eval sequence`` on their
+log — the poses the chained matches make, the map they build (thinned and in chunks for the page),
+the log's own poses and odometry, the flagged pairs, a second run beside it, the relations it is
+scored on. No viser here.
+
+The world frame is the first scan's (the robot base's when the rows report its motion, else the
+laser's), as ``eval sequence --png`` and ``--rrd`` draw it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from mbicp_viz.core import Pose2, relative
+from mbicp_viz.evaluation.health import flags_text
+from mbicp_viz.evaluation.run_score import RelationErrors, relation_errors
+from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices, stamps
+from mbicp_viz.evaluation.versus import Versus
+from mbicp_viz.readers import ScanLog
+from mbicp_viz.readers.pair_match import PairMatch, Suspicion
+from mbicp_viz.readers.relations import Relation
+
+from .. import scene
+
+RELATION_TOLERANCE_S = 0.025  # a relation's stamp meets a scan within this (eval relations')
+MAP_POINTS = 150_000  # the most map points sent to the page: the scans are thinned evenly to it
+# The map goes to the page once, in chunks whose visibility follows the slider (a step sends the
+# pair's own scans and a few flags, not the map: 4.6 s a step on the full Intel run before)
+MAP_CHUNKS = 100
+
+
+def is_chain(rows: list[PairMatch]) -> bool:
+    """Whether the rows are a run: each pair starts at the scan the one before ended at."""
+    return len(rows) > 0 and all(b.ref == a.obj for a, b in zip(rows, rows[1:]))
+
+
+@dataclass
+class RunModel:
+    """A run's rows on their log: the poses and the map, computed once."""
+
+    log: ScanLog
+    rows: list[PairMatch]
+    versus: Versus | None = None  # a second configuration's run of the same pairs (run B)
+    relations: list[Relation] | None = None  # Kümmerle et al.'s, on the log's clock + offset
+    offset: float = 0.0
+
+    @cached_property
+    def poses(self) -> list[Pose2]:
+        return accumulate(self.rows)
+
+    @cached_property
+    def other(self) -> list[Pose2] | None:
+        return accumulate(self.versus.b) if self.versus is not None else None
+
+    @cached_property
+    def scans(self) -> list[int]:
+        """The record number of each scan the run visits."""
+        return scan_indices(self.rows)
+
+    @cached_property
+    def mount(self) -> Pose2:
+        """T_base_laser when the rows report the base's motion, else the identity."""
+        return self.log.frames.mount if self.rows[0].frame != "laser" else Pose2()
+
+    @cached_property
+    def stored(self) -> list[Pose2] | None:
+        """The log's scan poses (laser frame) as the base's, in the run's world frame."""
+        laser = log_poses(self.log, self.rows)
+        if laser is None:
+            return None
+        m, inv = self.mount, self.mount.inverse()
+        return [m @ p @ inv for p in laser]
+
+    @cached_property
+    def odometry(self) -> list[Pose2] | None:
+        odo = [self.log.scan(i).odometry for i in self.scans]
+        if any(o is None for o in odo):
+            return None
+        m, inv = self.mount, self.mount.inverse()
+        return [m @ relative(odo[0], o) @ inv for o in odo]
+
+    @cached_property
+    def flagged(self) -> list[int]:
+        return [n for n, r in enumerate(self.rows) if r.flags]
+
+    def world_points(self, k: int) -> np.ndarray:
+        """The points of the run's k-th scan in the world frame."""
+        return (self.poses[k] @ self.mount).apply(self.log.scan(self.scans[k]).points())
+
+    @cached_property
+    def _map(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every ``step``-th scan's points (world frame) and the scan each belongs to."""
+        n = len(self.poses)
+        sizes = [self.log.scan(i).n_valid for i in self.scans]
+        step = max(1, math.ceil(sum(sizes) / MAP_POINTS))
+        parts = [(k, self.world_points(k)) for k in range(0, n, step)]
+        xy = np.concatenate([p for _, p in parts]) if parts else np.zeros((0, 2))
+        owner = np.concatenate([np.full(len(p), k) for k, p in parts]) if parts else np.zeros(0)
+        return xy, owner
+
+    @cached_property
+    def relation_errors(self) -> RelationErrors | None:
+        """The relations the run covers, scored on its chained poses."""
+        if self.relations is None:
+            return None
+        t = np.array([s + self.offset for s in stamps(self.log, self.rows)])
+        return relation_errors(t, self.poses, self.relations, RELATION_TOLERANCE_S)
+
+    def costliest(self, most: int = 100) -> list[int]:
+        """Positions in ``relation_errors`` of the relations the run misses most, worst first."""
+        e = self.relation_errors
+        return [int(k) for k in np.argsort(-e.trans, kind="stable")[:most]]
+
+    def relation_label(self, rank: int, k: int) -> str:
+        e = self.relation_errors
+        i, j = e.ends[k]
+        rel = self.relations[e.index[k]]
+        return (
+            f"{rank}. relation {e.index[k] + 1}: scans {self.scans[i]} → {self.scans[j]} "
+            f"({rel.t2 - rel.t1:.0f} s apart): missed by {e.trans[k]:.3f} m, "
+            f"{math.degrees(e.rot[k]):.2f} deg"
+        )
+
+    def relation_ends(self, k: int) -> tuple[Pose2, Pose2]:
+        """A relation's earlier end where the run put it, and where the relation puts the later
+        one from there (base frame: the relations are the robot's)."""
+        e = self.relation_errors
+        start = self.poses[e.ends[k][0]]
+        return start, start @ self.relations[e.index[k]].pose
+
+    @cached_property
+    def chunks(self) -> list[tuple[int, np.ndarray]]:
+        """The map in ``MAP_CHUNKS`` chunks of consecutive scans: (its last scan, its points)."""
+        xy, owner = self._map
+        cuts = np.array_split(np.arange(len(self.poses)), min(MAP_CHUNKS, len(self.poses)))
+        return [(int(c[-1]), xy[(owner >= c[0]) & (owner <= c[-1])]) for c in cuts if len(c)]
+
+    def whole_chunks(self, n: int) -> int:
+        """How many chunks the pair n has passed whole (their scans all up to its second)."""
+        return sum(last <= n + 1 for last, _ in self.chunks)
+
+    def tracks(self) -> scene.RunTracks:
+        fp = np.array([[self.poses[f + 1].x, self.poses[f + 1].y] for f in self.flagged])
+        return scene.RunTracks(
+            self.poses,
+            self.stored,
+            self.odometry,
+            fp.reshape(-1, 2),
+            self.other,
+            self.versus.name_b if self.versus is not None else "",
+        )
+
+    def pair_at(self, n: int, relation: int | None = None) -> scene.RunPair:
+        """Pair n: the map's scans since the last whole chunk, up to its second scan, its scans
+        and pose, and a chosen relation (a position in ``relation_errors``)."""
+        xy, owner = self._map
+        shown = self.whole_chunks(n)
+        first = self.chunks[shown - 1][0] + 1 if shown else 0
+        return scene.RunPair(
+            xy[(owner >= first) & (owner <= n + 1)],
+            self.world_points(n),
+            self.world_points(n + 1),
+            self.poses[n + 1],
+            self.relation_ends(relation) if relation is not None else None,
+        )
+
+    def extent(self) -> np.ndarray:
+        xy, _ = self._map
+        track = np.array([[p.x, p.y] for p in self.poses])
+        return np.concatenate([xy, track]) if len(xy) else track
+
+    def health(self, n: int) -> str:
+        """Pair n in words: its motion, how it ended, its numbers and its signs."""
+        row = self.rows[n]
+        r = row.result
+        parts = [
+            f"**pair {n + 1} of {len(self.rows)}**: scans {row.ref} → {row.obj}, {row.matcher}, "
+            f"motion {r.pose} of the {row.frame} frame",
+            f"{r.iterations} iterations, {r.reason.value}; {r.pairs_kept} pairs kept, "
+            f"{r.pairs_rejected} rejected",
+        ]
+        if row.overlap is not None:
+            parts.append(f"{100 * row.overlap:.0f} % of the object points on the reference")
+        if r.degeneracy is not None:
+            parts.append(f"condition number {r.degeneracy.condition_number:.0f}")
+        if row.odometry_xy is not None:
+            parts.append(
+                f"{1000 * row.odometry_xy:.1f} mm, {math.degrees(row.odometry_theta):.2f} deg "
+                "from the odometry"
+            )
+        parts.append(f"**flagged**: {flags_text(row)}" if row.flags else "not flagged")
+        return "  \n".join(parts)
+
+    def series(self) -> tuple[np.ndarray, ...]:
+        """The health timeline: pair number, overlap [%], distance from odometry [mm], flagged
+        (100 where a pair is, else 0), residual (RMS of the kept pairs' distances) [mm] and,
+        beside a run B, how far A and B end apart where they disagree [mm]."""
+        x = np.arange(1, len(self.rows) + 1, dtype=float)
+        apart = [r.flags.get(Suspicion.DISAGREE, (0.0,))[0] * 1000 for r in self.rows]
+        overlap = [100 * r.overlap if r.overlap is not None else np.nan for r in self.rows]
+        # the RMS of the kept pairs' distances (the record's error is their mean square)
+        residual = [1000 * math.sqrt(r.result.error) for r in self.rows]
+        odo = [1000 * r.odometry_xy if r.odometry_xy is not None else np.nan for r in self.rows]
+        flagged = [100.0 if r.flags else 0.0 for r in self.rows]
+        out = (x, np.array(overlap), np.array(odo), np.array(flagged), np.array(residual))
+        return out + ((np.array(apart),) if self.versus is not None else ())
