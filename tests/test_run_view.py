@@ -135,3 +135,17 @@ def test_two_runs_side_by_side_count_as_a_person_would(tmp_path):
     with pytest.raises(InputError) as e:
         versus(a, read_rows(laser), "a", str(laser))
     assert e.value.field == "frame" and str(laser) in str(e.value)
+
+
+def test_bench_run_times_the_run_view(tmp_path):
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+
+    rows = tmp_path / "rows.jsonl"
+    res = CliRunner().invoke(cli, ["eval", "sequence", str(INTEL), "--out", str(rows)])
+    assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(cli, ["bench", "run", str(INTEL), str(rows), "--steps", "4"])
+    assert res.exit_code == 0, res.output
+    steps = next(x for x in res.output.splitlines() if x.startswith("run slider step redraw"))
+    assert "(4 steps)" in steps and "open the run" in res.output

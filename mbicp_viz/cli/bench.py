@@ -175,6 +175,22 @@ def gui(
         typer.echo(t.line())
 
 
+def run(
+    log: Annotated[str, typer.Argument(help="the log the run matched")],
+    rows: Annotated[str, typer.Argument(metavar="ROWS", help="its rows (eval sequence --out)")],
+    steps: Annotated[int, typer.Option("--steps", min=2, help="slider steps over the run")] = 50,
+    topic: TopicOpt = None,
+):
+    """Latency of the run view (serve LOG --rows ROWS), server side: opening it, and a slider step
+    -> redraw."""
+    from mbicp_viz.evaluation.bench import machine_line
+    from mbicp_viz.views.debugger.latency import run_latency
+
+    typer.echo(f"run view of {rows} on {log}; {machine_line()}")
+    for t in run_latency(log, rows, read_options(topic), steps):
+        typer.echo(t.line())
+
+
 def startup(repeat: Annotated[int, typer.Option("--repeat", min=3, help="runs of --help")] = 10):
     """How soon the tool answers: --help, the first match with an empty kernel cache, the
     debugger."""
@@ -216,6 +232,7 @@ def register(app: typer.Typer) -> None:
         ("matches", matches),
         ("originals", originals),
         ("gui", gui),
+        ("run", run),
         ("startup", startup),
     ):
         group.command(name)(user_errors(fn))

@@ -9,6 +9,7 @@ import numpy as np
 import viser
 
 from mbicp_viz.core import Pose2
+from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.bench import Timing
 from mbicp_viz.readers import ReadOptions, read_log
 
@@ -63,3 +64,31 @@ def first_result_ms(path: str) -> float:
         return 1000.0 * (time.perf_counter() - t0)
     finally:
         app.stop()
+
+
+def run_latency(
+    path: str, rows: str, options: ReadOptions | None = None, steps: int = 50
+) -> tuple[Timing, Timing]:
+    """The run view, server side: from the log and its rows to the run drawn (read, first match,
+    the run's trajectories and map sent), and a slider step over the run -> its redraw."""
+    from .sources import files_source
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    t0 = time.perf_counter()
+    s = Session(server, files_source(path, None, options=options, rows=rows))
+    try:
+        if s.run is None:
+            raise InputError("these rows are no run (eval sequence writes one)", rows, field="ref")
+        opened = 1000.0 * (time.perf_counter() - t0)
+        step_ms = []
+        for v in np.linspace(1, len(s.run.model.rows), steps).round().astype(int):
+            t0 = time.perf_counter()
+            s.run.slider.value = int(v)  # the slider's callback redraws, as a user's drag does
+            step_ms.append(1000.0 * (time.perf_counter() - t0))
+        return (
+            Timing("open the run", np.array([opened]), "opens"),
+            Timing("run slider step redraw", np.array(step_ms), "steps"),
+        )
+    finally:
+        s.close()
+        server.stop()
