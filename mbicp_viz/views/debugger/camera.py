@@ -30,6 +30,7 @@ class TopDownCamera:
             None  # points to fit once the tab has reported its first view
         )
         self.recheck: threading.Timer | None = None
+        self._pending_lock = threading.Lock()
         if isinstance(client, viser.ClientHandle):
             client.camera.on_update(lambda cam: self.level(cam))
 
@@ -52,8 +53,9 @@ class TopDownCamera:
     def level(self, cam) -> None:
         """Fit a view asked for before the tab had one; put a tilted or turned camera back top-down
         (same point, same distance)."""
-        if self.pending is not None:
+        with self._pending_lock:
             points, self.pending = self.pending, None
+        if points is not None:
             self.fit(points)
             return
         if self.is_top_down(cam.position, cam.look_at, cam.up_direction):
@@ -102,7 +104,11 @@ class TopDownCamera:
             c, height = self.framing(pts, cam.fov, cam.aspect or DEFAULT_ASPECT)
             self._place(cam, c, height)
         else:  # the tab has not shown its first view yet: a view placed now would race it
-            self.pending = pts
+            with self._pending_lock:
+                self.pending = pts
+            # its first report may have come in between: then nothing else would place it
+            if cam.update_timestamp > 0.0:
+                self.level(cam)
 
 
 def on_scan_plane(origin, direction) -> np.ndarray | None:
