@@ -382,7 +382,7 @@ def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
         assert session.run.n == first
         page.screenshot(path=str(tmp_path / "run-view-flagged.png"))
         page.get_by_role("button", name="open this pair").click()
-        page.get_by_text(f"line {row.line}").first.wait_for(timeout=30000)
+        page.get_by_text(f"line {row.line}): {row.matcher} gave").first.wait_for(timeout=30000)
         assert session.state.pair == (row.ref, row.obj) and session.state.guess == row.guess
         legend.get_by_text(scene.REFERENCE.label, exact=True).wait_for(timeout=30000)
         assert scene.RUN_MAP.label not in legend.inner_text()
@@ -430,7 +430,7 @@ def test_two_runs_in_the_run_view(browser, tmp_path):
         page.keyboard.press("Escape")
         page.get_by_role("button", name="open run B's match of this pair").click()
         b = v.b[0]
-        page.get_by_text(f"line {b.line}").first.wait_for(timeout=30000)
+        page.get_by_text(f"line {b.line}): {b.matcher} gave").first.wait_for(timeout=30000)
         assert session.state.pair == (b.ref, b.obj) and session.state.matchers == ["plicp"]
         page.close()
     finally:
@@ -511,7 +511,9 @@ def test_suspicious_pairs_of_a_run_without_truth_open_as_they_ran(browser, tmp_p
         assert options == [suspect_label(k + 1, r) for k, r in enumerate(src.suspects)]
         page.get_by_role("option").nth(1).click()
         second = src.suspects[1]
-        page.get_by_text(f"line {second.line}").first.wait_for(timeout=30000)
+        page.get_by_text(f"line {second.line}): {second.matcher} gave").first.wait_for(
+            timeout=30000
+        )
         page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
         assert session.state.pair == (second.ref, second.obj)
         assert f"flagged: {flags_text(second)}" in page.inner_text("body")
@@ -564,7 +566,9 @@ def test_failures_of_an_evaluation_open_as_they_failed(browser, tmp_path):
         k = next(k for k, r in enumerate(src.failures) if k and failure_kind(r) in WHY_LAYERS)
         page.get_by_role("option").nth(k).click()
         second = src.failures[k]
-        page.get_by_text(f"line {second.line}").first.wait_for(timeout=30000)
+        page.get_by_text(f"line {second.line}): {second.matcher} gave").first.wait_for(
+            timeout=30000
+        )
         page.get_by_text("this run reproduces it").first.wait_for(timeout=30000)
         assert (
             session.state.pair == (second.ref, second.obj) and session.state.guess == second.guess
