@@ -99,12 +99,13 @@ def out_of_place(
         tol_rad = STEADY.max_error_rad + STEADY_SHARE * abs(step.theta)
         return max(et / tol_m, er / tol_rad)
 
-    jump = beyond(a, scaled(p, da / dp if ok else 1.0), p)
+    predicted = scaled(p, da / dp if ok else 1.0)
+    jump = beyond(a, predicted, p)
     back = beyond(b, scaled(a, db / da if ok else 1.0), p)
     both = beyond(a @ b, scaled(p, (da + db) / dp if ok else 2.0), p)
     if min(jump, back) <= 1.0 or both >= 0.5 * min(jump, back):
         return None
-    return pose_error(a, scaled(p, da / dp if ok else 1.0))
+    return pose_error(a, predicted)
 
 
 def severity(m: PairMatch) -> float:
@@ -127,8 +128,10 @@ def _beyond(name: Suspicion, value: tuple[float, ...]) -> float:
         return max(value[0] / c.max_error_m, value[1] / c.max_error_rad)
     if name is Suspicion.LITTLE_OVERLAP:
         return LITTLE_OVERLAP / max(value[0], 1e-3)
+    if name is Suspicion.STOPPED_EARLY:  # its number is the iterations run: no threshold
+        return 1.0
     limit = {Suspicion.WEAK_DIRECTION: DEGENERATE_CONDITION, Suspicion.SIGMA: SIGMA_MAHALANOBIS2}
-    return value[0] / limit.get(name, value[0] or 1.0)  # stopped early: 1
+    return value[0] / limit[name]
 
 
 def ranked(rows: list[PairMatch]) -> list[PairMatch]:

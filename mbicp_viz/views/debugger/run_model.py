@@ -62,26 +62,29 @@ class RunModel:
         return scan_indices(self.rows)
 
     @cached_property
+    def base(self) -> bool:
+        """Whether the rows report the robot base's motion (else the laser's)."""
+        return self.rows[0].frame != "laser"
+
+    @cached_property
     def mount(self) -> Pose2:
         """T_base_laser when the rows report the base's motion, else the identity."""
-        return self.log.frames.mount if self.rows[0].frame != "laser" else Pose2()
+        return self.log.frames.mount if self.base else Pose2()
 
     @cached_property
     def stored(self) -> list[Pose2] | None:
-        """The log's scan poses (laser frame) as the base's, in the run's world frame."""
+        """The log's scan poses (laser frame) in the frame the rows report, the run's world."""
         laser = log_poses(self.log, self.rows)
         if laser is None:
             return None
-        m, inv = self.mount, self.mount.inverse()
-        return [m @ p @ inv for p in laser]
+        return [self.log.frames.reported(p, self.base) for p in laser]
 
     @cached_property
     def odometry(self) -> list[Pose2] | None:
         odo = [self.log.scan(i).odometry for i in self.scans]
         if any(o is None for o in odo):
             return None
-        m, inv = self.mount, self.mount.inverse()
-        return [m @ relative(odo[0], o) @ inv for o in odo]
+        return [self.log.frames.reported(relative(odo[0], o), self.base) for o in odo]
 
     @cached_property
     def flagged(self) -> list[int]:
