@@ -40,6 +40,24 @@ def written(path: str | Path, say: bool = True) -> Iterator[Path]:
         say_replaced(path)
 
 
+@contextmanager
+def written_folder(path: str | Path) -> Iterator[Path]:
+    """``written`` for an output that is a folder (a ROS 2 bag): a path of the same name inside a
+    hidden folder beside ``path``, moved to ``path`` when the block ends (which must not exist),
+    removed with its folder when it raises. The folder's files keep the names they were written
+    with."""
+    import shutil
+
+    path = Path(path)
+    tmp = temporary_beside(path)
+    tmp.mkdir()
+    try:
+        yield tmp / path.name
+        os.replace(tmp / path.name, path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def write_text(path: str | Path, text: str) -> None:
     with written(path) as tmp:
         tmp.write_text(text)

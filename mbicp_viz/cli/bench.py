@@ -214,6 +214,58 @@ def startup(repeat: Annotated[int, typer.Option("--repeat", min=3, help="runs of
         typer.echo(t.line())
 
 
+def bag(
+    out: Annotated[Path, typer.Argument(metavar="OUT", help="the bag to write (a file or folder)")],
+    source: Annotated[
+        str, typer.Option("--from", help="the real recording whose scans are played to and fro")
+    ],
+    minutes: Annotated[
+        float, typer.Option("--minutes", min=0.01, max=24 * 60, help="length of the bag")
+    ] = 60.0,
+    kind: Annotated[
+        str, typer.Option("--kind", help="ros1 (.bag), humble (sqlite3 folder) or mcap (folder)")
+    ] = "ros1",
+    beams: Annotated[
+        int | None,
+        typer.Option("--beams", min=2, max=100_000, help="resample each scan to this many beams"),
+    ] = None,
+    rate_hz: Annotated[
+        float | None,
+        typer.Option("--rate-hz", min=0.1, max=1000, help="scans per second (default: the real)"),
+    ] = None,
+    topic: TopicOpt = None,
+):
+    """Write a long bag from a short real recording, for the benchmarks and big-file tests: its
+    scans played forwards and backwards with their real intervals, mount and odometry."""
+    import time
+
+    from mbicp_viz.errors import InputError
+    from mbicp_viz.outputs import written, written_folder
+    from mbicp_viz.writers.bag import KINDS, write
+    from mbicp_viz.writers.replay import replayed
+
+    if kind not in KINDS:
+        raise InputError(f"unknown bag kind {kind!r}; known: {', '.join(KINDS)}", field="--kind")
+    if out.exists():
+        raise InputError(f"{out} exists: give a new name", field="OUT")
+    try:
+        robot = replayed(
+            read_log_saying(source, read_options(topic)), 60.0 * minutes, beams, rate_hz
+        )
+    except ValueError as e:
+        raise InputError(str(e), field="--from") from None
+    t0 = time.perf_counter()
+    with (written if kind == "ros1" else written_folder)(out) as tmp:
+        write(tmp, robot, kind)
+    size = sum(f.stat().st_size for f in ([out] if out.is_file() else out.rglob("*")))
+    scan = robot.topics[0].scans[0]
+    typer.echo(
+        f"{out}: {len(robot.stamps)} scans of {len(scan.ranges)} beams over "
+        f"{robot.stamps[-1] - robot.stamps[0]:.0f} s ({kind}, {size / 1e6:.0f} MB, "
+        f"written in {time.perf_counter() - t0:.0f} s)"
+    )
+
+
 def command_names(app: typer.Typer) -> list[str]:
     """Every command of the CLI as typed (``eval sequence``, ``bench startup`` ...)."""
     out = []
@@ -234,6 +286,7 @@ def register(app: typer.Typer) -> None:
         ("gui", gui),
         ("run", run),
         ("startup", startup),
+        ("bag", bag),
     ):
         group.command(name)(user_errors(fn))
     app.add_typer(group, name="bench")

@@ -21,7 +21,7 @@ from mbicp_viz.choices import DEFAULT_TYPESTORE
 from mbicp_viz.core import Pose2
 from mbicp_viz.errors import InputError
 
-from .log import ScanLog, mirrored
+from .log import ScanLog, mirrored, no_usable_scan
 
 _READERS = {
     ".log": "carmen:read_carmen",
@@ -95,15 +95,8 @@ def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
         log.frames = replace(log.frames, mount=o.mount, mount_source="--mount")
     if o.upside_down:
         log = mirrored(log)
-    if not log.scans:
-        first = log.unusable[min(log.unusable)]
-        raise InputError(
-            f"no usable scan: all {log.records} are unusable (scan {min(log.unusable)}: "
-            f"{first.reason})",
-            str(p),
-            first.source.line,
-            "ranges",
-        )
+    if log.store is None and not log.scans:  # a lazily read log says so when its scans are read
+        no_usable_scan(log.path, log.unusable)
     if o.deskew is not None:
         from .deskew import deskew_log
 

@@ -14,12 +14,17 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mbicp_viz.core import Pose2, Scan, ScanError, ScanSource, UnusableScan, make_scan
 from mbicp_viz.errors import InputError
+
+if TYPE_CHECKING:
+    from .bag_index import BagScans
 
 # The finest 2-D scanners step by about 0.04 degrees; steps this small are damaged bearings.
 MIN_BEARING_STEP_RAD = 1e-4
@@ -66,8 +71,12 @@ class Frames:
 
 @dataclass
 class ScanLog:
+    """A file's scans. Read whole (``scans`` a list), or read when asked for (``store``: an indexed
+    bag): ``scan(record)`` then reads one record, and ``scans`` and ``unusable`` look at every
+    record once, the first time a command needs them (``Survey``)."""
+
     path: str
-    scans: list[Scan]  # the usable scans, in file order
+    scans: Sequence[Scan]  # the usable scans, in file order
     # (stamp [s], pose) from ODOM lines
     odometry: list[tuple[float, Pose2]] = field(default_factory=list)
     skipped: dict[str, int] = field(default_factory=dict)  # message type -> records read past
@@ -81,6 +90,16 @@ class ScanLog:
     scan_topics: dict[str, str] = field(default_factory=dict)
     odometry_source: str | None = None
     notes: list[str] = field(default_factory=list)  # warnings for the user (a bag cut short ...)
+    store: BagScans | None = None
+
+    def __post_init__(self):
+        if self.store is None or isinstance(self.scans, _UsableScans):
+            return
+        if self.scans:  # given its scans (made whole: deskewed, thinned ...): read no more
+            self.unusable, self.store = dict(self.unusable), None
+        else:
+            survey = Survey(self.store)
+            self.scans, self.unusable = _UsableScans(survey), _Unusable(survey)
 
     def __len__(self) -> int:
         return len(self.scans)
@@ -88,6 +107,8 @@ class ScanLog:
     @property
     def records(self) -> int:
         """Scan records in the file, usable or not."""
+        if self.store is not None:
+            return self.store.records
         return len(self.scans) + len(self.unusable)
 
     def add(self, scan: Scan | UnusableScan) -> None:
@@ -107,18 +128,22 @@ class ScanLog:
                 field="index",
             )
         index %= n
-        if index in self.unusable:
-            bad = self.unusable[index]
+        scan = self.store.load(index) if self.store is not None else self.unusable.get(index)
+        if isinstance(scan, UnusableScan):
             raise InputError(
-                f"scan {index} cannot be matched: {bad.reason}",
+                f"scan {index} cannot be matched: {scan.reason}",
                 self.path,
-                bad.source.line,
-                None if bad.source.line else "index",
+                scan.source.line,
+                None if scan.source.line else "index",
             )
+        if scan is not None:
+            return scan
         return self.scans[index - bisect.bisect_left(sorted(self.unusable), index)]
 
     def record_numbers(self) -> list[int]:
         """The record number of each of ``scans``."""
+        if isinstance(self.scans, _UsableScans):
+            return list(self.scans.survey.usable)
         return [r for r in range(self.records) if r not in self.unusable]
 
     def consecutive_pairs(self, limit: int | None = None) -> list[tuple[int, int]]:
@@ -130,18 +155,102 @@ class ScanLog:
         records = self.record_numbers()[: n + 1]
         return list(zip(records[:-1], records[1:]))
 
+    @property
+    def known_unusable(self) -> Mapping[int, UnusableScan]:
+        """The unusable records known without reading more of the file (a lazily read log knows
+        them once a command has looked at every record)."""
+        if isinstance(self.unusable, _Unusable):
+            return self.unusable.survey.known
+        return self.unusable
+
     def unusable_summary(self) -> str | None:
-        """One line for the records skipped as unusable, or None."""
-        if not self.unusable:
+        """One line for the records skipped as unusable (those known), or None."""
+        bad = self.known_unusable
+        if not bad:
             return None
-        first = min(self.unusable)
-        where = (
-            f", line {self.unusable[first].source.line}" if self.unusable[first].source.line else ""
-        )
+        first = min(bad)
+        where = f", line {bad[first].source.line}" if bad[first].source.line else ""
         return (
-            f"{self.path}: skipped {len(self.unusable)} unusable scan(s) of {self.records} "
-            f"(first: scan {first}{where}: {self.unusable[first].reason})"
+            f"{self.path}: skipped {len(bad)} unusable scan(s) of {self.records} "
+            f"(first: scan {first}{where}: {bad[first].reason})"
         )
+
+
+def no_usable_scan(path: str, unusable: Mapping[int, UnusableScan]):
+    """The error of a file whose every scan record is unusable."""
+    first = unusable[min(unusable)]
+    raise InputError(
+        f"no usable scan: all {len(unusable)} are unusable (scan {min(unusable)}: {first.reason})",
+        path,
+        first.source.line,
+        "ranges",
+    )
+
+
+class Survey:
+    """Every record's fate in a lazily read log, found by reading it front to back once, when
+    first asked for: the usable records' numbers and the unusable ones' reasons."""
+
+    def __init__(self, store: BagScans):
+        self.store = store
+        self._usable: list[int] | None = None
+        self._unusable: dict[int, UnusableScan] = {}
+
+    def _survey(self) -> None:
+        if self._usable is None:
+            usable = []
+            for r, scan in self.store.stream(odometry=False):
+                if isinstance(scan, UnusableScan):
+                    self._unusable[r] = scan
+                else:
+                    usable.append(r)
+            if not usable:
+                no_usable_scan(self.store.path, self._unusable)
+            self._usable = usable
+
+    @property
+    def usable(self) -> list[int]:
+        self._survey()
+        return self._usable
+
+    @property
+    def unusable(self) -> dict[int, UnusableScan]:
+        self._survey()
+        return self._unusable
+
+    @property
+    def known(self) -> dict[int, UnusableScan]:
+        """The unusable records found so far (all of them once surveyed)."""
+        return self._unusable
+
+
+class _UsableScans(Sequence):
+    """The usable scans of a lazily read log, each read when asked for."""
+
+    def __init__(self, survey: Survey):
+        self.survey = survey
+
+    def __len__(self) -> int:
+        return len(self.survey.usable)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        return self.survey.store.load(self.survey.usable[k])
+
+
+class _Unusable(Mapping):
+    def __init__(self, survey: Survey):
+        self.survey = survey
+
+    def __getitem__(self, r: int) -> UnusableScan:
+        return self.survey.unusable[r]
+
+    def __iter__(self):
+        return iter(self.survey.unusable)
+
+    def __len__(self) -> int:
+        return len(self.survey.unusable)
 
 
 def scan_or_reason(
@@ -171,6 +280,11 @@ def mirrored(log: ScanLog) -> ScanLog:
     """The log of a laser mounted upside down, its scans turned upright (every bearing negated)."""
     from dataclasses import replace
 
+    source = f"{log.frames.mount_source or 'no mount given'}, the laser upside down"
+    frames = replace(log.frames, mount_source=source)
+    if log.store is not None:
+        return replace(log, scans=[], unusable={}, frames=frames, store=log.store.mirrored())
+
     scans = [
         replace(
             s,
@@ -181,5 +295,4 @@ def mirrored(log: ScanLog) -> ScanLog:
         )
         for s in log.scans
     ]
-    source = f"{log.frames.mount_source or 'no mount given'}, the laser upside down"
-    return replace(log, scans=scans, frames=replace(log.frames, mount_source=source))
+    return replace(log, scans=scans, frames=frames)

@@ -59,13 +59,55 @@ def read_rosbag(
     mount: Pose2 | None = None,
 ) -> ScanLog:
     """The scans of one LaserScan topic, with the laser's mount from tf (``mount``, --mount, wins)
-    and the odometry of the robot's base moved onto the laser through that mount."""
+    and the odometry of the robot's base moved onto the laser through that mount. A bag rosbags
+    opens is read through its index, each scan when it is asked for (``bag_index.py``); a damaged
+    one is walked and read whole."""
     p = Path(path)
     if not p.exists():
         raise InputError("no such file or folder", str(path))
     notes: list[str] = []
-    messages = _messages(p, typestore, notes)
-    return _to_log(str(path), messages, topic, notes, mount)
+    try:
+        reader = open_bag(p, typestore)
+    except InputError:
+        raise
+    except Exception as e:  # rosbags refuses the bag (AnyReaderError, or its parsers' errors)
+        reason = " ".join(str(a) for a in e.args) or type(e).__name__
+        if p.is_file() and p.read_bytes()[: len(_MAGIC)] == _MAGIC:
+            return _to_log(str(path), _walk_ros1(p, notes, reason), topic, notes, mount)
+        raise InputError(f"not a readable ROS 1 or ROS 2 bag: {reason[:300]}", str(p)) from None
+    return _indexed_log(str(path), reader, typestore, topic, notes, mount)
+
+
+def open_bag(p: Path, typestore: str):
+    """rosbags' reader on ``p``, opened (its index read); a bag without a LaserScan topic is
+    refused here, before any message is decoded."""
+    from rosbags.highlevel import AnyReader
+
+    reader = AnyReader([p], default_typestore=_typestore(typestore))
+    reader.open()
+    if not any(_normalise(c.msgtype) == LASER_SCAN for c in reader.connections):
+        has = "; ".join(
+            f"{c.topic} ({c.msgtype}, {c.msgcount} messages)" for c in reader.connections
+        )
+        reader.close()
+        raise InputError(f"no {LASER_SCAN} topic; the bag has: {has or 'none'}", str(p))
+    return reader
+
+
+def raw_messages(reader, path: str, connections, start: int | None = None, stop: int | None = None):
+    """rosbags' (connection, record stamp [ns], raw bytes) of ``connections`` within [start, stop);
+    damage rosbags meets on the way (a chunk or record its index points at wrongly) is one error
+    naming the bag."""
+    try:
+        yield from reader.messages(connections, start, stop)
+    except InputError:
+        raise
+    except Exception as e:
+        raise InputError(
+            f"the bag is damaged where its index points ({type(e).__name__}: {str(e)[:200]}); "
+            "the messages before it were read",
+            path,
+        ) from None
 
 
 def _typestore(name: str):
@@ -78,42 +120,6 @@ def _typestore(name: str):
         raise InputError(
             f"unknown ROS distro {name!r}; known: {known}", field="--typestore"
         ) from None
-
-
-def _messages(p: Path, typestore: str, notes: list[str]) -> list[Message]:
-    """Every message of the topics this reader uses, decoded, in recording order."""
-    from rosbags.highlevel import AnyReader, AnyReaderError
-
-    store = _typestore(typestore)
-    try:
-        with AnyReader([p], default_typestore=store) as reader:
-            wanted = [
-                c for c in reader.connections if _normalise(c.msgtype) in (LASER_SCAN, ODOMETRY, TF)
-            ]
-            if not any(_normalise(c.msgtype) == LASER_SCAN for c in wanted):
-                # said before any message is decoded (rosbags reads every topic for no connection)
-                has = "; ".join(
-                    f"{c.topic} ({c.msgtype}, {c.msgcount} messages)" for c in reader.connections
-                )
-                raise InputError(f"no {LASER_SCAN} topic; the bag has: {has or 'none'}", str(p))
-            return [
-                Message(
-                    conn.topic,
-                    _normalise(conn.msgtype),
-                    t * 1e-9,
-                    _decode(reader.deserialize, raw, conn.msgtype, p, n),
-                )
-                for n, (conn, t, raw) in enumerate(reader.messages(connections=wanted))
-            ]
-    except AnyReaderError as e:
-        reason = " ".join(str(a) for a in e.args) or type(e).__name__
-    except InputError:
-        raise
-    except Exception as e:  # rosbags found the bag damaged while reading it
-        reason = f"{type(e).__name__}: {e}"
-    if p.is_file() and p.read_bytes()[: len(_MAGIC)] == _MAGIC:
-        return _walk_ros1(p, notes, reason)
-    raise InputError(f"not a readable ROS 1 or ROS 2 bag: {reason[:300]}", str(p))
 
 
 # The fields this reader reads of each type, and what each holds (f: a float, i: an integer, s: a
@@ -146,7 +152,7 @@ def _holds(value, kind: str) -> bool:
     return isinstance(value, types) and not isinstance(value, bool)
 
 
-def _decode(deserialize, raw, msgtype: str, p: Path, n: int):
+def decode(deserialize, raw, msgtype: str, p: Path, n: int | str):
     try:
         msg = deserialize(raw, msgtype)
     except Exception as e:  # rosbags' serde errors: damaged message data
@@ -341,12 +347,16 @@ def _chunk_records(data: bytes, p: Path, store, conns: dict, out: list) -> None:
                         topic,
                         msgtype,
                         sec + 1e-9 * nsec,
-                        _decode(store.deserialize_ros1, d, msgtype, p, len(out)),
+                        decode(store.deserialize_ros1, d, msgtype, p, len(out)),
                     )
                 )
 
 
 # ---- scans, topics, frames and odometry ---------------------------------------------------------
+
+
+def _describe(count: int, frame_id: str) -> str:
+    return f"{count} messages, frame_id {frame_id!r}"
 
 
 def _scan_topics(messages: list[Message]) -> dict[str, str]:
@@ -356,12 +366,10 @@ def _scan_topics(messages: list[Message]) -> dict[str, str]:
         if m.msgtype == LASER_SCAN:
             n, frame = counts.get(m.topic, (0, m.msg.header.frame_id))
             counts[m.topic] = (n + 1, frame)
-    return {t: f"{n} messages, frame_id {f!r}" for t, (n, f) in sorted(counts.items())}
+    return {t: _describe(n, f) for t, (n, f) in sorted(counts.items())}
 
 
-def _scan_topic(
-    topics: dict[str, str], messages: list[Message], topic: str | None, path: str
-) -> str:
+def _scan_topic(topics: dict[str, str], others: list[str], topic: str | None, path: str) -> str:
     """The one scan topic to read: the one named, else the only one; several: an error listing
     them."""
     listing = "; ".join(f"{t} ({d})" for t, d in topics.items())
@@ -374,7 +382,6 @@ def _scan_topic(
             )
         return topic
     if not topics:
-        others = sorted({m.topic for m in messages})
         raise InputError(
             f"no {LASER_SCAN} messages (topics read: {', '.join(others) or 'none'})", path
         )
@@ -387,23 +394,40 @@ def _scan_topic(
     return next(iter(topics))
 
 
+def _odometry_topics(topics) -> list[str]:
+    """The Odometry topics among ``topics`` (topic, type), ``/odom`` first."""
+    return sorted({t for t, kind in topics if kind == ODOMETRY}, key=lambda t: (t != "/odom", t))
+
+
 def _odometry(messages: list[Message], tf: TfTree, mount: Mount | None):
     """(source, stamps, base poses) from an Odometry topic (``/odom`` first), else from /tf: the
     track of the base the laser hangs from, or where tf does not link the laser, of the first
     base frame below odom."""
-    topics = sorted(
-        {m.topic for m in messages if m.msgtype == ODOMETRY}, key=lambda t: (t != "/odom", t)
-    )
+    topics = _odometry_topics((m.topic, m.msgtype) for m in messages)
     if topics:
-        msgs = [m.msg for m in messages if m.topic == topics[0]]
-        stamps = np.array([o.header.stamp.sec + 1e-9 * o.header.stamp.nanosec for o in msgs])
-        poses = np.array([_planar(o.pose.pose) for o in msgs])
-        order = np.argsort(stamps, kind="stable")
-        return f"{topics[0]} (nav_msgs/Odometry)", stamps[order], poses[order]
+        return (
+            f"{topics[0]} (nav_msgs/Odometry)",
+            *odometry_track([m.msg for m in messages if m.topic == topics[0]]),
+        )
+    base = _tf_base(tf, mount)
+    return None if base is None else tf.odometry_track(base)
+
+
+def _tf_base(tf: TfTree, mount: Mount | None) -> str | None:
+    """The base frame whose track /tf gives (the one the laser hangs from, else the first below
+    odom), or None."""
     for base in [mount.base_frame] if mount is not None else BASE_FRAMES:
-        if (track := tf.odometry_track(base)) is not None:
-            return track
+        if tf.odometry_track(base) is not None:
+            return base
     return None
+
+
+def odometry_track(msgs: list) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps, base poses (N, 3)) of Odometry messages, in stamp order."""
+    stamps = np.array([o.header.stamp.sec + 1e-9 * o.header.stamp.nanosec for o in msgs])
+    poses = np.array([_planar(o.pose.pose) for o in msgs]).reshape(-1, 3)
+    order = np.argsort(stamps, kind="stable")
+    return stamps[order], poses[order]
 
 
 def _planar(pose) -> tuple[float, float, float]:
@@ -415,31 +439,25 @@ def _planar(pose) -> tuple[float, float, float]:
     )
 
 
-def _to_log(
-    path: str, messages: list[Message], topic: str | None, notes: list[str], given: Pose2 | None
-) -> ScanLog:
-    try:
-        topics = _scan_topics(messages)
-        chosen = _scan_topic(topics, messages, topic, path)
-    except InputError as e:
-        if not notes:
-            raise
-        raise InputError(
-            f"{e.message}: {notes[-1].split(': ', 1)[-1]}", path, field=e.field
-        ) from None
+def _tf_tree(messages, notes: list[str]) -> TfTree:
+    """The transforms of /tf and /tf_static among ``messages`` ((record stamp, topic, message))."""
     tf = TfTree()
-    for m in messages:
-        if m.msgtype == TF and m.topic.lstrip("/") in ("tf", "tf_static"):
-            tf.add(m.msg, m.stamp, m.topic.lstrip("/") == "tf_static")
+    for stamp, topic, msg in messages:
+        if topic.lstrip("/") in ("tf", "tf_static"):
+            tf.add(msg, stamp, topic.lstrip("/") == "tf_static")
     for parent, child in sorted(tf.conflicts):
         notes.append(
             f"/tf_static gives {parent} -> {child} several different values: the last one "
             "published is used"
         )
-    scans = [m for m in messages if m.topic == chosen]
-    frame_id = scans[0].msg.header.frame_id.lstrip("/")
+    return tf
+
+
+def _frames(
+    tf: TfTree, frame_id: str, path: str, given: Pose2 | None, odometry: str | None, notes
+) -> tuple[Frames, Mount | None]:
+    """The scans' frames (the mount from tf, or ``given``: --mount wins) and the mount tf gives."""
     mount = tf.mount(frame_id, path) if frame_id else None
-    odometry = _odometry(messages, tf, mount)
     frames = (
         Frames(mount.pose, mount.source, mount.base_frame, frame_id)
         if mount
@@ -449,23 +467,113 @@ def _to_log(
         frames = replace(frames, mount=given, mount_source="--mount")
     elif mount is None and odometry is not None:
         notes.append(
-            f"the odometry ({odometry[0]}) is the robot base's and no mount of the laser "
+            f"the odometry ({odometry}) is the robot base's and no mount of the laser "
             f"{frame_id!r} is known: the laser's odometry is taken as the base's (give --mount "
             "X Y THETA_DEG)"
         )
+    return frames, mount
+
+
+def _to_log(
+    path: str, messages: list[Message], topic: str | None, notes: list[str], given: Pose2 | None
+) -> ScanLog:
+    """The log of a walked bag, every message decoded."""
+    try:
+        topics = _scan_topics(messages)
+        chosen = _scan_topic(topics, sorted({m.topic for m in messages}), topic, path)
+    except InputError as e:
+        if not notes:
+            raise
+        raise InputError(
+            f"{e.message}: {notes[-1].split(': ', 1)[-1]}", path, field=e.field
+        ) from None
+    tf = _tf_tree(((m.stamp, m.topic, m.msg) for m in messages if m.msgtype == TF), notes)
+    scans = [m for m in messages if m.topic == chosen]
+    frame_id = scans[0].msg.header.frame_id.lstrip("/")
+    odometry = _odometry(messages, tf, tf.mount(frame_id, path) if frame_id else None)
+    frames, mount = _frames(tf, frame_id, path, given, odometry[0] if odometry else None, notes)
     log = ScanLog(path, [], frames=frames, topic=chosen, scan_topics=topics, notes=notes)
     if odometry is not None:
         log.odometry_source = odometry[0]
+    upside_down = mount is not None and mount.upside_down
+    track = odometry[1:] if odometry is not None else None
     for k, m in enumerate(scans):
-        log.add(
-            _scan(m.msg, path, k, mount is not None and mount.upside_down, odometry, frames.mount)
-        )
+        log.add(laser_scan(m.msg, path, k, upside_down, track, frames.mount))
     return log
 
 
-def _scan(m, path: str, k: int, upside_down: bool, odometry, mount: Pose2):
+def _indexed_log(
+    path: str, reader, typestore: str, topic: str | None, notes: list[str], given: Pose2 | None
+) -> ScanLog:
+    """The log of a bag rosbags opened: frames and topics from the messages that name them, the
+    scans read when asked for (``bag_index.BagScans``)."""
+    from .bag_index import TF_AT_OPEN_S, BagScans, OdometrySource, records_with_stamps
+
+    p = Path(path)
+    by_topic: dict[str, list] = {}
+    for c in reader.connections:
+        by_topic.setdefault(c.topic, []).append(c)
+    kinds = {t: _normalise(cs[0].msgtype) for t, cs in by_topic.items()}
+
+    def first(t: str):
+        c, stamp, raw = next(raw_messages(reader, path, by_topic[t]))
+        return decode(reader.deserialize, raw, c.msgtype, p, f"0 of {t}")
+
+    frames_of = {t: first(t).header.frame_id for t, k in kinds.items() if k == LASER_SCAN}
+    topics = {
+        t: _describe(sum(c.msgcount for c in by_topic[t]), frames_of[t]) for t in sorted(frames_of)
+    }
+    chosen = _scan_topic(topics, sorted(by_topic), topic, path)
+    tf_conns = [c for t, cs in by_topic.items() if kinds[t] == TF for c in cs]
+    statics = [c for c in tf_conns if c.topic.lstrip("/") == "tf_static"]
+    opening = [
+        (t * 1e-9, c.topic, decode(reader.deserialize, raw, c.msgtype, p, f"at {t} ns"))
+        for c, t, raw in raw_messages(reader, path, statics)
+    ] + [
+        (t * 1e-9, c.topic, decode(reader.deserialize, raw, c.msgtype, p, f"at {t} ns"))
+        for c, t, raw in raw_messages(
+            reader,
+            path,
+            [c for c in tf_conns if c not in statics],
+            stop=reader.start_time + int(TF_AT_OPEN_S * 1e9),
+        )
+    ]
+    tf = _tf_tree(opening, notes)
+    frame_id = frames_of[chosen].lstrip("/")
+    laser_mount = tf.mount(frame_id, path) if frame_id else None
+    odometry, source = None, None
+    if odom_topics := _odometry_topics(kinds.items()):
+        odometry, source = OdometrySource(odom_topics[0]), f"{odom_topics[0]} (nav_msgs/Odometry)"
+    elif (base := _tf_base(tf, laser_mount)) is not None:
+        odometry, source = OdometrySource("/tf", base), tf.odometry_track(base)[0]
+    frames, mount = _frames(tf, frame_id, path, given, source, notes)
+    store = BagScans(
+        path,
+        typestore,
+        chosen,
+        records_with_stamps(reader, by_topic[chosen]),
+        tf,
+        odometry,
+        mount is not None and mount.upside_down,
+        frames.mount,
+    )
+    store.adopt(reader)
+    return ScanLog(
+        path,
+        [],
+        frames=frames,
+        topic=chosen,
+        scan_topics=topics,
+        odometry_source=source,
+        notes=notes,
+        store=store,
+    )
+
+
+def laser_scan(m, path: str, k: int, upside_down: bool, track, mount: Pose2):
     """One LaserScan as a scan in the (upright) laser frame, bearings increasing; its odometry is
-    the pose of the laser in the odom frame at the scan's stamp."""
+    the pose of the laser in the odom frame at the scan's stamp, from the base's ``track``
+    (stamps, poses) when there is one."""
     # damaged numbers become invalid readings, silently
     with np.errstate(invalid="ignore", over="ignore"):
         ranges = np.asarray(m.ranges, dtype=float)
@@ -481,8 +589,8 @@ def _scan(m, path: str, k: int, upside_down: bool, odometry, mount: Pose2):
         times = None if times is None else times[::-1]
     stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
     odom = None
-    if odometry is not None:
-        base = interpolate(odometry[1], odometry[2], stamp)
+    if track is not None:
+        base = interpolate(track[0], track[1], stamp)
         odom = base @ mount if base is not None else None
     range_max = float(m.range_max) if np.isfinite(m.range_max) and m.range_max > 0 else np.inf
     range_min = float(m.range_min) if np.isfinite(m.range_min) else 0.0

@@ -101,6 +101,13 @@ class TfTree:
                 t = tr.header.stamp.sec + 1e-9 * tr.header.stamp.nanosec
                 self.timed.setdefault(key, []).append((t if t > 0 else (stamp or 0.0), T))
 
+    def frames_only(self) -> TfTree:
+        """The static transforms and the first value of each timed one (what ``constant`` reads):
+        the tree a window of /tf messages is added to."""
+        return TfTree(
+            dict(self.static), {e: v[:1] for e, v in self.timed.items()}, set(self.conflicts)
+        )
+
     def parents(self) -> dict[str, str]:
         out = {child: parent for parent, child in self.static}
         out.update({child: parent for parent, child in self.timed})

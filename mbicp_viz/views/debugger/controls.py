@@ -319,7 +319,7 @@ class Scans:
         self.info.content = (
             f"records 0 .. {log.records - 1}"
             + (f" of {log.topic}" if log.topic else "")
-            + (f" ({len(log.unusable)} unusable)" if log.unusable else "")
+            + (f" ({len(log.known_unusable)} unusable)" if log.known_unusable else "")
         )
 
     def _topic(self) -> None:

@@ -1,0 +1,204 @@
+"""An indexed bag's scans, read when they are asked for: opening an hour-long recording costs its
+index, not its messages.
+
+At opening, only what names the frames is decoded: ``/tf_static``, the first seconds of ``/tf``
+(a mount published there), and the first message of each LaserScan topic (its frame id). The
+scan topic's record stamps come from the bag's own index (ROS 1) or one pass over the topic's raw
+messages without decoding them (ROS 2 sqlite3 and MCAP). A scan is then one time query for its
+message, and its odometry one query for the odometry messages around its stamp
+(``ODOMETRY_WINDOW_S``), interpolated as the whole-bag reader does (``tf.interpolate``, which
+refuses gaps longer than half a second, so the window sees every message that could be used).
+A whole run reads the bag front to back once (``stream``), keeping only that window.
+
+Record ``k`` is the topic's ``k``-th message in recording order, as for every reader; whether it
+is usable is known once it is read, and the log's list of unusable records after one pass
+(``ScanLog`` asks for it only when a command needs every record's fate).
+"""
+
+from __future__ import annotations
+
+import bisect
+import threading
+from collections import OrderedDict, deque
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mbicp_viz.core import Pose2, Scan, UnusableScan
+
+from .tf import TfTree
+
+ODOMETRY_WINDOW_S = 2.0  # [s] of odometry read either side of a scan's record stamp
+TF_AT_OPEN_S = 5.0  # [s] of /tf decoded at opening (a mount published on /tf, odometry on /tf)
+CACHED_SCANS = 32  # scans kept decoded: a pair, the run view's neighbours, the debugger's tabs
+
+
+@dataclass(frozen=True)
+class OdometrySource:
+    """Where a bag's odometry is: an Odometry topic, or /tf (odom -> ``base``)."""
+
+    topic: str  # "/odom" ..., or "/tf"
+    base: str | None = None  # the base frame, for /tf
+
+
+class BagScans:
+    """The scans of one LaserScan topic of an indexed bag. It pickles as its recipe (a worker
+    process opens the bag again); one open reader is shared by the threads of a process."""
+
+    def __init__(
+        self,
+        path: str,
+        typestore: str,
+        topic: str,
+        stamps_ns: np.ndarray,
+        static: TfTree,
+        odometry: OdometrySource | None,
+        upside_down: bool,
+        mount: Pose2,
+    ):
+        self.path, self.typestore, self.topic = path, typestore, topic
+        self.stamps_ns, self.static, self.odometry = stamps_ns, static, odometry
+        self.upside_down, self.mount = upside_down, mount
+        self._reader = None
+        self._lock = threading.Lock()
+        self._cache: OrderedDict[int, Scan | UnusableScan] = OrderedDict()
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.update(_reader=None, _lock=None, _cache=OrderedDict())
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+    def mirrored(self) -> BagScans:
+        """These scans as a laser mounted the other way up sees them."""
+        from copy import copy
+
+        out = copy(self)
+        out.upside_down, out._cache, out._lock = (
+            not self.upside_down,
+            OrderedDict(),
+            threading.Lock(),
+        )
+        return out
+
+    def adopt(self, reader) -> None:
+        """Use ``reader``, already open on the bag, in this process."""
+        self._reader = reader
+
+    @property
+    def records(self) -> int:
+        return len(self.stamps_ns)
+
+    def _open(self):
+        if self._reader is None:
+            from .rosbag import open_bag
+
+            self._reader = open_bag(Path(self.path), self.typestore)  # a worker process
+        return self._reader
+
+    def _connections(self, topic: str):
+        return [c for c in self._open().connections if c.topic == topic]
+
+    def _decoded(self, topic: str, start_ns: int, stop_ns: int) -> list:
+        """(record stamp [s], message) of ``topic`` within [start, stop)."""
+        from .rosbag import decode, raw_messages
+
+        reader = self._open()
+        wanted = self._connections(topic)
+        return [
+            (t * 1e-9, decode(reader.deserialize, raw, c.msgtype, Path(self.path), f"at {t} ns"))
+            for c, t, raw in raw_messages(reader, self.path, wanted, start_ns, stop_ns)
+        ]
+
+    def load(self, k: int) -> Scan | UnusableScan:
+        """Record ``k``: its scan, or why it cannot be matched."""
+        with self._lock:
+            if k in self._cache:
+                self._cache.move_to_end(k)
+                return self._cache[k]
+            t = int(self.stamps_ns[k])
+            first = bisect.bisect_left(self.stamps_ns, t)  # records sharing this stamp
+            msgs = self._decoded(self.topic, t, t + 1)
+            scan = self._scan(k, msgs[k - first][1], self._odometry_around(t))
+            self._cache[k] = scan
+            if len(self._cache) > CACHED_SCANS:
+                self._cache.popitem(last=False)
+            return scan
+
+    def _odometry_around(self, t_ns: int):
+        if self.odometry is None:
+            return None
+        w = int(ODOMETRY_WINDOW_S * 1e9)
+        return self._track(self._decoded(self.odometry.topic, t_ns - w, t_ns + w))
+
+    def _track(self, msgs: list):
+        """(stamps, base poses) of the odometry messages ``msgs`` ((record stamp, message))."""
+        from .rosbag import odometry_track
+
+        if self.odometry.topic == "/tf":
+            tree = self.static.frames_only()
+            for stamp, m in msgs:
+                tree.add(m, stamp, False)
+            track = tree.odometry_track(self.odometry.base)
+            return None if track is None else track[1:]
+        return odometry_track([m for _, m in msgs])
+
+    def _scan(self, k: int, msg, odometry) -> Scan | UnusableScan:
+        from .rosbag import laser_scan
+
+        return laser_scan(msg, self.path, k, self.upside_down, odometry, self.mount)
+
+    def stream(
+        self, start: int = 0, odometry: bool = True
+    ) -> Iterator[tuple[int, Scan | UnusableScan]]:
+        """Records ``start`` ... in order, read front to back once: each scan leaves once the
+        odometry a window past it has been read (``odometry``: False, the scans without it)."""
+        from .rosbag import decode, raw_messages
+
+        reader = self._open()
+        wanted = self._connections(self.topic)
+        with_odometry = odometry and self.odometry is not None
+        if with_odometry:
+            wanted += self._connections(self.odometry.topic)
+        begin = int(self.stamps_ns[start]) - int(ODOMETRY_WINDOW_S * 1e9) if start else None
+        w = ODOMETRY_WINDOW_S
+        odometry: deque = deque()  # (record stamp, message) within the window of waiting scans
+        waiting: deque = deque()  # (record, record stamp, message)
+        k = start
+
+        def ready(now: float) -> Iterator[tuple[int, Scan | UnusableScan]]:
+            while waiting and waiting[0][1] + w < now:
+                r, t, msg = waiting.popleft()
+                near = [o for o in odometry if t - w <= o[0] < t + w]
+                track = self._track(near) if with_odometry else None
+                yield r, self._scan(r, msg, track)
+            horizon = (waiting[0][1] if waiting else now) - w
+            while odometry and odometry[0][0] < horizon:
+                odometry.popleft()
+
+        for c, t, raw in raw_messages(reader, self.path, wanted, begin):
+            stamp = t * 1e-9
+            msg = decode(reader.deserialize, raw, c.msgtype, Path(self.path), f"at {t} ns")
+            if c.topic == self.topic:
+                if t < self.stamps_ns[start]:
+                    continue
+                waiting.append((k, stamp, msg))
+                k += 1
+            else:
+                odometry.append((stamp, msg))
+            yield from ready(stamp)
+        yield from ready(np.inf)
+
+
+def records_with_stamps(reader, connections) -> np.ndarray:
+    """The record stamps [ns] of ``connections``' messages in recording order: from a ROS 1 bag's
+    index, else one pass over the raw messages (nothing decoded)."""
+    indexes = [getattr(c.owner, "indexes", {}).get(c.id) for c in connections]
+    if all(i is not None for i in indexes):
+        return np.sort(np.concatenate([[e.time for e in i] for i in indexes]).astype(np.int64))
+    return np.fromiter((t for _, t, _ in reader.messages(connections)), dtype=np.int64)
