@@ -73,11 +73,11 @@ def interrupt_the_fourth_match(monkeypatch):
 
     real, calls = seq._match_row, []
 
-    def row(job):
+    def row(job, **kw):
         calls.append(job)
         if len(calls) == 4:
             os.kill(os.getpid(), signal.SIGINT)
-        return real(job)
+        return real(job, **kw)
 
     monkeypatch.setattr(seq, "_match_row", row)
 

@@ -47,9 +47,9 @@ def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]]) -> Partia
 
 def stop_if_interrupted(rows: PartialRows, total: int) -> None:
     """A run stopped before its last pair ends here: where its rows are and how to go on."""
-    if len(rows.rows) < total:
+    if rows.count < total:
         say(
-            f"interrupted after {len(rows.rows)} of {total} pairs: the rows so far are in "
+            f"interrupted after {rows.count} of {total} pairs: the rows so far are in "
             f"{rows.path}; the same command goes on from them"
         )
         raise typer.Exit(INTERRUPTED_CODE)

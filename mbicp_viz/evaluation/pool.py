@@ -8,14 +8,17 @@ break the clean stop the first one started.
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 import signal
 import threading
-from collections.abc import Callable, Iterator
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 
 POLL_S = 0.1  # how often a waiting parent looks at the flag: a stop takes effect within this
+IN_FLIGHT_PER_WORKER = 3  # chunks sent ahead per worker: each busy while the parent takes results
 # Set by Ctrl-C during a run: the run stops; within ``one_command`` later runs start no job (a
 # command that runs several, one per matcher, ends instead of going on with the next).
 INTERRUPTED = threading.Event()
@@ -59,16 +62,30 @@ def _chunk(job: tuple[Callable, list]) -> list:
     return [fn(j) for j in jobs]
 
 
+def _chunks(jobs: Iterable, size: int) -> Iterator[list]:
+    it = iter(jobs)
+    while chunk := list(itertools.islice(it, size)):
+        yield chunk
+
+
 def ordered_map(
-    fn: Callable, jobs: list, workers: int | None = None, on_result: Callable | None = None
+    fn: Callable,
+    jobs: Iterable,
+    workers: int | None = None,
+    on_result: Callable | None = None,
+    total: int | None = None,
 ) -> list:
     """``[fn(job) for job in jobs]``, in order, over ``workers`` processes (default: every core).
 
-    ``on_result`` sees each result as it arrives (progress). Ctrl-C stops the run within one job
-    (one process) or ``POLL_S`` (a pool, whose workers are ended) and returns the results
-    finished so far, in order; ``fn`` and the jobs must pickle (module-level function, plain data).
+    ``jobs`` may be a generator (its ``total`` length, when known, sizes the chunks sent to a
+    worker): a few chunks per worker are under way at a time, so a long run's jobs are made as
+    they are needed, never all at once. ``on_result`` sees each result as it arrives (progress).
+    Ctrl-C stops the run within one job (one process) or ``POLL_S`` (a pool, whose workers are
+    ended) and returns the results finished so far, in order; ``fn`` and the jobs must pickle
+    (module-level function, plain data).
     """
     workers = workers or os.cpu_count() or 1
+    total = len(jobs) if total is None and hasattr(jobs, "__len__") else total
     out: list = []
 
     def take(r) -> None:
@@ -81,7 +98,7 @@ def ordered_map(
     with stopping() as stop:
         if stop.is_set():  # an earlier run of this command was stopped
             return out
-        if workers == 1 or len(jobs) <= 1:
+        if workers == 1 or total is not None and total <= 1:
             for job in jobs:
                 if stop.is_set():
                     break
@@ -91,17 +108,28 @@ def ordered_map(
                     stop.set()
                     break
             return out
-        size = max(1, min(16, len(jobs) // (8 * workers)))
-        chunks = [(fn, jobs[k : k + size]) for k in range(0, len(jobs), size)]
+        size = max(1, min(16, (total or 16 * 8 * workers) // (8 * workers)))
+        chunks = _chunks(jobs, size)
         pool = multiprocessing.get_context().Pool(workers, initializer=ignore_interrupts)
+        under_way: deque = deque()
+
+        def send() -> None:
+            chunk = next(chunks, None)
+            if chunk is not None:
+                under_way.append(pool.apply_async(_chunk, ((fn, chunk),)))
+
         try:
-            results = pool.imap(_chunk, chunks)  # one chunk at a time: next() can time out
-            while len(out) < len(jobs) and not stop.is_set():
+            for _ in range(IN_FLIGHT_PER_WORKER * workers):
+                send()
+            while under_way and not stop.is_set():
                 try:
-                    for r in results.next(timeout=POLL_S):
-                        take(r)
+                    results = under_way[0].get(timeout=POLL_S)
                 except multiprocessing.TimeoutError:
                     continue
+                under_way.popleft()
+                send()
+                for r in results:
+                    take(r)
         finally:
             pool.terminate()  # a stop ends the jobs under way; their results are not waited for
             pool.join()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -65,37 +66,37 @@ def match_sequence(
             "odometry",
             field="--truth",
         )
-    jobs = [
-        (
-            log.path,
-            i,
-            j,
-            log.scan(i),
-            log.scan(j),
-            params,
-            guess,
-            truth,
-            search,
-            log.frames,
-            base,
-            log.topic,
-            budget_s,
-        )
-        for i, j in log.consecutive_pairs(limit)[len(done) :]
-    ]
-    steady, rows = Steadiness(log, done), []
+    pairs = log.consecutive_pairs(limit)[len(done) :]
+    stamps: dict[int, float | None] = {}  # of the scans sent and not yet seen back
+
+    def jobs():  # made as the workers need them: the log is read front to back once
+        if not pairs:
+            return
+        scans = log.scans_from(pairs[0][0])
+        i, ref = next(scans)
+        for (j, obj), pair in zip(scans, pairs):
+            assert (i, j) == pair, "the log's usable scans changed under the run"
+            stamps[i], stamps[j] = ref.stamp, obj.stamp
+            yield (log.path, i, j, ref, obj, params, guess, truth, search, log.frames, base)
+            i, ref = j, obj
+
+    steady, rows = Steadiness(log, done, stamps), []
 
     def take(m: PairMatch) -> None:
+        if m.params == params:  # one object for the run's rows, not one copy from each worker
+            m = replace(m, params=params)
         rows.append(steady.amend(m))
         if on_row is not None:
             on_row(rows[-1])
 
-    ordered_map(_match_row, jobs, workers, take)
+    ordered_map(
+        partial(_match_row, stream=log.topic, budget_s=budget_s), jobs(), workers, take, len(pairs)
+    )
     return rows
 
 
-def _match_row(job) -> PairMatch:
-    path, i, j, ref, obj, params, guess, truth, search, frames, base, stream, budget_s = job
+def _match_row(job, stream: str | None, budget_s: float | None) -> PairMatch:
+    path, i, j, ref, obj, params, guess, truth, search, frames, base = job
     t0 = time.perf_counter()
     g, source = pair_guess(ref, obj, guess, search, missing_ok=True)
     guess_ms = 1000.0 * (time.perf_counter() - t0)
@@ -113,22 +114,26 @@ def _match_row(job) -> PairMatch:
 
 class Steadiness:
     """Marks each row, in the run's order, whose first scan is out of place (health.out_of_place:
-    the motion jumps and returns), from the two rows before it."""
+    the motion jumps and returns), from the two rows before it. ``stamps`` holds the stamps of
+    the scans of rows still to come (each taken once its row is seen); the rows of ``done`` are
+    read from the log."""
 
-    def __init__(self, log: ScanLog, done: list[PairMatch]):
-        self.log, self.last = log, list(done[-2:])
+    def __init__(self, log: ScanLog, done: list[PairMatch], stamps: dict[int, float | None]):
+        self.stamps = stamps
+        self.last = [(m, self._dt(log.scan(m.ref).stamp, log.scan(m.obj).stamp)) for m in done[-2:]]
 
-    def _dt(self, m: PairMatch) -> float | None:
-        a, b = self.log.scan(m.ref).stamp, self.log.scan(m.obj).stamp
+    @staticmethod
+    def _dt(a: float | None, b: float | None) -> float | None:
         return b - a if a is not None and b is not None and b > a else None
 
     def amend(self, m: PairMatch) -> PairMatch:
-        steps = (*self.last, m)
-        if len(steps) == 3 and steps[0].obj == steps[1].ref and steps[1].obj == m.ref:
-            jump = out_of_place(steps, tuple(self._dt(s) for s in steps))
+        dt = self._dt(self.stamps.pop(m.ref, None), self.stamps.get(m.obj))
+        steps = (*self.last, (m, dt))
+        if len(steps) == 3 and steps[0][0].obj == steps[1][0].ref and steps[1][0].obj == m.ref:
+            jump = out_of_place(tuple(r for r, _ in steps), tuple(d for _, d in steps))
             if jump is not None:
                 m = replace(m, flags=m.flags | {Suspicion.OUT_OF_PLACE: jump})
-        self.last = [*self.last, m][-2:]
+        self.last = [*self.last, (m, dt)][-2:]
         return m
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -140,19 +140,32 @@ class ScanLog:
             return scan
         return self.scans[index - bisect.bisect_left(sorted(self.unusable), index)]
 
-    def record_numbers(self) -> list[int]:
-        """The record number of each of ``scans``."""
+    def scans_from(self, record: int) -> Iterator[tuple[int, Scan]]:
+        """(record, scan) of each usable scan from ``record`` on, in file order (a lazily read log
+        is read front to back once)."""
+        if self.store is not None:
+            for r, scan in self.store.stream(record):
+                if isinstance(scan, Scan):
+                    yield r, scan
+            return
+        records = self.record_numbers()
+        k = bisect.bisect_left(records, record)
+        yield from zip(records[k:], self.scans[k:])
+
+    def record_numbers(self, first: int | None = None) -> list[int]:
+        """The record number of each of ``scans`` (the ``first`` ones: a lazily read log not yet
+        surveyed reads only as far as they go)."""
         if isinstance(self.scans, _UsableScans):
-            return list(self.scans.survey.usable)
-        return [r for r in range(self.records) if r not in self.unusable]
+            return self.scans.survey.first(first)
+        records = [r for r in range(self.records) if r not in self.unusable]
+        return records if first is None else records[:first]
 
     def consecutive_pairs(self, limit: int | None = None) -> list[tuple[int, int]]:
         """Record numbers of each usable scan and the next usable one (the first ``limit``
         pairs)."""
-        n = len(self.scans) - 1 if limit is None else min(limit, len(self.scans) - 1)
-        if n < 1:
+        records = self.record_numbers(None if limit is None else limit + 1)
+        if len(records) < 2:
             raise InputError("needs at least two usable scans", self.path)
-        records = self.record_numbers()[: n + 1]
         return list(zip(records[:-1], records[1:]))
 
     @property
@@ -212,6 +225,20 @@ class Survey:
     def usable(self) -> list[int]:
         self._survey()
         return self._usable
+
+    def first(self, n: int | None) -> list[int]:
+        """The first ``n`` usable records (all: the survey), read only as far as they go."""
+        if n is None or self._usable is not None:
+            return self.usable[:n]
+        out = []
+        for r, scan in self.store.stream(odometry=False):
+            if isinstance(scan, UnusableScan):
+                self._unusable[r] = scan
+            elif len(out) < n:
+                out.append(r)
+            if len(out) == n:
+                break
+        return out
 
     @property
     def unusable(self) -> dict[int, UnusableScan]:

@@ -12,10 +12,11 @@ object's line in the file is kept: an error names the file, the line and the fie
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 from mbicp_viz.errors import InputError
-from mbicp_viz.outputs import write_text, written
+from mbicp_viz.outputs import written
 
 from .pair_match import PairMatch, parse_pair_match
 from .text import opening
@@ -136,7 +137,9 @@ class PartialRows:
         self.out = Path(out)
         self.path = self.out.with_name(self.out.name + PARTIAL)
         self.run = json.loads(json.dumps(run))  # as it reads back
+        # the rows a stopped run left, until the run starts (then on disk only, as the new ones)
         self.rows: list[dict] = self._resumed() if self.path.exists() else []
+        self.count = len(self.rows)
         self._file = None
 
     def _resumed(self) -> list[dict]:
@@ -176,21 +179,25 @@ class PartialRows:
         # the rows read, without a line a kill cut short
         with written(self.path, say=False) as tmp:
             tmp.write_text(json.dumps({"partial": self.run}) + "\n" + rows_text(self.rows))
+        self.rows = []  # on disk, and read by now: a long run does not keep them twice
         self._file = open(self.path, "a")
         return self
 
     def add(self, row: dict) -> None:
         """Append ``row``, on disk at once (a kill loses at most the row being written)."""
-        self.rows.append(row)
         self._file.write(json.dumps(row) + "\n")
         self._file.flush()
+        self.count += 1
 
     def __exit__(self, *exc) -> None:
         self._file.close()
 
     def finish(self) -> None:
-        """The run is complete: ``out`` written whole, the partial file gone."""
-        write_text(self.out, rows_text(self.rows))
+        """The run is complete: ``out`` written whole (the partial file's rows, copied line by
+        line), the partial file gone."""
+        with written(self.out) as tmp, open(self.path) as src, open(tmp, "w") as dst:
+            src.readline()  # the line naming the run
+            shutil.copyfileobj(src, dst)
         self.path.unlink()
 
 

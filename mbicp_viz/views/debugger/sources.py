@@ -63,7 +63,7 @@ def files_source(
         )
         return Source(f"{first} -> {second}", log, guess_kind=guess)
     log = read_log(first, options)
-    if len(log.scans) < 2:
+    if len(log.record_numbers(2)) < 2:
         raise InputError("needs at least two usable scans (or give two files)", first)
     run = rows_of_log(rows, log) if rows is not None else []
     both = None

@@ -265,7 +265,7 @@ class DebugState:
         options = replace(src.options or ReadOptions(), topic=topic)
         try:
             log = read_log(src.log.path, options)
-            if len(log.scans) < 2:
+            if len(log.record_numbers(2)) < 2:
                 raise InputError(
                     f"topic {topic} has fewer than two usable scans", log.path, field="topic"
                 )
