@@ -266,6 +266,61 @@ def bag(
     )
 
 
+def throughput(
+    source: Annotated[
+        str, typer.Option("--from", help="the real recording whose scans are played to and fro")
+    ],
+    beams: Annotated[
+        str, typer.Option("--beams", help="beam counts to resample to, comma-separated")
+    ] = "180,361,681,1081,1947",
+    rate_hz: Annotated[float, typer.Option("--rate-hz", min=0.1, max=1000)] = 40.0,
+    pairs: Annotated[int, typer.Option("--pairs", min=2, help="consecutive pairs per run")] = 400,
+    matcher: MatcherOpt = DEFAULT_MATCHER,
+    params: ParamsOpt = None,
+    topic: TopicOpt = None,
+):
+    """A whole run's real-time factor (the recording's duration over the matching time, as `eval
+    sequence` matches it) per beam count, on one core and on every core."""
+    import os
+
+    from mbicp_viz.errors import InputError
+    from mbicp_viz.evaluation.bench import machine_line
+    from mbicp_viz.evaluation.throughput import throughput as run_throughput
+    from mbicp_viz.readers.params_toml import make_params
+
+    try:
+        counts = [int(b) for b in beams.split(",")]
+    except ValueError:
+        raise InputError(
+            f"expected whole numbers separated by commas, got {beams!r}", field="--beams"
+        ) from None
+    if any(not 2 <= b <= 100_000 for b in counts):
+        raise InputError("each beam count must be 2 .. 100000", field="--beams")
+    lg = read_log_saying(source, read_options(topic))
+    p = make_params(matcher.value, params)
+    cores = sorted({1, os.cpu_count() or 1})
+    typer.echo(f"{matcher.value} on {source} played to and fro at {rate_hz:g} Hz; {machine_line()}")
+    for b in counts:
+        typer.echo(run_throughput(lg, p, b, pairs, rate_hz, cores).line())
+
+
+def opening(
+    log: Annotated[str, typer.Argument(help="the recording to open")],
+    pair: PairOpt = None,
+    repeat: Annotated[
+        int, typer.Option("--repeat", min=1, help="runs of each; the best is kept")
+    ] = 3,
+):
+    """How soon a recording opens, each in a fresh process: `match LOG --pair I J`, and the
+    debugger to its first result; with each one's peak memory."""
+    from mbicp_viz.evaluation.bench import machine_line
+    from mbicp_viz.evaluation.throughput import opening as measure
+
+    typer.echo(f"opening {log}; {machine_line()}")
+    for t in measure(log, pair or (0, 1), repeat):
+        typer.echo(t.line())
+
+
 def command_names(app: typer.Typer) -> list[str]:
     """Every command of the CLI as typed (``eval sequence``, ``bench startup`` ...)."""
     out = []
@@ -287,6 +342,8 @@ def register(app: typer.Typer) -> None:
         ("run", run),
         ("startup", startup),
         ("bag", bag),
+        ("throughput", throughput),
+        ("open", opening),
     ):
         group.command(name)(user_errors(fn))
     app.add_typer(group, name="bench")

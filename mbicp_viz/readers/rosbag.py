@@ -97,7 +97,9 @@ def open_bag(p: Path, typestore: str):
 def raw_messages(reader, path: str, connections, start: int | None = None, stop: int | None = None):
     """rosbags' (connection, record stamp [ns], raw bytes) of ``connections`` within [start, stop);
     damage rosbags meets on the way (a chunk or record its index points at wrongly) is one error
-    naming the bag."""
+    naming the bag. No connections, no messages (rosbags reads every topic for none)."""
+    if not connections:
+        return
     try:
         yield from reader.messages(connections, start, stop)
     except InputError:

@@ -50,13 +50,15 @@ def gui_latency(
         server.stop()
 
 
-def first_result_ms(path: str) -> float:
-    """From nothing to a tab's first result: a debugger on ``path``'s first pair, its kernels
-    compiled (or loaded from numba's cache), one session's match drawn [ms]."""
+def first_result_ms(path: str, pair: tuple[int, int] | None = None) -> float:
+    """From nothing to a tab's first result, as ``serve PATH [--pair I J]`` opens it: the log
+    read, a debugger on its first pair (or ``pair``), its kernels compiled (or loaded from numba's
+    cache), one session's match drawn [ms]."""
     from .app import App
+    from .sources import files_source
 
     t0 = time.perf_counter()
-    app = App(Source(path, read_log(path), guess=Pose2()), "127.0.0.1", 0)
+    app = App(files_source(path, None, pair), "127.0.0.1", 0)
     try:
         s = Session(app.server, app.source, app.ready)
         s.first_match(app.ready)

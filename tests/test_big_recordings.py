@@ -1,0 +1,188 @@
+"""Recordings as long as robots make them: bags read through their index (each scan when it is
+asked for), long bags written from real scans played to and fro, runs streamed with bounded
+memory."""
+
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from mbicp_viz.cli import app
+from mbicp_viz.core import Pose2, pose_error
+from mbicp_viz.evaluation import pool
+from mbicp_viz.readers import read_log
+from mbicp_viz.readers.rosbag import _to_log, _walk_ros1
+from mbicp_viz.writers.replay import Replay, replayed, resampled
+
+from .bags import intel_robot, write
+from .conftest import DATA, INTEL, json_lines
+from .test_bags import same_scan
+
+MOUNT = Pose2(0.2, 0.05, math.radians(10.0))
+
+
+def walked(path: Path):
+    """The bag read whole, message by message, by the reader that does not use its index."""
+    notes = []
+    return _to_log(str(path), _walk_ros1(path, notes, "test"), None, notes, None)
+
+
+@pytest.mark.parametrize("odometry_on", ["/odom", "/tf"])
+def test_scans_read_through_the_index_equal_the_bag_read_whole(tmp_path, intel, odometry_on):
+    path = write(
+        tmp_path / "r.bag", intel_robot(intel, 0, 40, MOUNT, odometry_on=odometry_on), "ros1"
+    )
+    lazy, whole = read_log(path), walked(path)
+    assert lazy.store is not None and whole.store is None
+    assert lazy.frames == whole.frames and lazy.odometry_source == whole.odometry_source
+    assert lazy.records == whole.records == 40
+    for k in [39, 0, 17, 18, 3]:  # any record, in any order
+        a, b = lazy.scan(k), whole.scan(k)
+        assert same_scan(a, b) and a.stamp == b.stamp
+        assert a.odometry is not None and np.allclose(a.odometry.as_array(), b.odometry.as_array())
+    streamed = list(lazy.store.stream())  # a whole run reads the bag once, front to back
+    assert [r for r, _ in streamed] == list(range(40))
+    for r, s in streamed:
+        b = whole.scan(r)
+        assert same_scan(s, b) and np.allclose(s.odometry.as_array(), b.odometry.as_array())
+
+
+@pytest.mark.parametrize("kind", ["humble", "mcap"])
+def test_ros2_bags_read_through_their_index_like_ros1(tmp_path, intel, kind):
+    robot = intel_robot(intel, 0, 12, MOUNT)
+    ros1 = read_log(write(tmp_path / "r.bag", robot, "ros1"))
+    ros2 = read_log(write(tmp_path / "r2", robot, kind))
+    assert ros2.store is not None and ros2.records == 12
+    for k in (11, 0, 5):
+        assert same_scan(ros2.scan(k), ros1.scan(k))
+        assert np.allclose(ros2.scan(k).odometry.as_array(), ros1.scan(k).odometry.as_array())
+
+
+def test_a_long_bag_opens_without_reading_its_scans(tmp_path, intel):
+    """The index is read, not the messages: a scan near the end is read alone, and the log does
+    not look at every record until a command needs them."""
+    path = tmp_path / "long.bag"
+    code = CliRunner().invoke(
+        app,
+        ["bench", "bag", str(path), "--from", str(INTEL), "--minutes", "3", "--rate-hz", "40"],
+    )
+    assert code.exit_code == 0, code.output
+    assert "7201 scans of 180 beams over 180 s (ros1" in code.output
+    log = read_log(path)
+    assert log.records == 7201 and log.known_unusable == {}
+    survey = log.scans.survey
+    assert log.scan(7000).stamp is not None and survey._usable is None  # read alone
+    assert log.consecutive_pairs(3) == [(0, 1), (1, 2), (2, 3)] and survey._usable is None
+
+
+def test_bench_bag_plays_real_scans_to_and_fro_with_real_intervals(tmp_path, intel):
+    out = tmp_path / "m"
+    args = ["bench", "bag", str(out), "--from", str(INTEL), "--minutes", "1", "--kind", "mcap"]
+    args += ["--rate-hz", "10"]
+    result = CliRunner().invoke(app, args + ["--beams", "361"])
+    assert result.exit_code == 0, result.output
+    log = read_log(out)
+    n = len(intel.scans)
+    play = Replay(n, log.records)
+    dts = np.diff([s.stamp for s in intel.scans])
+    for k in (0, 1, n - 1, n, 2 * n - 2, 2 * n + 3):  # forwards, the turn, backwards, forwards
+        src = intel.scans[play[k]]
+        assert same_scan(log.scan(k), resampled(src, 361))
+        # the base's odometry played along, seen on the laser through the mount again
+        assert max(pose_error(log.scan(k).odometry, src.odometry)) < 1e-6
+    # the intervals are the real ones, scaled to 10 Hz on average; the first step back is the last
+    first = log.scan(1).stamp - log.scan(0).stamp
+    back = log.scan(n).stamp - log.scan(n - 1).stamp
+    assert back / first == pytest.approx(dts[-1] / dts[0], rel=1e-6)
+    assert (log.scan(600).stamp - log.scan(0).stamp) / 600 == pytest.approx(0.1, rel=0.05)
+    assert CliRunner().invoke(app, args).exit_code == 2  # never over an existing output
+
+
+@given(n=st.integers(1, 50), k=st.integers(0, 10_000))
+def test_a_replay_moves_one_scan_at_a_time_and_stays_in_the_recording(n, k):
+    play = Replay(n, 10_001)
+    assert 0 <= play[k] < n
+    if n > 1 and k < 10_000:
+        assert abs(play[k + 1] - play[k]) == 1
+
+
+def test_resampled_scans_read_the_nearest_real_beam(intel):
+    s = intel.scans[0]
+    r = resampled(s, 1081)
+    assert len(r.ranges) == 1081 and r.bearings[0] == s.bearings[0]
+    assert r.bearings[-1] == pytest.approx(s.bearings[-1])
+    nearest = np.abs(s.bearings[None, :] - r.bearings[:, None]).argmin(axis=1)
+    assert np.array_equal(r.ranges, s.ranges[nearest]) and np.array_equal(r.valid, s.valid[nearest])
+
+
+def test_replaying_needs_stamps(intel):
+    from dataclasses import replace
+
+    from mbicp_viz.readers import ScanLog
+
+    frozen = ScanLog("x", [replace(s, stamp=1.0) for s in intel.scans[:3]])
+    with pytest.raises(ValueError, match="increasing stamps"):
+        replayed(frozen, 10.0)
+
+
+def peak_mb(args: list[str]) -> float:
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 0, proc.stderr.read().decode()[-500:]
+    proc.stderr.close()
+    return usage.ru_maxrss / 1024.0
+
+
+def test_memory_does_not_grow_with_the_bag(tmp_path):
+    """A bag 8 times longer costs the same memory to open and match a late pair in, and a run over
+    its first pairs streams them (the same pairs, the same peak)."""
+    exe = [sys.executable, "-m", "mbicp_viz"]
+    source = str(DATA / "hokuyo-demo.bag")
+    peaks = {}
+    for minutes in (1, 8):
+        path = tmp_path / f"{minutes}.bag"
+        make = exe + ["bench", "bag", str(path), "--from", source, "--minutes", str(minutes)]
+        assert subprocess.run(make, capture_output=True).returncode == 0
+        late = str(int(minutes * 600) - 2)
+        peaks[minutes] = (
+            peak_mb(exe + ["match", str(path), "--pair", late, str(int(late) + 1), "--json"]),
+            peak_mb(
+                exe
+                + ["eval", "sequence", str(path), "--limit", "300", "--workers", "1"]
+                + ["--out", str(tmp_path / f"{minutes}.json")]
+            ),
+        )
+    assert (tmp_path / "8.bag").stat().st_size > 7 * (tmp_path / "1.bag").stat().st_size
+    for short, long in zip(peaks[1], peaks[8]):
+        assert long < short + 25, peaks  # MB
+    rows = [json_lines(tmp_path / f"{m}.json") for m in (1, 8)]
+    assert [(r["ref"], r["x"], r["theta"]) for r in rows[0]] == [
+        (r["ref"], r["x"], r["theta"]) for r in rows[1]
+    ]
+
+
+def test_a_run_makes_its_jobs_as_the_workers_need_them():
+    made = []
+
+    def jobs():
+        for k in range(400):
+            made.append(k)
+            yield k
+
+    seen = []
+
+    def take(r):
+        seen.append((r, len(made)))
+
+    out = pool.ordered_map(abs, jobs(), 2, take, total=400)
+    assert out == list(range(400))
+    # when the first result came back, only the chunks sent ahead had been made
+    size = max(1, min(16, 400 // 16))
+    assert seen[0][1] <= pool.IN_FLIGHT_PER_WORKER * 2 * size + size
