@@ -148,7 +148,7 @@ def run_tracks(
             )
     t = [s + offset for s in stamps(log, rows)]
     tracks = {"matches chained": (t, accumulate(rows))}
-    odometry = [log.scan(i).odometry for i in scan_indices(rows)]
+    odometry = [s.odometry for s in log.scans_of(scan_indices(rows))]
     if all(o is not None for o in odometry):
         tracks[FUSED] = (t, kalman(rows, odometry, ODOMETRY_SIGMA, MATCH_SIGMA))
         tracks["raw odometry"] = (t, [relative(odometry[0], o) for o in odometry])

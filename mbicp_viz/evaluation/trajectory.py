@@ -40,10 +40,10 @@ def scan_indices(rows: list[PairMatch]) -> list[int]:
 
 def log_poses(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
     """The log's own scan poses for the same scans, in the first scan's frame (None if missing)."""
-    scans = [log.scan(i) for i in scan_indices(rows)]
-    if any(s.pose is None for s in scans):
+    poses = [s.pose for s in log.scans_of(scan_indices(rows))]
+    if any(p is None for p in poses):
         return None
-    return [relative(scans[0].pose, s.pose) for s in scans]
+    return [relative(poses[0], p) for p in poses]
 
 
 def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str, list[Pose2]]:
@@ -55,7 +55,7 @@ def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str
     if stored is not None:
         out[STORED] = stored
     if fuse:
-        odo = [log.scan(i).odometry for i in scan_indices(rows)]
+        odo = [s.odometry for s in log.scans_of(scan_indices(rows))]
         if any(o is None for o in odo):
             raise InputError(
                 "--kalman needs odometry for every scan; this log has none",
@@ -68,9 +68,9 @@ def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str
 
 def stamps(log: ScanLog, rows: list[PairMatch]) -> list[float]:
     """Each visited scan's time stamp (its record number when it has none)."""
+    records = scan_indices(rows)
     return [
-        s.stamp if s.stamp is not None else float(i)
-        for i, s in ((i, log.scan(i)) for i in scan_indices(rows))
+        s.stamp if s.stamp is not None else float(i) for i, s in zip(records, log.scans_of(records))
     ]
 
 
@@ -138,8 +138,8 @@ def plot_png(
     plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(8, 8))
-    for i, pose in zip(scan_indices(rows), tracks[map_track]):
-        pts = pose.apply(log.scan(i).points()[::2])
+    for scan, pose in zip(log.scans_of(scan_indices(rows)), tracks[map_track]):
+        pts = pose.apply(scan.points()[::2])
         ax.plot(pts[:, 0], pts[:, 1], ",", color=(0.85, 0.15, 0.15), alpha=0.5)
     for name, poses in tracks.items():
         xy = np.array([[p.x, p.y] for p in poses])

@@ -152,6 +152,23 @@ class ScanLog:
         k = bisect.bisect_left(records, record)
         yield from zip(records[k:], self.scans[k:])
 
+    def scans_of(self, records: list[int]) -> Iterator[Scan]:
+        """The scans of ``records`` in their order, each read once: a lazily read log is read front
+        to back once when they increase (a run's scans), else one by one."""
+        if self.store is None or any(b <= a for a, b in zip(records, records[1:])):
+            yield from (self.scan(r) for r in records)
+            return
+        wanted = iter(records)
+        r = next(wanted, None)
+        for k, scan in self.scans_from(records[0]) if records else ():
+            if k == r:
+                yield scan
+                r = next(wanted, None)
+                if r is None:
+                    return
+        if r is not None:
+            self.scan(r)  # not usable: its own error
+
     def record_numbers(self, first: int | None = None) -> list[int]:
         """The record number of each of ``scans`` (the ``first`` ones: a lazily read log not yet
         surveyed reads only as far as they go)."""

@@ -81,7 +81,7 @@ class RunModel:
 
     @cached_property
     def odometry(self) -> list[Pose2] | None:
-        odo = [self.log.scan(i).odometry for i in self.scans]
+        odo = [s.odometry for s in self.log.scans_of(self.scans)]
         if any(o is None for o in odo):
             return None
         return [self.log.frames.reported(relative(odo[0], o), self.base) for o in odo]
@@ -98,9 +98,13 @@ class RunModel:
     def _map(self) -> tuple[np.ndarray, np.ndarray]:
         """Every ``step``-th scan's points (world frame) and the scan each belongs to."""
         n = len(self.poses)
-        sizes = [self.log.scan(i).n_valid for i in self.scans]
+        sizes = [s.n_valid for s in self.log.scans_of(self.scans)]
         step = max(1, math.ceil(sum(sizes) / MAP_POINTS))
-        parts = [(k, self.world_points(k)) for k in range(0, n, step)]
+        kept = list(range(0, n, step))
+        parts = [
+            (k, (self.poses[k] @ self.mount).apply(s.points()))
+            for k, s in zip(kept, self.log.scans_of([self.scans[k] for k in kept]))
+        ]
         xy = np.concatenate([p for _, p in parts]) if parts else np.zeros((0, 2))
         owner = np.concatenate([np.full(len(p), k) for k, p in parts]) if parts else np.zeros(0)
         return xy, owner
