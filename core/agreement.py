@@ -11,17 +11,39 @@ from .se2 import Pose2
 INLIER_RADIUS_M = 0.05
 
 
+def _nearest(ref: Scan, obj: Scan, pose: Pose2):
+    """The reference points, the object points moved by ``pose``, and each moved point's distance
+    to its nearest reference point and that point's index (one k-d tree, one query)."""
+    q = pose.apply(obj.points())
+    p = ref.points()
+    if not len(q) or not len(p):
+        return p, q, np.full(len(q), np.inf), np.zeros(len(q), dtype=int)
+    best, nearest = cKDTree(p).query(q)
+    return p, q, best, nearest
+
+
 def inlier_fraction(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M) -> float:
     """Fraction of the object's valid points within ``radius`` [m] of a reference point once moved
     by ``pose`` (object frame -> reference frame). Lets a user compare two candidate poses — a
     matcher's and a stored "truth" — on the data itself."""
-    d, _ = cKDTree(ref.points()).query(pose.apply(obj.points()), distance_upper_bound=radius)
-    return float(np.mean(d <= radius))
+    _, q, best, _ = _nearest(ref, obj, pose)
+    return float(np.mean(best <= radius)) if len(q) else 0.0
 
 
 # A reference segment between neighbouring beams is taken as surface when it is at most this many
 # beam spacings long (r * beam step: a surface seen at up to ~70° incidence), plus the radius.
 SURFACE_GAP_BEAMS = 3.0
+
+
+def agreement(
+    ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M
+) -> tuple[float, float]:
+    """(``inlier_fraction``, ``surface_overlap``) from one nearest-point query."""
+    p, q, best, nearest = _nearest(ref, obj, pose)
+    if not len(q):
+        return 0.0, 0.0
+    on_points = float(np.mean(best <= radius))
+    return on_points, float(np.mean(_to_surface(ref, p, q, best, nearest, radius) <= radius))
 
 
 def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M) -> float:
@@ -30,16 +52,19 @@ def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RA
     where it is short enough to be one surface (not a jump between depths). Unlike
     ``inlier_fraction`` it does not fall with the beams' spacing: a sparse long-range scan laid
     well on its reference (30 cm between points at 20 m and 1°) scores as high as a dense one."""
-    q = pose.apply(obj.points())
-    p = ref.points()
-    if not len(q) or not len(p):
-        return 0.0
+    return agreement(ref, obj, pose, radius)[1]
+
+
+def _to_surface(ref: Scan, p, q, best, nearest, radius: float) -> np.ndarray:
+    """Each moved object point's distance to the reference surface (``surface_overlap``), from its
+    distance ``best`` to the ``nearest`` reference point."""
+    if not len(p):
+        return best
     idx = ref.valid_indices()
     r, b = ref.ranges[idx], ref.bearings[idx]
     a, ab = p[:-1], np.diff(p, axis=0)
     length = np.hypot(ab[:, 0], ab[:, 1])
     surface = length <= SURFACE_GAP_BEAMS * np.maximum(r[:-1], r[1:]) * np.diff(b) + radius
-    best, nearest = cKDTree(p).query(q)
     # the nearest point's two segments hold the surface's nearest point
     for s in (nearest - 1, nearest):
         use = (s >= 0) & (s < len(a))
@@ -50,4 +75,4 @@ def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RA
         foot = a[s] + np.clip(t, 0.0, 1.0)[:, None] * ab[s]
         d = np.hypot(*(q - foot).T)
         best = np.where(use & surface[s], np.minimum(best, d), best)
-    return float(np.mean(best <= radius))
+    return best

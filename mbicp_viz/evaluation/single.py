@@ -18,7 +18,7 @@ from mbicp_viz.core import (
     match,
     pose_error,
 )
-from mbicp_viz.core.agreement import inlier_fraction, surface_overlap
+from mbicp_viz.core.agreement import agreement, inlier_fraction
 from mbicp_viz.core.budget import Halt, limited
 from mbicp_viz.readers.log import Frames
 from mbicp_viz.readers.pair_match import PairMatch, Score
@@ -112,7 +112,7 @@ def match_pair(
         et, er = pose_error(shown.pose, odometry_shown)
         fields = {"odometry": odometry, "odometry_xy": et, "odometry_theta": er}
     i, j = indices if indices is not None else (ref.source.index, obj.source.index)
-    overlap = surface_overlap(ref, obj, result.pose)
+    on_ref, overlap = agreement(ref, obj, result.pose)
     m = PairMatch(
         i,
         j,
@@ -121,7 +121,7 @@ def match_pair(
         s.guess_source,
         shown,
         frames.frame_name(base),
-        inlier_fraction(ref, obj, result.pose),
+        on_ref,
         stream,
         ms,
         interpreted=compiling or tiers.compiling(),
