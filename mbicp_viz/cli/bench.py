@@ -310,6 +310,7 @@ def opening(
     repeat: Annotated[
         int, typer.Option("--repeat", min=1, help="runs of each; the best is kept")
     ] = 3,
+    topic: TopicOpt = None,
 ):
     """How soon a recording opens, each in a fresh process: `match LOG --pair I J`, and the
     debugger to its first result; with each one's peak memory."""
@@ -317,7 +318,7 @@ def opening(
     from mbicp_viz.evaluation.throughput import opening as measure
 
     typer.echo(f"opening {log}; {machine_line()}")
-    for t in measure(log, pair or (0, 1), repeat):
+    for t in measure(log, pair or (0, 1), repeat, topic):
         typer.echo(t.line())
 
 

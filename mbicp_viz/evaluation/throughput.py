@@ -98,16 +98,19 @@ def _run_measured(args: list[str]) -> tuple[float, float]:
     return took, usage.ru_maxrss / 1024.0
 
 
-def opening(path: str, pair: tuple[int, int], repeat: int) -> list[Opening]:
+def opening(
+    path: str, pair: tuple[int, int], repeat: int, topic: str | None = None
+) -> list[Opening]:
     """Each a fresh process, best of ``repeat``: ``match PATH --pair I J``, and the debugger on
     ``PATH`` to its first tab's result."""
     exe = [sys.executable, "-m", "mbicp_viz"]
     match = exe + ["match", path, "--pair", str(pair[0]), str(pair[1]), "--json"]
+    match += ["--topic", topic] if topic is not None else []
     debugger = [
         sys.executable,
         "-c",
         "from mbicp_viz.views.debugger.latency import first_result_ms; "
-        f"first_result_ms({path!r}, {pair!r})",
+        f"first_result_ms({path!r}, {pair!r}, {topic!r})",
     ]
     out = []
     for label, args in (

@@ -50,7 +50,9 @@ def gui_latency(
         server.stop()
 
 
-def first_result_ms(path: str, pair: tuple[int, int] | None = None) -> float:
+def first_result_ms(
+    path: str, pair: tuple[int, int] | None = None, topic: str | None = None
+) -> float:
     """From nothing to a tab's first result, as ``serve PATH [--pair I J]`` opens it: the log
     read, a debugger on its first pair (or ``pair``), its kernels compiled (or loaded from numba's
     cache), one session's match drawn [ms]."""
@@ -58,7 +60,7 @@ def first_result_ms(path: str, pair: tuple[int, int] | None = None) -> float:
     from .sources import files_source
 
     t0 = time.perf_counter()
-    app = App(files_source(path, None, pair), "127.0.0.1", 0)
+    app = App(files_source(path, None, pair, options=ReadOptions(topic=topic)), "127.0.0.1", 0)
     try:
         s = Session(app.server, app.source, app.ready)
         s.first_match(app.ready)
