@@ -26,7 +26,7 @@ class Termination(enum.Enum):
         return self in (Termination.CONVERGED, Termination.CYCLE)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Degeneracy:
     """How well the final pairs constrain the pose.
 
@@ -50,7 +50,7 @@ class Degeneracy:
         return float(a - 180.0 if a > 90.0 else a + 180.0 if a <= -90.0 else a)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class MatchResult:
     """``pose`` is the pose of the object frame in the reference frame (maps object points into
     it)."""

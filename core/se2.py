@@ -18,7 +18,7 @@ def wrap_angle(theta: float | np.ndarray) -> float | np.ndarray:
     return (theta + np.pi) % (2.0 * np.pi) - np.pi
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Pose2:
     """Rigid motion (x [m], y [m], theta [rad]) mapping child-frame points into the parent frame."""
 

@@ -199,7 +199,7 @@ def sequence(
 
         record_sequence(lg, rows, str(rrd))
         say(f"sequence recording written to {rrd}")
-    _failures(log, out)
+    _failures(log, out, rows)
     if serve:
         from mbicp_viz.views.debugger.sources import files_source
 
@@ -207,14 +207,13 @@ def sequence(
         open_debugger(replace(source, budget_s=budget_s), "127.0.0.1", port, (), None)
 
 
-def _failures(log: str, out: Path) -> None:
-    """The rows' failures and suspicious pairs, read back from the file as ``serve --rows`` will
-    open them."""
+def _failures(log: str, out: Path, rows: list) -> None:
+    """The rows' failures and suspicious pairs, named by their lines in ``out`` (one row a line),
+    as ``serve --rows`` will open them."""
     from mbicp_viz.evaluation.failures import failure_summary
     from mbicp_viz.evaluation.health import ranked, suspect_summary
-    from mbicp_viz.readers.rows import read_rows
 
-    rows = read_rows(out)
+    rows = [replace(r, line=k) for k, r in enumerate(rows, 1)]
     failures = failure_summary(rows)
     typer.echo("\n".join(failures + suspect_summary(rows)))
     if failures or ranked(rows):

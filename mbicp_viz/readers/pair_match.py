@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -57,7 +58,7 @@ class Suspicion(StrEnum):
     DISAGREE = "matchers disagree"  # two configurations' runs (evaluation/versus.py)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Score:
     """The laser's motion against the known answer (the frame the paper's criteria are in)."""
 
@@ -74,7 +75,7 @@ class Score:
         return not self.success and self.inliers_match > self.inliers_truth
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class PairMatch:
     """One pair's match."""
 
@@ -206,8 +207,11 @@ class _Fields:
         v = self.numbers(key, 3, optional)
         return None if v is None else Pose2(*v)
 
-    def text(self, key: str, what: str, optional: bool = False) -> str | None:
-        return self.get(key, (str,), what, optional)
+    def text(self, key: str, what: str, optional: bool = False, null: bool = False) -> str | None:
+        """A string (or ``null``: None); one object for every row holding the same (a long run's
+        rows repeat their names and sources)."""
+        v = self.get(key, (str, type(None)) if null else (str,), what, optional)
+        return None if v is None else sys.intern(v)
 
     def flag(self, key: str, optional: bool = False) -> bool | None:
         return self.get(key, (bool,), "true or false", optional)
@@ -347,7 +351,7 @@ def parse_pair_match(obj, path: str, line: int) -> PairMatch:
         f.text("guess", "where the guess came from"),
         _result(f, matcher),
         f.text("frame", "a frame's name"),
-        stream=f.get("stream", (str, type(None)), "a scan stream's name or null", optional=True),
+        stream=f.text("stream", "a scan stream's name or null", optional=True, null=True),
         interpreted=bool(f.flag("interpreted", optional=True)),
         truth=f.pose("truth_pose", optional=True),
         odometry=f.pose("odometry_pose", optional=True),

@@ -21,7 +21,7 @@ from mbicp_viz.outputs import written
 from .pair_match import PairMatch, parse_pair_match
 from .text import opening
 
-MAX_FILE_BYTES = 512_000_000  # ~300 000 rows; a rows file is read whole
+MAX_FILE_BYTES = 512_000_000  # a rows file written as one JSON array is read whole
 PARTIAL = ".partial"  # a stopped run's rows, beside the file they become
 
 
@@ -54,9 +54,9 @@ def _decoded(line: str, path: str, n: int):
         raise InputError("JSON nested too deeply", path, n) from None
 
 
-def _lines(text: str, path: str):
+def _lines(lines, path: str):
     """(line, object) for each non-empty line of JSON lines; a partial file's header is skipped."""
-    for n, line in enumerate(text.split("\n"), 1):
+    for n, line in enumerate(lines, 1):
         if line.strip():
             obj = _decoded(line, path, n)
             if n > 1 or _header(obj) is None:
@@ -109,22 +109,44 @@ def _objects(text: str, path: str):
 
 
 def read_rows(path: str | Path) -> list[PairMatch]:
-    """Every row of a rows file, in order; an empty file or array is refused."""
+    """Every row of a rows file, in order; an empty file or array is refused. JSON lines (what
+    `eval sequence` writes) are read one line at a time, an hour-long run's hundreds of MB never
+    held whole; a JSON array (as written before) is read whole, up to ``MAX_FILE_BYTES``."""
     path = str(path)
     p = Path(path)
-    with opening(p):
-        if p.stat().st_size > MAX_FILE_BYTES:
-            raise InputError(f"larger than {MAX_FILE_BYTES // 1_000_000} MB: not a rows file", path)
-        data = p.read_bytes()
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise InputError(f"not UTF-8 text ({e.reason} at byte {e.start})", path) from None
-    objects = _objects if text.lstrip().startswith("[") else _lines
-    rows = [parse_row(obj, path, line) for line, obj in objects(text, path)]
+    with opening(p), open(p, "rb") as f:
+        start = f.read(64).lstrip()
+        f.seek(0)
+        if start.startswith(b"["):
+            if p.stat().st_size > MAX_FILE_BYTES:
+                raise InputError(
+                    f"larger than {MAX_FILE_BYTES // 1_000_000} MB: not a rows file", path
+                )
+            objects = _objects(_text(f.read(), path), path)
+        else:
+            objects = _lines(_file_lines(f, path), path)
+        rows = [parse_row(obj, path, line) for line, obj in objects]
     if not rows:
         raise InputError("no rows", path)
     return rows
+
+
+MAX_LINE_BYTES = 1_000_000  # a row is a few kB
+
+
+def _text(data: bytes, path: str, line: int | None = None) -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise InputError(f"not UTF-8 text ({e.reason} at byte {e.start})", path, line) from None
+
+
+def _file_lines(f, path: str):
+    """The lines of an open file, decoded, each at most ``MAX_LINE_BYTES``."""
+    for n, data in enumerate(iter(lambda: f.readline(MAX_LINE_BYTES + 1), b""), 1):
+        if len(data) > MAX_LINE_BYTES:
+            raise InputError(f"a line longer than {MAX_LINE_BYTES} bytes: not a rows file", path, n)
+        yield _text(data, path, n)
 
 
 class PartialRows:
