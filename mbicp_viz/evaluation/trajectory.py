@@ -40,7 +40,11 @@ def scan_indices(rows: list[PairMatch]) -> list[int]:
 
 def log_poses(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
     """The log's own scan poses for the same scans, in the first scan's frame (None if missing)."""
-    poses = [s.pose for s in log.scans_of(scan_indices(rows))]
+    return from_first([s.pose for s in log.scans_of(scan_indices(rows), odometry=False)])
+
+
+def from_first(poses: list[Pose2 | None]) -> list[Pose2] | None:
+    """``poses`` in the first one's frame (None when one is missing)."""
     if any(p is None for p in poses):
         return None
     return [relative(poses[0], p) for p in poses]
@@ -69,9 +73,8 @@ def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str
 def stamps(log: ScanLog, rows: list[PairMatch]) -> list[float]:
     """Each visited scan's time stamp (its record number when it has none)."""
     records = scan_indices(rows)
-    return [
-        s.stamp if s.stamp is not None else float(i) for i, s in zip(records, log.scans_of(records))
-    ]
+    scans = log.scans_of(records, odometry=False)
+    return [s.stamp if s.stamp is not None else float(i) for i, s in zip(records, scans)]
 
 
 def _jacobians(x: Pose2, u: Pose2):
@@ -138,7 +141,7 @@ def plot_png(
     plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(8, 8))
-    for scan, pose in zip(log.scans_of(scan_indices(rows)), tracks[map_track]):
+    for scan, pose in zip(log.scans_of(scan_indices(rows), odometry=False), tracks[map_track]):
         pts = pose.apply(scan.points()[::2])
         ax.plot(pts[:, 0], pts[:, 1], ",", color=(0.85, 0.15, 0.15), alpha=0.5)
     for name, poses in tracks.items():

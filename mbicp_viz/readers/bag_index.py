@@ -134,19 +134,32 @@ class BagScans:
         if self.odometry is None:
             return None
         w = int(ODOMETRY_WINDOW_S * 1e9)
-        return self._track(self._decoded(self.odometry.topic, t_ns - w, t_ns + w))
+        msgs = self._decoded(self.odometry.topic, t_ns - w, t_ns + w)
+        return self._track([s for stamp, m in msgs for s in self._samples(stamp, m)])
 
-    def _track(self, msgs: list):
-        """(stamps, base poses) of the odometry messages ``msgs`` ((record stamp, message))."""
+    def _samples(self, stamp: float, msg) -> list[tuple[float, float, float, float]]:
+        """The base's poses (stamp, x, y, theta) one odometry message (record ``stamp``) gives;
+        each message is turned into poses once, however many scans' windows it falls in."""
         from .rosbag import odometry_track
 
-        if self.odometry.topic == "/tf":
-            tree = self.static.frames_only()
-            for stamp, m in msgs:
-                tree.add(m, stamp, False)
-            track = tree.odometry_track(self.odometry.base)
-            return None if track is None else track[1:]
-        return odometry_track([m for _, m in msgs])
+        if self.odometry.topic != "/tf":
+            t, p = odometry_track([msg])
+            return [(t[0], *p[0])]
+        tree = self.static.frames_only()
+        tree.add(msg, stamp, False)
+        track = tree.odometry_track(self.odometry.base)
+        if track is None:
+            return []
+        # the tree keeps the first value each moving edge had at opening: not this message's
+        w = ODOMETRY_WINDOW_S
+        return [(t, *p) for t, p in zip(track[1], track[2]) if abs(t - stamp) < w]
+
+    @staticmethod
+    def _track(samples: list) -> tuple[np.ndarray, np.ndarray]:
+        """(stamps, base poses) of odometry ``samples``, in stamp order."""
+        a = np.array(samples, dtype=float).reshape(-1, 4)
+        order = np.argsort(a[:, 0], kind="stable")
+        return a[order, 0], a[order, 1:]
 
     def _scan(self, k: int, msg, odometry) -> Scan | UnusableScan:
         from .rosbag import laser_scan
@@ -167,14 +180,14 @@ class BagScans:
             wanted += self._connections(self.odometry.topic)
         begin = int(self.stamps_ns[start]) - int(ODOMETRY_WINDOW_S * 1e9) if start else None
         w = ODOMETRY_WINDOW_S
-        odometry: deque = deque()  # (record stamp, message) within the window of waiting scans
+        odometry: deque = deque()  # (record stamp, its samples) within the waiting scans' window
         waiting: deque = deque()  # (record, record stamp, message)
         k = start
 
         def ready(now: float) -> Iterator[tuple[int, Scan | UnusableScan]]:
             while waiting and waiting[0][1] + w < now:
                 r, t, msg = waiting.popleft()
-                near = [o for o in odometry if t - w <= o[0] < t + w]
+                near = [x for stamp, xs in odometry if t - w <= stamp < t + w for x in xs]
                 track = self._track(near) if with_odometry else None
                 yield r, self._scan(r, msg, track)
             horizon = (waiting[0][1] if waiting else now) - w
@@ -190,7 +203,7 @@ class BagScans:
                 waiting.append((k, stamp, msg))
                 k += 1
             else:
-                odometry.append((stamp, msg))
+                odometry.append((stamp, self._samples(stamp, msg)))
             yield from ready(stamp)
         yield from ready(np.inf)
 

@@ -140,11 +140,11 @@ class ScanLog:
             return scan
         return self.scans[index - bisect.bisect_left(sorted(self.unusable), index)]
 
-    def scans_from(self, record: int) -> Iterator[tuple[int, Scan]]:
+    def scans_from(self, record: int, odometry: bool = True) -> Iterator[tuple[int, Scan]]:
         """(record, scan) of each usable scan from ``record`` on, in file order (a lazily read log
-        is read front to back once)."""
+        is read front to back once; without ``odometry``, its scans' odometry is not read)."""
         if self.store is not None:
-            for r, scan in self.store.stream(record):
+            for r, scan in self.store.stream(record, odometry):
                 if isinstance(scan, Scan):
                     yield r, scan
             return
@@ -152,15 +152,16 @@ class ScanLog:
         k = bisect.bisect_left(records, record)
         yield from zip(records[k:], self.scans[k:])
 
-    def scans_of(self, records: list[int]) -> Iterator[Scan]:
+    def scans_of(self, records: list[int], odometry: bool = True) -> Iterator[Scan]:
         """The scans of ``records`` in their order, each read once: a lazily read log is read front
-        to back once when they increase (a run's scans), else one by one."""
+        to back once when they increase (a run's scans), else one by one (without ``odometry``:
+        its scans' odometry may be left unread)."""
         if self.store is None or any(b <= a for a, b in zip(records, records[1:])):
             yield from (self.scan(r) for r in records)
             return
         wanted = iter(records)
         r = next(wanted, None)
-        for k, scan in self.scans_from(records[0]) if records else ():
+        for k, scan in self.scans_from(records[0], odometry) if records else ():
             if k == r:
                 yield scan
                 r = next(wanted, None)

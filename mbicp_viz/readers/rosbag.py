@@ -162,11 +162,21 @@ def decode(deserialize, raw, msgtype: str, p: Path, n: int | str):
             f"message {n} ({msgtype}) cannot be decoded: {type(e).__name__}: {str(e)[:200]}", str(p)
         ) from None
     kind = _normalise(msgtype)
-    _has_fields(msg, _FIELDS.get(kind, ()), f"message {n} ({msgtype})", p)
+    if type(msg) not in _CHECKED:
+        _has_fields(msg, _FIELDS.get(kind, ()), f"message {n} ({msgtype})", p)
+        if kind != TF:
+            _CHECKED.add(type(msg))
     if kind == TF:
         for tr in msg.transforms:
-            _has_fields(tr, _TRANSFORM_FIELDS, f"message {n} ({msgtype}): a transform", p)
+            if type(tr) not in _CHECKED:
+                _has_fields(tr, _TRANSFORM_FIELDS, f"message {n} ({msgtype}): a transform", p)
+                _CHECKED.add(type(tr))
     return msg
+
+
+# The message classes whose fields were found as this reader needs them: what a field holds is
+# its class's (the definition rosbags built it from), so each class is checked once.
+_CHECKED: set[type] = set()
 
 
 def _has_fields(msg, fields, what: str, p: Path) -> None:

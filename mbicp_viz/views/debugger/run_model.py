@@ -15,10 +15,10 @@ from functools import cached_property
 
 import numpy as np
 
-from mbicp_viz.core import Pose2, relative
+from mbicp_viz.core import Pose2
 from mbicp_viz.evaluation.health import flags_text
 from mbicp_viz.evaluation.run_score import RelationErrors, relation_errors
-from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices, stamps
+from mbicp_viz.evaluation.trajectory import accumulate, from_first, scan_indices, stamps
 from mbicp_viz.evaluation.versus import Versus
 from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
@@ -72,19 +72,28 @@ class RunModel:
         return self.log.frames.mount if self.base else Pose2()
 
     @cached_property
+    def _facts(self) -> tuple[list, list, list[int]]:
+        """Each visited scan's stored pose, odometry and count of valid readings, read in one pass
+        (an hour-long bag is read front to back once for all three)."""
+        facts = [(s.pose, s.odometry, s.n_valid) for s in self.log.scans_of(self.scans)]
+        poses, odometry, sizes = zip(*facts) if facts else ((), (), ())
+        return list(poses), list(odometry), list(sizes)
+
+    def _reported(self, laser: list | None) -> list[Pose2] | None:
+        """Laser poses relative to the first, in the frame the rows report (the run's world)."""
+        chained = from_first(laser)
+        return (
+            None if chained is None else [self.log.frames.reported(p, self.base) for p in chained]
+        )
+
+    @cached_property
     def stored(self) -> list[Pose2] | None:
-        """The log's scan poses (laser frame) in the frame the rows report, the run's world."""
-        laser = log_poses(self.log, self.rows)
-        if laser is None:
-            return None
-        return [self.log.frames.reported(p, self.base) for p in laser]
+        """The log's scan poses in the frame the rows report."""
+        return self._reported(self._facts[0])
 
     @cached_property
     def odometry(self) -> list[Pose2] | None:
-        odo = [s.odometry for s in self.log.scans_of(self.scans)]
-        if any(o is None for o in odo):
-            return None
-        return [self.log.frames.reported(relative(odo[0], o), self.base) for o in odo]
+        return self._reported(self._facts[1])
 
     @cached_property
     def flagged(self) -> list[int]:
@@ -98,12 +107,11 @@ class RunModel:
     def _map(self) -> tuple[np.ndarray, np.ndarray]:
         """Every ``step``-th scan's points (world frame) and the scan each belongs to."""
         n = len(self.poses)
-        sizes = [s.n_valid for s in self.log.scans_of(self.scans)]
-        step = max(1, math.ceil(sum(sizes) / MAP_POINTS))
+        step = max(1, math.ceil(sum(self._facts[2]) / MAP_POINTS))
         kept = list(range(0, n, step))
         parts = [
             (k, (self.poses[k] @ self.mount).apply(s.points()))
-            for k, s in zip(kept, self.log.scans_of([self.scans[k] for k in kept]))
+            for k, s in zip(kept, self.log.scans_of([self.scans[k] for k in kept], False))
         ]
         xy = np.concatenate([p for _, p in parts]) if parts else np.zeros((0, 2))
         owner = np.concatenate([np.full(len(p), k) for k, p in parts]) if parts else np.zeros(0)
