@@ -30,12 +30,13 @@ def settings_of(reading) -> dict:
     return {k: getattr(v, "value", v) for k, v in asdict(reading).items()}
 
 
-def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]]) -> PartialRows:
-    """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left."""
+def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]], decode) -> PartialRows:
+    """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left
+    (``decode``-d from the file, path and line)."""
     from mbicp_viz.readers.rows import PartialRows
 
-    rows = PartialRows(out, run)
-    done = [(r.get("ref"), r.get("obj")) for r in rows.rows]
+    rows = PartialRows(out, run, decode)
+    done = rows.pairs
     if done != [tuple(p) for p in pairs[: len(done)]]:
         raise InputError(
             "its rows are not this run's first pairs: delete it to start afresh", str(rows.path)
@@ -68,8 +69,8 @@ def matched_rows(
     stopped run ends here with its rows kept and the same command resumes from them (``decode``-d
     from the file, path and line), and ``out`` is written whole at the end; without, the rows stay
     in memory (a Ctrl-C still ends the command, ``user_errors``)."""
-    kept = resumable_rows(out, run, pairs) if out is not None else None
-    rows = [decode(r, str(kept.path), k) for k, r in enumerate(kept.rows, 2)] if kept else []
+    kept = resumable_rows(out, run, pairs, decode) if out is not None else None
+    rows = kept.rows if kept is not None else []
     with Progress(len(pairs)) as bar:
         bar.resumed(len(rows))
 

@@ -12,6 +12,7 @@ object's line in the file is kept: an error names the file, the line and the fie
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -155,53 +156,66 @@ class PartialRows:
     removes them. A stopped or killed run leaves them, and the same run started again resumes
     from them (``rows``); the rows of another run are refused, never mixed in."""
 
-    def __init__(self, out: Path, run: dict):
+    def __init__(self, out: Path, run: dict, decode=lambda row, path, line: row):
         self.out = Path(out)
         self.path = self.out.with_name(self.out.name + PARTIAL)
         self.run = json.loads(json.dumps(run))  # as it reads back
-        # the rows a stopped run left, until the run starts (then on disk only, as the new ones)
-        self.rows: list[dict] = self._resumed() if self.path.exists() else []
+        # the rows a stopped run left (``decode``-d from the file, path and line) and their pairs
+        self.rows: list = []
+        self.pairs: list[tuple] = []
+        self._good = 0  # bytes of the file up to its last whole row
+        if self.path.exists():
+            self._resume(decode)
         self.count = len(self.rows)
         self._file = None
 
-    def _resumed(self) -> list[dict]:
+    def _resume(self, decode) -> None:
+        """The rows of the file, read a line at a time; a last line a kill cut short (no newline,
+        or not JSON) is left out, and that pair is matched again."""
         path = str(self.path)
-        with opening(self.path):
-            lines = self.path.read_bytes().decode("utf-8", "replace").split("\n")
-        theirs = _header(_decoded(lines[0], path, 1)) if lines[0].strip() else None
-        if theirs is None:
-            raise InputError(
-                "not the rows of a stopped run (no first line naming it): delete it or give "
-                "another --out",
-                path,
-                1,
-            )
-        for key in sorted(set(theirs) | set(self.run)):
-            if theirs.get(key) != self.run.get(key):
+        with opening(self.path), open(self.path, "rb") as f:
+            lines = _file_lines(f, path)
+            first = next(lines, "")
+            theirs = _header(_decoded(first, path, 1)) if first.strip() else None
+            if theirs is None:
                 raise InputError(
-                    f"rows of another run ({json.dumps(theirs.get(key))[:60]}; this run: "
-                    f"{json.dumps(self.run.get(key))[:60]}): delete the file to start afresh, or "
-                    "give another --out",
+                    "not the rows of a stopped run (no first line naming it): delete it or give "
+                    "another --out",
                     path,
                     1,
-                    key,
                 )
-        body = [(n, line) for n, line in enumerate(lines[1:], 2) if line.strip()]
-        rows = []
-        for k, (n, line) in enumerate(body):
-            try:
-                rows.append(json.loads(line))
-            except json.JSONDecodeError:
-                if k < len(body) - 1:
-                    raise InputError("invalid JSON: not a row this tool wrote", path, n) from None
-                # the last line, cut short by a kill: that pair is matched again
-        return rows
+            for key in sorted(set(theirs) | set(self.run)):
+                if theirs.get(key) != self.run.get(key):
+                    raise InputError(
+                        f"rows of another run ({json.dumps(theirs.get(key))[:60]}; this run: "
+                        f"{json.dumps(self.run.get(key))[:60]}): delete the file to start afresh, "
+                        "or give another --out",
+                        path,
+                        1,
+                        key,
+                    )
+            self._good, cut = len(first.encode()), None
+            for n, line in enumerate(lines, 2):
+                if cut is not None:
+                    raise InputError("invalid JSON: not a row this tool wrote", path, cut)
+                try:
+                    row = json.loads(line) if line.strip() else None
+                except json.JSONDecodeError:
+                    row = cut = n
+                if not line.endswith("\n"):
+                    cut = n
+                if cut is None and row is not None:
+                    self.pairs.append((row.get("ref"), row.get("obj")))
+                    self.rows.append(decode(row, path, n))
+                if cut is None:
+                    self._good += len(line.encode())
 
     def __enter__(self) -> PartialRows:
-        # the rows read, without a line a kill cut short
-        with written(self.path, say=False) as tmp:
-            tmp.write_text(json.dumps({"partial": self.run}) + "\n" + rows_text(self.rows))
-        self.rows = []  # on disk, and read by now: a long run does not keep them twice
+        if self.path.exists():
+            os.truncate(self.path, self._good)  # without a line a kill cut short
+        else:
+            with written(self.path, say=False) as tmp:
+                tmp.write_text(json.dumps({"partial": self.run}) + "\n")
         self._file = open(self.path, "a")
         return self
 
