@@ -147,6 +147,7 @@ def sequence(
     p, search = pf.matchers[matcher.value], pf.search
     reading = read_options(topic, typestore, mount, upside_down, deskew)
     lg = read_log_saying(log, reading)
+    t0, resumed = time.perf_counter(), []  # the run's pace counts finding its pairs
     pairs = lg.consecutive_pairs(limit)
     run = {
         "command": "eval sequence",
@@ -160,11 +161,9 @@ def sequence(
         "frame": frame.value,
         "budget_s": budget_s,
     }
-    rows = matched_rows(
-        out,
-        run,
-        pairs,
-        lambda on_row, done: match_sequence(
+    def match(on_row, done):
+        resumed.append(len(done))
+        return match_sequence(
             lg,
             p,
             limit,
@@ -176,10 +175,10 @@ def sequence(
             base=frame is Frame.base,
             done=done,
             budget_s=budget_s,
-        ),
-        PairMatch.to_json,
-        parse_pair_match,
-    )
+        )
+
+    rows = matched_rows(out, run, pairs, match, PairMatch.to_json, parse_pair_match)
+    say(_pace(lg, rows[resumed[0] :], time.perf_counter() - t0))
     halted = sum(r.result.reason is Termination.HALTED for r in rows)
     typer.echo(
         f"{len(rows)} pairs matched with {matcher.value}: "
@@ -205,6 +204,17 @@ def sequence(
 
         source = files_source(log, None, None, guess, reading, str(out))
         open_debugger(replace(source, budget_s=budget_s), "127.0.0.1", port, (), None)
+
+
+def _pace(lg, rows: list, seconds: float) -> str:
+    """How fast this run matched: pairs a second, and against the recording's own time when its
+    scans are stamped (the real-time factor `bench throughput` measures)."""
+    text = f"{len(rows)} pairs matched in {seconds:.1f} s ({len(rows) / max(seconds, 1e-9):.1f}/s"
+    if rows:
+        a, b = lg.scan(rows[0].ref).stamp, lg.scan(rows[-1].obj).stamp
+        if a is not None and b is not None and b > a:
+            text += f"; the recording's {b - a:.1f} s at {(b - a) / seconds:.1f}x real time"
+    return text + ")"
 
 
 def _failures(log: str, out: Path, rows: list) -> None:
