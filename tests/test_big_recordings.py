@@ -186,3 +186,27 @@ def test_a_run_makes_its_jobs_as_the_workers_need_them():
     # when the first result came back, only the chunks sent ahead had been made
     size = max(1, min(16, 400 // 16))
     assert seen[0][1] <= pool.IN_FLIGHT_PER_WORKER * 2 * size + size
+
+
+def test_bench_throughput_times_the_run_eval_sequence_makes(intel):
+    """The replayed run is the recording played at the asked rate and beam count, and its
+    real-time factor is the recording's duration over the wall time."""
+    from mbicp_viz.evaluation.throughput import replay_log, throughput
+    from mbicp_viz.readers.params_toml import make_params
+
+    run = replay_log(intel, 6, 90, 20.0)
+    assert len(run.scans) == 7 and all(len(s.ranges) == 90 for s in run.scans)
+    assert np.mean(np.diff([s.stamp for s in run.scans])) == pytest.approx(0.05, rel=0.5)
+    t = throughput(intel, make_params("improved", None), 90, 6, 20.0, [1])
+    assert t.pairs == 6 and t.seconds == pytest.approx(run.scans[-1].stamp - run.scans[0].stamp)
+    line = t.line()
+    assert "90 beams" in line and f"{t.seconds / t.wall_s[1]:6.1f}x real time on 1 core" in line
+
+
+def test_eval_sequence_says_its_pace(tmp_path):
+    out = tmp_path / "r.json"
+    result = CliRunner().invoke(
+        app, ["eval", "sequence", str(DATA / "hokuyo-demo.bag"), "--limit", "5", "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "5 pairs matched in " in result.output and "x real time)" in result.output
