@@ -210,3 +210,25 @@ def test_eval_sequence_says_its_pace(tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert "5 pairs matched in " in result.output and "x real time)" in result.output
+
+
+def test_a_run_over_a_bag_read_through_its_index_steps_over_an_unusable_scan(tmp_path, intel):
+    from mbicp_viz.core import make_scan
+
+    from .bags import Robot, Topic
+
+    scans = [intel.scan(k) for k in range(6)]
+    scans[3] = make_scan(np.full(180, 81.9), scans[3].bearings, valid=np.ones(180, bool))
+    path = write(
+        tmp_path / "e.bag", Robot([Topic("/scan", "laser", scans)], [1, 2, 3, 4, 5, 6]), "ros1"
+    )
+    log = read_log(path)
+    assert log.store is not None and log.known_unusable == {}  # not known before it is read
+    assert [r for r, _ in log.scans_from(1)] == [1, 2, 4, 5]
+    out = tmp_path / "r.json"
+    res = CliRunner().invoke(
+        app, ["eval", "sequence", str(path), "--out", str(out), "--workers", "2"]
+    )
+    assert res.exit_code == 0, res.output
+    assert [(r["ref"], r["obj"]) for r in json_lines(out)] == [(0, 1), (1, 2), (2, 4), (4, 5)]
+    assert "skipped 1 unusable scan(s) of 6 (first: scan 3" in res.output

@@ -236,6 +236,8 @@ def _sequence_notes(lg, rows, truth, guess: Guess, frame: Frame) -> None:
     from mbicp_viz.evaluation.pairs import MISSING
     from mbicp_viz.evaluation.sequence import odometry_summary, truth_summary
 
+    if lg.store is not None and (skipped := lg.unusable_summary()):
+        say(skipped)  # a bag read through its index knows its unusable scans once it is read
     if truth:
         typer.echo("\n".join(truth_summary(rows)))
     if odometry := odometry_summary(rows):
