@@ -161,6 +161,7 @@ def sequence(
         "frame": frame.value,
         "budget_s": budget_s,
     }
+
     def match(on_row, done):
         resumed.append(len(done))
         return match_sequence(

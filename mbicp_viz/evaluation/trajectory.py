@@ -27,9 +27,14 @@ STORED = "log poses"
 
 def accumulate(rows: list[PairMatch]) -> list[Pose2]:
     """Poses of scans rows[0].ref, rows[k].obj ... composed from the matched increments."""
+    return chained([r.result.pose for r in rows])
+
+
+def chained(motions: list[Pose2]) -> list[Pose2]:
+    """The poses a chain of ``motions`` visits, from the identity."""
     poses = [Pose2()]
-    for r in rows:
-        poses.append(poses[-1] @ r.result.pose)
+    for m in motions:
+        poses.append(poses[-1] @ m)
     return poses
 
 
@@ -40,13 +45,11 @@ def scan_indices(rows: list[PairMatch]) -> list[int]:
 
 def log_poses(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
     """The log's own scan poses for the same scans, in the first scan's frame (None if missing)."""
-    return from_first([s.pose for s in log.scans_of(scan_indices(rows), odometry=False)])
-
-
-def from_first(poses: list[Pose2 | None]) -> list[Pose2] | None:
-    """``poses`` in the first one's frame (None when one is missing)."""
-    if any(p is None for p in poses):
-        return None
+    poses = []
+    for s in log.scans_of(scan_indices(rows), odometry=False):
+        if s.pose is None:  # a bag stores none: known at its first scan
+            return None
+        poses.append(s.pose)
     return [relative(poses[0], p) for p in poses]
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from mbicp_viz.core import Pose2
 from mbicp_viz.evaluation.health import flags_text
 from mbicp_viz.evaluation.run_score import RelationErrors, relation_errors
-from mbicp_viz.evaluation.trajectory import accumulate, from_first, scan_indices, stamps
+from mbicp_viz.evaluation.trajectory import accumulate, chained, log_poses, scan_indices, stamps
 from mbicp_viz.evaluation.versus import Versus
 from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
@@ -31,6 +31,7 @@ MAP_POINTS = 150_000  # the most map points sent to the page: the scans are thin
 # The map goes to the page once, in chunks whose visibility follows the slider (a step sends the
 # pair's own scans and a few flags, not the map: 4.6 s a step on the full Intel run before)
 MAP_CHUNKS = 100
+MAP_SAMPLE = 50  # scans whose valid readings say how many a run's scans hold (the map's step)
 
 
 def is_chain(rows: list[PairMatch]) -> bool:
@@ -72,28 +73,20 @@ class RunModel:
         return self.log.frames.mount if self.base else Pose2()
 
     @cached_property
-    def _facts(self) -> tuple[list, list, list[int]]:
-        """Each visited scan's stored pose, odometry and count of valid readings, read in one pass
-        (an hour-long bag is read front to back once for all three)."""
-        facts = [(s.pose, s.odometry, s.n_valid) for s in self.log.scans_of(self.scans)]
-        poses, odometry, sizes = zip(*facts) if facts else ((), (), ())
-        return list(poses), list(odometry), list(sizes)
-
-    def _reported(self, laser: list | None) -> list[Pose2] | None:
-        """Laser poses relative to the first, in the frame the rows report (the run's world)."""
-        chained = from_first(laser)
-        return (
-            None if chained is None else [self.log.frames.reported(p, self.base) for p in chained]
-        )
-
-    @cached_property
     def stored(self) -> list[Pose2] | None:
-        """The log's scan poses in the frame the rows report."""
-        return self._reported(self._facts[0])
+        """The log's scan poses (laser frame) in the frame the rows report, the run's world."""
+        laser = log_poses(self.log, self.rows)
+        if laser is None:
+            return None
+        return [self.log.frames.reported(p, self.base) for p in laser]
 
     @cached_property
     def odometry(self) -> list[Pose2] | None:
-        return self._reported(self._facts[1])
+        """The odometry's track, chained from each row's odometry motion (the log's scans are
+        not read again)."""
+        if any(r.odometry is None for r in self.rows):
+            return None
+        return chained([self.log.frames.reported(r.odometry, self.base) for r in self.rows])
 
     @cached_property
     def flagged(self) -> list[int]:
@@ -107,7 +100,9 @@ class RunModel:
     def _map(self) -> tuple[np.ndarray, np.ndarray]:
         """Every ``step``-th scan's points (world frame) and the scan each belongs to."""
         n = len(self.poses)
-        step = max(1, math.ceil(sum(self._facts[2]) / MAP_POINTS))
+        sample = np.unique(np.linspace(0, n - 1, min(n, MAP_SAMPLE)).astype(int))
+        per_scan = np.median([self.log.scan(self.scans[k]).n_valid for k in sample])
+        step = max(1, math.ceil(n * per_scan / MAP_POINTS))
         kept = list(range(0, n, step))
         parts = [
             (k, (self.poses[k] @ self.mount).apply(s.points()))
