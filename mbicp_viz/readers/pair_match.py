@@ -232,8 +232,13 @@ _PARAMS_SEEN: dict[tuple[str, str], Params] = {}
 
 def _params(f: _Fields, matcher: str) -> Params:
     values = f.get("params", (dict,), "an object of the matcher's parameters")
-    key = (matcher, json.dumps(values, sort_keys=True))
-    if (known := _PARAMS_SEEN.get(key)) is not None:
+    try:  # a flat object of numbers and names, as this tool writes it: its items are the key
+        key = (matcher, tuple(values.items()))
+        known = _PARAMS_SEEN.get(key)
+    except TypeError:  # a value that is a list or an object (refused below)
+        key = (matcher, json.dumps(values, sort_keys=True))
+        known = _PARAMS_SEEN.get(key)
+    if known is not None:
         return known
     try:
         p = params_from_mapping(MATCHERS[matcher].params_type, values, f.path, "params")
