@@ -2,6 +2,7 @@ import contextlib
 import json
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,8 @@ from mbicp_viz.readers import read_log
 # The suite's numbers must not depend on how far a background compile has come: every process it
 # starts compiles its kernels itself (core/tiers.py; tests/test_tiers.py starts the quick tier).
 os.environ["MBICP_VIZ_JIT"] = "eager"
+# Logs read whole are cached (readers/log_cache.py): the suite's own cache, never the user's.
+os.environ.setdefault("MBICP_VIZ_CACHE", tempfile.mkdtemp(prefix="mbicp-viz-cache-"))
 
 # No deadline: a test's first example may compile a matcher's kernels (numba), which takes
 # seconds on a cold cache; a deadline there measures the compiler, not the code.

@@ -232,3 +232,42 @@ def test_a_run_over_a_bag_read_through_its_index_steps_over_an_unusable_scan(tmp
     assert res.exit_code == 0, res.output
     assert [(r["ref"], r["obj"]) for r in json_lines(out)] == [(0, 1), (1, 2), (2, 4), (4, 5)]
     assert "skipped 1 unusable scan(s) of 6 (first: scan 3" in res.output
+
+
+def test_a_log_read_whole_is_cached_and_read_from_the_cache_alike(tmp_path, monkeypatch):
+    """A CARMEN log is read whole once and cached outside its folder; the next opening maps the
+    cache and reads each scan when asked for, every scan, pose, odometry and note as before."""
+    import shutil
+
+    from mbicp_viz.readers import log_cache
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(log_cache, "CACHED_RECORDS", 10)
+    path = tmp_path / "ro" / "intel.log.gz"
+    path.parent.mkdir()
+    shutil.copy(INTEL, path)
+    path.parent.chmod(0o555)  # a read-only input: nothing is written beside it
+    try:
+        whole = read_log(path)
+        cached = read_log(path)
+    finally:
+        path.parent.chmod(0o755)
+    assert whole.store is None and cached.store is not None
+    assert os.listdir(path.parent) == ["intel.log.gz"]
+    assert "cached in" in whole.notes[-1] and "read from its cache" in cached.notes[-1]
+    assert cached.notes[:-1] == whole.notes[:-1]
+    assert cached.records == whole.records and cached.frames == whole.frames
+    assert cached.odometry == whole.odometry and cached.topic == whole.topic
+    for k in [59, 0, 31]:
+        a, b = cached.scan(k), whole.scan(k)
+        assert np.array_equal(a.ranges, b.ranges) and np.array_equal(a.bearings, b.bearings)
+        assert np.array_equal(a.valid, b.valid) and (a.pose, a.odometry, a.stamp) == (
+            b.pose,
+            b.odometry,
+            b.stamp,
+        )
+        assert a.source == b.source
+    assert cached.consecutive_pairs() == whole.consecutive_pairs()
+    path.touch()  # the file changed: read whole again
+    os.utime(path, ns=(1, 1))
+    assert read_log(path).store is None

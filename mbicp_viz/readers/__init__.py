@@ -90,7 +90,13 @@ def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
             str(p),
             field="--topic",
         )
-    log = fn(str(p), *streams.get(module, ()))
+    args = streams.get(module, ())
+    if module == "rosbag" or not p.is_file():  # a bag has an index of its own
+        log = fn(str(p), *args)
+    else:
+        from .log_cache import read_cached
+
+        log = read_cached(str(p), module, args, lambda: fn(str(p), *args))
     if o.mount is not None:
         log.frames = replace(log.frames, mount=o.mount, mount_source="--mount")
     if o.upside_down:

@@ -25,6 +25,7 @@ from mbicp_viz.errors import InputError
 
 if TYPE_CHECKING:
     from .bag_index import BagScans
+    from .log_cache import CachedScans
 
 # Records fewer than one in this many of those they span are read one by one, not front to back
 # (a bag's scan by its index takes about 30 times as long as the next one in a pass).
@@ -75,7 +76,8 @@ class Frames:
 @dataclass
 class ScanLog:
     """A file's scans. Read whole (``scans`` a list), or read when asked for (``store``: an indexed
-    bag): ``scan(record)`` then reads one record, and ``scans`` and ``unusable`` look at every
+    bag, ``bag_index.BagScans``, or a log kept in the cache, ``log_cache.CachedScans``):
+    ``scan(record)`` then reads one record, and ``scans`` and ``unusable`` look at every
     record once, the first time a command needs them (``Survey``)."""
 
     path: str
@@ -93,7 +95,7 @@ class ScanLog:
     scan_topics: dict[str, str] = field(default_factory=dict)
     odometry_source: str | None = None
     notes: list[str] = field(default_factory=list)  # warnings for the user (a bag cut short ...)
-    store: BagScans | None = None
+    store: BagScans | CachedScans | None = None
 
     def __post_init__(self):
         if self.store is None or isinstance(self.scans, _UsableScans):
