@@ -137,9 +137,15 @@ def children_of(pid: int) -> list[int]:
     return [int(p) for p in out.split()]
 
 
+# A stop is seen within the pool's poll (0.1 s); ending the workers and the interpreter takes the
+# rest. 2 s held on an idle machine and failed once on a loaded CI: the promise is seconds, not a
+# hang, and a run that went on would take far longer than this.
+STOPS_WITHIN_S = 5.0
+
+
 def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(tmp_path):
-    """Real SIGINTs to a real process running the pool: the parent ends within 2 s with the
-    finished rows kept, its workers ended with it, no traceback."""
+    """Real SIGINTs to a real process running the pool: the parent ends within seconds
+    (``STOPS_WITHIN_S``) with the finished rows kept, its workers ended with it, no traceback."""
     out = tmp_path / "seq.json"
     cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess"]
     cmd += ["search", "--out", str(out), "--workers", "2"]
@@ -156,7 +162,7 @@ def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(t
     for _ in range(3):
         proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=60)
-    assert time.monotonic() - t0 < 2.0
+    assert time.monotonic() - t0 < STOPS_WITHIN_S
     stderr = seen + stderr
     assert proc.returncode == 130, stderr
     rows = json_lines(out.with_name("seq.json.partial"))[1:]
@@ -178,7 +184,7 @@ def test_ctrl_c_ends_any_command_in_one_line_without_a_traceback():
     t0 = time.monotonic()
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
-    assert time.monotonic() - t0 < 2.0
+    assert time.monotonic() - t0 < STOPS_WITHIN_S
     assert proc.returncode == 130 and err.strip().splitlines()[-1] == "mbicp-viz: interrupted", err
     assert "Traceback" not in err
 
