@@ -271,3 +271,15 @@ def test_a_log_read_whole_is_cached_and_read_from_the_cache_alike(tmp_path, monk
     path.touch()  # the file changed: read whole again
     os.utime(path, ns=(1, 1))
     assert read_log(path).store is None
+
+
+@given(n=st.integers(1, 70_000))
+def test_a_long_trajectory_is_drawn_through_evenly_spaced_poses_ending_at_its_last(n):
+    from mbicp_viz.views import scene
+
+    poses = [Pose2(float(k), 0.0, 0.0) for k in range(n)]
+    drawn = scene._drawn_track(poses)[:, 0]
+    assert len(drawn) <= scene.RUN_TRACK_VERTICES + 1 and drawn[0] == 0 and drawn[-1] == n - 1
+    steps = np.diff(drawn)
+    assert np.all(steps > 0) and (n <= scene.RUN_TRACK_VERTICES) == np.all(steps == 1)
+    assert len(set(steps[:-1])) <= 1  # evenly spaced, but for the step to the last pose
