@@ -283,3 +283,14 @@ def test_a_long_trajectory_is_drawn_through_evenly_spaced_poses_ending_at_its_la
     steps = np.diff(drawn)
     assert np.all(steps > 0) and (n <= scene.RUN_TRACK_VERTICES) == np.all(steps == 1)
     assert len(set(steps[:-1])) <= 1  # evenly spaced, but for the step to the last pose
+
+
+def test_every_scan_of_a_lazily_read_log_is_read_front_to_back(tmp_path, intel):
+    path = write(tmp_path / "r.bag", intel_robot(intel, 0, 30, MOUNT), "ros1")
+    log = read_log(path)
+    loads = []
+    real = log.store.load
+    log.store.load = lambda k: loads.append(k) or real(k)
+    stamps = [s.stamp for s in log.scans]  # one pass, no seek per scan
+    assert len(stamps) == 30 and loads == [] and stamps == sorted(stamps)
+    assert [s.stamp for s in walked(path).scans] == stamps

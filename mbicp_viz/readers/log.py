@@ -289,6 +289,12 @@ class _UsableScans(Sequence):
             return [self[i] for i in range(*k.indices(len(self)))]
         return self.survey.store.load(self.survey.usable[k])
 
+    def __iter__(self):
+        """Front to back once (each scan by its own read would seek for every one)."""
+        for _, scan in self.survey.store.stream():
+            if isinstance(scan, Scan):
+                yield scan
+
 
 class _Unusable(Mapping):
     def __init__(self, survey: Survey):
