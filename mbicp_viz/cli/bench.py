@@ -274,7 +274,12 @@ def throughput(
         str, typer.Option("--beams", help="beam counts to resample to, comma-separated")
     ] = "180,361,681,1081,1947",
     rate_hz: Annotated[float, typer.Option("--rate-hz", min=0.1, max=1000)] = 40.0,
-    pairs: Annotated[int, typer.Option("--pairs", min=2, help="consecutive pairs per run")] = 400,
+    pairs: Annotated[
+        int,
+        typer.Option(
+            "--pairs", min=2, help="consecutive pairs per run (a pool takes a while to start)"
+        ),
+    ] = 1000,
     matcher: MatcherOpt = DEFAULT_MATCHER,
     params: ParamsOpt = None,
     topic: TopicOpt = None,
