@@ -289,7 +289,7 @@ def throughput(
     import os
 
     from mbicp_viz.errors import InputError
-    from mbicp_viz.evaluation.bench import machine_line
+    from mbicp_viz.evaluation.bench import machine_line, speed_probe_us
     from mbicp_viz.evaluation.throughput import throughput as run_throughput
     from mbicp_viz.readers.params_toml import make_params
 
@@ -305,8 +305,13 @@ def throughput(
     p = make_params(matcher.value, params)
     cores = sorted({1, os.cpu_count() or 1})
     typer.echo(f"{matcher.value} on {source} played to and fro at {rate_hz:g} Hz; {machine_line()}")
+    before = speed_probe_us()
     for b in counts:
         typer.echo(run_throughput(lg, p, b, pairs, rate_hz, cores).line())
+    typer.echo(
+        f"machine speed probe {before:.2f} us before, {speed_probe_us():.2f} us after (lower is "
+        "faster)"
+    )
 
 
 def opening(
