@@ -49,7 +49,7 @@ def matches(
     on."""
     import numpy as np
 
-    from mbicp_viz.evaluation.bench import bench, machine_line, speed_probe_us
+    from mbicp_viz.evaluation.bench import bench, machine_line, probe_line, speed_probe_us
     from mbicp_viz.readers.params_toml import make_params
 
     lg = read_log_saying(log, read_options(topic))
@@ -67,11 +67,7 @@ def matches(
     after = speed_probe_us()
     for t in timings:
         typer.echo(t.line())
-    typer.echo(
-        f"machine speed probe    {before:.2f} us before, {after:.2f} us after (a fixed numpy "
-        "workload; "
-        "lower is faster)"
-    )
+    typer.echo(probe_line(before, after))
     typer.echo(
         f"observer overhead      {100.0 * (timings[1].median / timings[0].median - 1.0):+.0f} % "
         "(median)"
@@ -127,7 +123,7 @@ def originals(
 ):
     """This MbICP, ICP and PL-ICP against the original C code on the same pairs (agreement,
     successes, time per match); improved MbICP against CSM's PL-ICP."""
-    from mbicp_viz.evaluation.bench import machine_line, speed_probe_us
+    from mbicp_viz.evaluation.bench import machine_line, probe_line, speed_probe_us
     from mbicp_viz.evaluation.originals import (
         check_built,
         compare,
@@ -155,10 +151,7 @@ def originals(
         [(str(params), improved)] if params else []
     ):
         typer.echo(improved_against_plicp(pairs, p, label, plicp, repeat))
-    typer.echo(
-        f"machine speed probe {before:.2f} us before, {speed_probe_us():.2f} us after (lower is "
-        "faster)"
-    )
+    typer.echo(probe_line(before, speed_probe_us()))
 
 
 def gui(
@@ -289,7 +282,7 @@ def throughput(
     import os
 
     from mbicp_viz.errors import InputError
-    from mbicp_viz.evaluation.bench import machine_line, speed_probe_us
+    from mbicp_viz.evaluation.bench import machine_line, probe_line, speed_probe_us
     from mbicp_viz.evaluation.throughput import throughput as run_throughput
     from mbicp_viz.readers.params_toml import make_params
 
@@ -308,10 +301,7 @@ def throughput(
     before = speed_probe_us()
     for b in counts:
         typer.echo(run_throughput(lg, p, b, pairs, rate_hz, cores).line())
-    typer.echo(
-        f"machine speed probe {before:.2f} us before, {speed_probe_us():.2f} us after (lower is "
-        "faster)"
-    )
+    typer.echo(probe_line(before, speed_probe_us()))
 
 
 def opening(

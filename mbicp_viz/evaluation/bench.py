@@ -109,6 +109,15 @@ def speed_probe_us() -> float:
     )
 
 
+def probe_line(before: float, after: float) -> str:
+    """The speed probe around a benchmark, in words: figures from a machine that drifted between
+    the two are not to be compared."""
+    return (
+        f"machine speed probe    {before:.2f} us before, {after:.2f} us after (a fixed numpy "
+        "workload; lower is faster)"
+    )
+
+
 def _run_seconds(args: list[str], env: dict | None = None) -> float:
     """Wall time of one command to its end [s]; an error if it fails."""
     import subprocess
