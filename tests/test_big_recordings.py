@@ -6,6 +6,7 @@ import math
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -294,3 +295,45 @@ def test_every_scan_of_a_lazily_read_log_is_read_front_to_back(tmp_path, intel):
     stamps = [s.stamp for s in log.scans]  # one pass, no seek per scan
     assert len(stamps) == 30 and loads == [] and stamps == sorted(stamps)
     assert [s.stamp for s in walked(path).scans] == stamps
+
+
+def test_a_pass_and_another_threads_scans_share_the_open_bag(tmp_path, intel):
+    """The debugger's tabs are threads: one reading a run front to back while another opens
+    pairs get the same scans as alone (one open reader: its steps are taken under a lock)."""
+    import sys
+    import threading
+
+    robot, play = intel_robot(intel, 0, 60, MOUNT), Replay(60, 1200)
+    played = [robot.topics[0].scans[play[k]] for k in range(1200)]
+    robot = replace(
+        robot,
+        stamps=[100.0 + 0.05 * k for k in range(1200)],
+        topics=[replace(robot.topics[0], scans=played)],
+        odometry=[robot.odometry[play[k]] for k in range(1200)],
+    )
+    path = write(tmp_path / "r.bag", robot, "ros1")
+    log, alone = read_log(path), walked(path)
+    picked, errors = [], []
+
+    def pairs():
+        k = 0
+        try:
+            for _ in range(1000):
+                k = (k * 7 + 13) % 1200
+                log.store._cache.clear()
+                picked.append((k, log.scan(k)))
+        except Exception as e:
+            errors.append(e)
+
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # threads take turns as often as they can
+    try:
+        other = threading.Thread(target=pairs)
+        other.start()
+        streamed = list(log.scans_from(0))
+        other.join()
+    finally:
+        sys.setswitchinterval(switch)
+    assert not errors and len(picked) == 1000
+    for k, s in streamed + picked:
+        assert same_scan(s, alone.scan(k)) and s.stamp == alone.scan(k).stamp

@@ -166,6 +166,18 @@ class BagScans:
 
         return laser_scan(msg, self.path, k, self.upside_down, odometry, self.mount)
 
+    def _locked(self, messages: Iterator) -> Iterator:
+        """``messages`` taken one at a time under the reader's lock: a pass and another thread's
+        ``load`` share one open reader (its file position, its chunk in hand), and rosbags'
+        readers seek again at each message, so their steps may interleave but never overlap."""
+        messages = iter(messages)
+        while True:
+            with self._lock:
+                item = next(messages, None)
+            if item is None:
+                return
+            yield item
+
     def stream(
         self, start: int = 0, odometry: bool = True
     ) -> Iterator[tuple[int, Scan | UnusableScan]]:
@@ -173,12 +185,18 @@ class BagScans:
         odometry a window past it has been read (``odometry``: False, the scans without it)."""
         from .rosbag import decode, raw_messages
 
-        reader = self._open()
-        wanted = self._connections(self.topic)
+        if start >= self.records:
+            return
+        with self._lock:
+            reader = self._open()
+            wanted = self._connections(self.topic)
         with_odometry = odometry and self.odometry is not None
         if with_odometry:
             wanted += self._connections(self.odometry.topic)
-        begin = int(self.stamps_ns[start]) - int(ODOMETRY_WINDOW_S * 1e9) if start else None
+        first = int(self.stamps_ns[start])
+        begin = first - int(ODOMETRY_WINDOW_S * 1e9) if start else None
+        # records before ``start`` recorded at its very stamp, to pass over
+        same = start - bisect.bisect_left(self.stamps_ns, first)
         w = ODOMETRY_WINDOW_S
         odometry: deque = deque()  # (record stamp, its samples) within the waiting scans' window
         waiting: deque = deque()  # (record, record stamp, message)
@@ -194,11 +212,12 @@ class BagScans:
             while odometry and odometry[0][0] < horizon:
                 odometry.popleft()
 
-        for c, t, raw in raw_messages(reader, self.path, wanted, begin):
+        for c, t, raw in self._locked(raw_messages(reader, self.path, wanted, begin)):
             stamp = t * 1e-9
             msg = decode(reader.deserialize, raw, c.msgtype, Path(self.path), f"at {t} ns")
             if c.topic == self.topic:
-                if t < self.stamps_ns[start]:
+                if t < first or (t == first and same > 0):
+                    same -= t == first
                     continue
                 waiting.append((k, stamp, msg))
                 k += 1
