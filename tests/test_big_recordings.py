@@ -337,3 +337,16 @@ def test_a_pass_and_another_threads_scans_share_the_open_bag(tmp_path, intel):
     assert not errors and len(picked) == 1000
     for k, s in streamed + picked:
         assert same_scan(s, alone.scan(k)) and s.stamp == alone.scan(k).stamp
+
+
+def test_a_damaged_cache_entry_is_read_whole_again(tmp_path, monkeypatch):
+    from mbicp_viz.readers import log_cache
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(log_cache, "CACHED_RECORDS", 10)
+    read_log(INTEL)
+    folder = log_cache.entry(str(INTEL), "carmen", (None,))
+    (folder / "ranges.npy").write_bytes(b"\\x93NUMPY cut short")
+    again = read_log(INTEL)  # the entry is dropped, the file read whole and cached anew
+    assert again.store is None and "cached in" in again.notes[-1]
+    assert read_log(INTEL).store is not None

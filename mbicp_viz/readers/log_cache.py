@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import threading
 from collections.abc import Iterator
 from dataclasses import replace
@@ -96,6 +97,14 @@ def save(log: ScanLog, folder: Path) -> bool:
     return True
 
 
+ARRAYS = ("ranges", "bearings", "valid", "ends", "records", "poses", "odometry", "stamps", "lines")
+
+
+def mapped(folder: Path) -> dict[str, np.ndarray]:
+    """A cache entry's scan arrays, mapped from disk (read when sliced)."""
+    return {n: np.load(folder / f"{n}.npy", mmap_mode="r") for n in ARRAYS}
+
+
 class CachedScans:
     """A cached log's scans, mapped from disk (``ScanLog.store``). It pickles as its folder."""
 
@@ -118,9 +127,7 @@ class CachedScans:
     def _mapped(self) -> dict[str, np.ndarray]:
         with self._lock:
             if self._arrays is None:
-                names = ("ranges", "bearings", "valid", "ends", "records", "poses", "odometry")
-                names += ("stamps", "lines")
-                self._arrays = {n: np.load(self.folder / f"{n}.npy", mmap_mode="r") for n in names}
+                self._arrays = mapped(self.folder)
                 self._index = {int(r): k for k, r in enumerate(self._arrays["records"])}
             return self._arrays
 
@@ -167,10 +174,16 @@ class CachedScans:
 def cached_log(folder: Path, path: str) -> ScanLog | None:
     """The log a cache folder holds, its scans read when asked for; None when there is none (or
     it cannot be read: the file is then read whole again)."""
+    if not folder.is_dir():
+        return None
     try:
         meta = json.loads((folder / "meta.json").read_text())
         odometry = np.load(folder / "log_odometry.npy")
-    except (OSError, ValueError):
+        arrays = mapped(folder)
+        if len(arrays["records"]) + len(meta["unusable"]) != meta["records"]:
+            raise ValueError("records")
+    except (OSError, ValueError, KeyError, TypeError):  # damaged: read the file whole again
+        shutil.rmtree(folder, ignore_errors=True)
         return None
     x, y, theta, source, base, frame_id = meta["frames"]
     unusable = {int(r): (reason, line) for r, (reason, line) in meta["unusable"].items()}
