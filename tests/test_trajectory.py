@@ -130,3 +130,25 @@ def test_kalman_without_odometry_is_a_clean_error(tmp_path):
         ],
     )
     assert res.exit_code == 2 and "needs odometry" in res.output
+
+
+def test_the_odometry_track_is_the_bases_when_the_rows_report_the_base(tmp_path, intel):
+    """A laser mounted off the base's centre: the odometry chained from the rows is the base's
+    track (the one the matches are chained in), not the laser's."""
+    from mbicp_viz.evaluation.trajectory import odometry_chain
+    from mbicp_viz.readers.rows import read_rows
+
+    from .bags import intel_robot, write
+
+    mount = Pose2(0.3, 0.1, 0.5)
+    robot = intel_robot(intel, 0, 8, mount)
+    path = write(tmp_path / "r.bag", robot, "ros1")
+    out = tmp_path / "rows.json"
+    args = ["eval", "sequence", str(path), "--out", str(out), "--workers", "1"]
+    assert CliRunner().invoke(app, args).exit_code == 0
+    rows = read_rows(out)
+    assert rows[0].frame == "base_link"
+    track = odometry_chain(read_log(path), rows)
+    base = robot.odometry
+    for k, pose in enumerate(track):
+        assert max(pose_error(pose, relative(base[0], base[k]))) < 1e-6

@@ -30,7 +30,7 @@ from .trajectory import (
     ODOMETRY_SIGMA,
     accumulate,
     kalman,
-    scan_indices,
+    odometry_chain,
     stamps,
 )
 
@@ -148,10 +148,9 @@ def run_tracks(
             )
     t = [s + offset for s in stamps(log, rows)]
     tracks = {"matches chained": (t, accumulate(rows))}
-    odometry = [s.odometry for s in log.scans_of(scan_indices(rows))]
-    if all(o is not None for o in odometry):
+    if (odometry := odometry_chain(log, rows)) is not None:
         tracks[FUSED] = (t, kalman(rows, odometry, ODOMETRY_SIGMA, MATCH_SIGMA))
-        tracks["raw odometry"] = (t, [relative(odometry[0], o) for o in odometry])
+        tracks["raw odometry"] = (t, odometry)
     return tracks
 
 

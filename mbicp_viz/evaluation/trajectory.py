@@ -38,6 +38,16 @@ def chained(motions: list[Pose2]) -> list[Pose2]:
     return poses
 
 
+def odometry_chain(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
+    """The odometry's track over the scans the rows visit, from the first, in the frame the rows
+    report (the base's when they do): each row's odometry motion chained, no scan read again.
+    None when a row has no odometry."""
+    if any(r.odometry is None for r in rows):
+        return None
+    base = rows[0].frame != "laser"
+    return chained([log.frames.reported(r.odometry, base) for r in rows])
+
+
 def scan_indices(rows: list[PairMatch]) -> list[int]:
     """The scans a sequence of consecutive rows visits."""
     return [rows[0].ref] + [r.obj for r in rows]
@@ -62,8 +72,8 @@ def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str
     if stored is not None:
         out[STORED] = stored
     if fuse:
-        odo = [s.odometry for s in log.scans_of(scan_indices(rows))]
-        if any(o is None for o in odo):
+        odo = odometry_chain(log, rows)
+        if odo is None:
             raise InputError(
                 "--kalman needs odometry for every scan; this log has none",
                 log.path,

@@ -18,7 +18,13 @@ import numpy as np
 from mbicp_viz.core import Pose2
 from mbicp_viz.evaluation.health import flags_text
 from mbicp_viz.evaluation.run_score import RelationErrors, relation_errors
-from mbicp_viz.evaluation.trajectory import accumulate, chained, log_poses, scan_indices, stamps
+from mbicp_viz.evaluation.trajectory import (
+    accumulate,
+    log_poses,
+    odometry_chain,
+    scan_indices,
+    stamps,
+)
 from mbicp_viz.evaluation.versus import Versus
 from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
@@ -84,9 +90,7 @@ class RunModel:
     def odometry(self) -> list[Pose2] | None:
         """The odometry's track, chained from each row's odometry motion (the log's scans are
         not read again)."""
-        if any(r.odometry is None for r in self.rows):
-            return None
-        return chained([self.log.frames.reported(r.odometry, self.base) for r in self.rows])
+        return odometry_chain(self.log, self.rows)
 
     @cached_property
     def flagged(self) -> list[int]:
