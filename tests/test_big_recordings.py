@@ -350,3 +350,24 @@ def test_a_damaged_cache_entry_is_read_whole_again(tmp_path, monkeypatch):
     again = read_log(INTEL)  # the entry is dropped, the file read whole and cached anew
     assert again.store is None and "cached in" in again.notes[-1]
     assert read_log(INTEL).store is not None
+
+
+def test_the_cache_removes_its_least_recently_used_entries_beyond_its_size(tmp_path, monkeypatch):
+    import shutil
+
+    from mbicp_viz.readers import log_cache
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(log_cache, "CACHED_RECORDS", 10)
+    logs = [tmp_path / f"{k}.log.gz" for k in range(3)]
+    for k, path in enumerate(logs):
+        shutil.copy(INTEL, path)
+        os.utime(path, ns=(k + 1, k + 1))  # three files, three entries
+    read_log(logs[0])
+    size = sum(f.stat().st_size for f in log_cache.entry(str(logs[0]), "carmen", (None,)).iterdir())
+    monkeypatch.setattr(log_cache, "CACHE_BYTES", int(2.5 * size))  # room for two entries
+    read_log(logs[1])
+    read_log(logs[0])  # used again: now the most recent
+    read_log(logs[2])  # a third entry: the least recently used one goes
+    kept = [log_cache.entry(str(p), "carmen", (None,)).is_dir() for p in logs]
+    assert kept == [True, False, True]

@@ -10,6 +10,8 @@ records' reasons, and the log's frames, odometry and notes. The next opening of 
 (same path, size and modification time, same stream) maps those arrays and reads one scan at a
 time, in memory bounded by the scans in view; a note says the cache was used. Logs under
 ``CACHED_RECORDS`` scan records are not cached: reading them whole takes well under a second.
+The cache holds at most ``CACHE_BYTES``: writing an entry removes the least recently used ones
+beyond it.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from mbicp_viz.core import Pose2, Scan, ScanSource, UnusableScan
 from .log import Frames, ScanLog
 
 CACHED_RECORDS = 5_000  # logs with fewer scan records are read whole each time
+CACHE_BYTES = 4_000_000_000  # entries beyond this, least recently used first, are removed
 FORMAT = 1  # the layout of a cache entry; a new layout ignores the old entries
 
 
@@ -202,14 +205,35 @@ def cached_log(folder: Path, path: str) -> ScanLog | None:
     )
 
 
+def prune(logs: Path, limit: int, keep: Path) -> None:
+    """Remove the entries of ``logs`` least recently used first while they hold more than
+    ``limit`` bytes (``keep``, the one just written, stays)."""
+    entries = []
+    for folder in logs.iterdir():
+        try:
+            size = sum(f.stat().st_size for f in folder.iterdir())
+            entries.append(((folder / "meta.json").stat().st_mtime_ns, size, folder))
+        except OSError:  # another process removing it, or not an entry
+            continue
+    total = sum(size for _, size, _ in entries)
+    for _, size, folder in sorted(entries):
+        if total <= limit:
+            return
+        if folder != keep:
+            shutil.rmtree(folder, ignore_errors=True)
+            total -= size
+
+
 def read_cached(path: str, reader: str, args: tuple, read) -> ScanLog:
     """``read()``'s log of ``path``, from the cache when it holds it; a log of ``CACHED_RECORDS``
     records or more read whole is cached for the next time."""
     folder = entry(path, reader, args)
     if (log := cached_log(folder, path)) is not None:
+        os.utime(folder / "meta.json")  # used: the last to be removed
         return log
     log = read()
     if log.records >= CACHED_RECORDS and save(log, folder):
+        prune(folder.parent, CACHE_BYTES, keep=folder)
         note = f"{path}: read whole, and cached in {folder}: the next opening reads it from there"
         return replace(log, notes=[*log.notes, note])
     return log
