@@ -18,6 +18,7 @@ from typer.testing import CliRunner
 from mbicp_viz.cli import app
 from mbicp_viz.core import Pose2, pose_error
 from mbicp_viz.evaluation import pool
+from mbicp_viz.evaluation.bench import run_measured
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.rosbag import _to_log, _walk_ros1
 from mbicp_viz.writers.replay import Replay, replayed, resampled
@@ -134,11 +135,7 @@ def test_replaying_needs_stamps(intel):
 
 
 def peak_mb(args: list[str]) -> float:
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    assert os.waitstatus_to_exitcode(status) == 0, proc.stderr.read().decode()[-500:]
-    proc.stderr.close()
-    return usage.ru_maxrss / 1024.0
+    return run_measured(args)[1]
 
 
 def test_memory_does_not_grow_with_the_bag(tmp_path):

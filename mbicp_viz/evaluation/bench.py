@@ -118,16 +118,22 @@ def probe_line(before: float, after: float) -> str:
     )
 
 
-def _run_seconds(args: list[str], env: dict | None = None) -> float:
-    """Wall time of one command to its end [s]; an error if it fails."""
+def run_measured(args: list[str], env: dict | None = None) -> tuple[float, float]:
+    """Wall time [s] and peak resident memory [MB] of one process run to its end; an error if it
+    fails."""
+    import os
     import subprocess
 
     t0 = time.perf_counter()
-    proc = subprocess.run(args, capture_output=True, text=True, env=env)
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    _, status, usage = os.wait4(proc.pid, 0)
     took = time.perf_counter() - t0
+    err = proc.stderr.read().decode("utf-8", "replace")
+    proc.stderr.close()
+    proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(args)} failed: {proc.stderr.strip()[-300:]}")
-    return took
+        raise RuntimeError(f"{' '.join(args)} failed: {err.strip()[-300:]}")
+    return took, usage.ru_maxrss / 1024.0
 
 
 def _wait_background_compile(cache: str) -> None:
@@ -152,18 +158,18 @@ def startup(
     import tempfile
 
     env = {k: v for k, v in os.environ.items() if k != "MBICP_VIZ_JIT"}  # the tiers a user gets
-    helps = [_run_seconds(c) for _ in range(repeat) for c in commands[:1]]
-    each = [min(_run_seconds(c) for _ in range(max(1, repeat // 3))) for c in commands[1:]]
+    helps = [run_measured(c)[0] for _ in range(repeat) for c in commands[:1]]
+    each = [min(run_measured(c)[0] for _ in range(max(1, repeat // 3))) for c in commands[1:]]
     cold, compiled, warm, first_result = [], [], [], []
     for _ in range(max(1, repeat // 3)):
         with tempfile.TemporaryDirectory() as cache:
             t0 = time.perf_counter()
-            cold.append(_run_seconds(match, env | {"NUMBA_CACHE_DIR": cache}))
+            cold.append(run_measured(match, env | {"NUMBA_CACHE_DIR": cache})[0])
             _wait_background_compile(cache)
             compiled.append(time.perf_counter() - t0)
-            warm.append(_run_seconds(match, env | {"NUMBA_CACHE_DIR": cache}))
+            warm.append(run_measured(match, env | {"NUMBA_CACHE_DIR": cache})[0])
         with tempfile.TemporaryDirectory() as cache:
-            first_result.append(_run_seconds(debugger, env | {"NUMBA_CACHE_DIR": cache}))
+            first_result.append(run_measured(debugger, env | {"NUMBA_CACHE_DIR": cache})[0])
             _wait_background_compile(cache)
     to_ms = lambda v: 1000.0 * np.array(v)  # noqa: E731
     return [

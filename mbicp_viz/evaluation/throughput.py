@@ -9,14 +9,14 @@ beam count asked for, at the scan rate asked for.
 
 from __future__ import annotations
 
-import os
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, replace
 
 from mbicp_viz.core import Params
 from mbicp_viz.readers import ScanLog
+
+from .bench import run_measured
 
 
 @dataclass(frozen=True)
@@ -84,20 +84,6 @@ class Opening:
         return f"{self.label:<34} {self.wall_s:6.2f} s   peak RSS {self.peak_mb:6.0f} MB"
 
 
-def _run_measured(args: list[str]) -> tuple[float, float]:
-    """Wall time [s] and peak resident memory [MB] of one process to its end."""
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    took = time.perf_counter() - t0
-    err = proc.stderr.read().decode("utf-8", "replace")
-    proc.stderr.close()
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(args)} failed: {err.strip()[-300:]}")
-    return took, usage.ru_maxrss / 1024.0
-
-
 def opening(
     path: str, pair: tuple[int, int], repeat: int, topic: str | None = None
 ) -> list[Opening]:
@@ -117,6 +103,6 @@ def opening(
         (f"match --pair {pair[0]} {pair[1]}", match),
         ("debugger first result", debugger),
     ):
-        runs = [_run_measured(args) for _ in range(repeat)]
+        runs = [run_measured(args) for _ in range(repeat)]
         out.append(Opening(label, min(w for w, _ in runs), max(m for _, m in runs)))
     return out

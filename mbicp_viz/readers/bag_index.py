@@ -106,14 +106,11 @@ class BagScans:
 
     def _decoded(self, topic: str, start_ns: int, stop_ns: int) -> list:
         """(record stamp [s], message) of ``topic`` within [start, stop)."""
-        from .rosbag import decode, raw_messages
+        from .rosbag import decoded_messages
 
-        reader = self._open()
         wanted = self._connections(topic)
-        return [
-            (t * 1e-9, decode(reader.deserialize, raw, c.msgtype, Path(self.path), f"at {t} ns"))
-            for c, t, raw in raw_messages(reader, self.path, wanted, start_ns, stop_ns)
-        ]
+        msgs = decoded_messages(self._open(), self.path, wanted, start_ns, stop_ns)
+        return [(t * 1e-9, m) for _, t, m in msgs]
 
     def load(self, k: int) -> Scan | UnusableScan:
         """Record ``k``: its scan, or why it cannot be matched."""
@@ -183,7 +180,7 @@ class BagScans:
     ) -> Iterator[tuple[int, Scan | UnusableScan]]:
         """Records ``start`` ... in order, read front to back once: each scan leaves once the
         odometry a window past it has been read (``odometry``: False, the scans without it)."""
-        from .rosbag import decode, raw_messages
+        from .rosbag import decoded_messages
 
         if start >= self.records:
             return
@@ -212,9 +209,8 @@ class BagScans:
             while odometry and odometry[0][0] < horizon:
                 odometry.popleft()
 
-        for c, t, raw in self._locked(raw_messages(reader, self.path, wanted, begin)):
+        for c, t, msg in self._locked(decoded_messages(reader, self.path, wanted, begin)):
             stamp = t * 1e-9
-            msg = decode(reader.deserialize, raw, c.msgtype, Path(self.path), f"at {t} ns")
             if c.topic == self.topic:
                 if t < first or (t == first and same > 0):
                     same -= t == first

@@ -161,13 +161,13 @@ class ScanLog:
         """The scans of ``records`` in their order, each read once: a lazily read log is read front
         to back once when they increase and lie close (a run's scans), else one by one (a map's
         every 1000th scan; without ``odometry``, its scans' odometry may be left unread)."""
-        sparse = len(records) * SPARSE_READ < records[-1] - records[0] if records else True
+        sparse = not records or len(records) * SPARSE_READ < records[-1] - records[0]
         if self.store is None or sparse or any(b <= a for a, b in zip(records, records[1:])):
             yield from (self.scan(r) for r in records)
             return
         wanted = iter(records)
         r = next(wanted, None)
-        for k, scan in self.scans_from(records[0], odometry) if records else ():
+        for k, scan in self.scans_from(records[0], odometry):
             if k == r:
                 yield scan
                 r = next(wanted, None)
@@ -228,45 +228,39 @@ class Survey:
     """Every record's fate in a lazily read log, found by reading it front to back once, when
     first asked for: the usable records' numbers and the unusable ones' reasons."""
 
-    def __init__(self, store: BagScans):
+    def __init__(self, store: BagScans | CachedScans):
         self.store = store
         self._usable: list[int] | None = None
         self._unusable: dict[int, UnusableScan] = {}
 
-    def _survey(self) -> None:
-        if self._usable is None:
-            usable = []
-            for r, scan in self.store.stream(odometry=False):
-                if isinstance(scan, UnusableScan):
-                    self._unusable[r] = scan
-                else:
-                    usable.append(r)
-            if not usable:
-                no_usable_scan(self.store.path, self._unusable)
-            self._usable = usable
-
-    @property
-    def usable(self) -> list[int]:
-        self._survey()
-        return self._usable
-
-    def first(self, n: int | None) -> list[int]:
-        """The first ``n`` usable records (all: the survey), read only as far as they go."""
-        if n is None or self._usable is not None:
-            return self.usable[:n]
+    def _read(self, n: int | None) -> list[int]:
+        """The first ``n`` usable records (None: all, and the survey is complete), read front to
+        back only as far as they go."""
         out = []
         for r, scan in self.store.stream(odometry=False):
             if isinstance(scan, UnusableScan):
                 self._unusable[r] = scan
-            elif len(out) < n:
+            else:
                 out.append(r)
-            if len(out) == n:
-                break
+                if len(out) == n:
+                    return out
+        if not out:
+            no_usable_scan(self.store.path, self._unusable)
+        self._usable = out
         return out
 
     @property
+    def usable(self) -> list[int]:
+        return self._usable if self._usable is not None else self._read(None)
+
+    def first(self, n: int | None) -> list[int]:
+        """The first ``n`` usable records (all: the survey)."""
+        return self.usable[:n] if n is None or self._usable is not None else self._read(n)
+
+    @property
     def unusable(self) -> dict[int, UnusableScan]:
-        self._survey()
+        if self._usable is None:  # the survey finds them
+            self._read(None)
         return self._unusable
 
     @property

@@ -112,6 +112,13 @@ def raw_messages(reader, path: str, connections, start: int | None = None, stop:
         ) from None
 
 
+def decoded_messages(reader, path: str, connections, start=None, stop=None):
+    """(connection, record stamp [ns], decoded message) of ``raw_messages``."""
+    p = Path(path)
+    for c, t, raw in raw_messages(reader, path, connections, start, stop):
+        yield c, t, decode(reader.deserialize, raw, c.msgtype, p, f"at {t} ns")
+
+
 def _typestore(name: str):
     from rosbags.typesys import Stores, get_typestore
 
@@ -521,15 +528,13 @@ def _indexed_log(
     scans read when asked for (``bag_index.BagScans``)."""
     from .bag_index import TF_AT_OPEN_S, BagScans, OdometrySource, records_with_stamps
 
-    p = Path(path)
     by_topic: dict[str, list] = {}
     for c in reader.connections:
         by_topic.setdefault(c.topic, []).append(c)
     kinds = {t: _normalise(cs[0].msgtype) for t, cs in by_topic.items()}
 
     def first(t: str):
-        c, stamp, raw = next(raw_messages(reader, path, by_topic[t]))
-        return decode(reader.deserialize, raw, c.msgtype, p, f"0 of {t}")
+        return next(decoded_messages(reader, path, by_topic[t]))[2]
 
     frames_of = {t: first(t).header.frame_id for t, k in kinds.items() if k == LASER_SCAN}
     topics = {
@@ -538,19 +543,11 @@ def _indexed_log(
     chosen = _scan_topic(topics, sorted(by_topic), topic, path)
     tf_conns = [c for t, cs in by_topic.items() if kinds[t] == TF for c in cs]
     statics = [c for c in tf_conns if c.topic.lstrip("/") == "tf_static"]
-    opening = [
-        (t * 1e-9, c.topic, decode(reader.deserialize, raw, c.msgtype, p, f"at {t} ns"))
-        for c, t, raw in raw_messages(reader, path, statics)
-    ] + [
-        (t * 1e-9, c.topic, decode(reader.deserialize, raw, c.msgtype, p, f"at {t} ns"))
-        for c, t, raw in raw_messages(
-            reader,
-            path,
-            [c for c in tf_conns if c not in statics],
-            stop=reader.start_time + int(TF_AT_OPEN_S * 1e9),
-        )
-    ]
-    tf = _tf_tree(opening, notes)
+    first_seconds = reader.start_time + int(TF_AT_OPEN_S * 1e9)
+    timed = [c for c in tf_conns if c not in statics]
+    opening = [*decoded_messages(reader, path, statics)]
+    opening += decoded_messages(reader, path, timed, stop=first_seconds)
+    tf = _tf_tree(((t * 1e-9, c.topic, m) for c, t, m in opening), notes)
     frame_id = frames_of[chosen].lstrip("/")
     laser_mount = tf.mount(frame_id, path) if frame_id else None
     odometry, source = None, None
