@@ -1,5 +1,10 @@
 """mbicp-viz: an interactive visual debugger and teaching tool for 2-D laser scan matching.
 
+From Python: ``import mbicp_viz as mv``, then ``mv.read_log``, ``mv.match``, ``mv.run``,
+``mv.write_rrd``, ``mv.show``, ``mv.open_debugger`` ... (``api.py``; ``docs/api.md``). The names
+load their module on first use (PEP 562): importing the package, as every ``--help`` does, loads
+neither numpy nor the matchers.
+
 Rooms, by role: ``core`` (the matchers and their events; no I/O), ``readers`` (file formats),
 ``evaluation`` (protocols, criteria, sequences), ``views`` (the scene mapping, rerun, the viser
 debugger) and ``cli`` (thin glue, one module per command group).
@@ -7,6 +12,7 @@ debugger) and ``cli`` (thin glue, one module per command group).
 
 from __future__ import annotations
 
+import importlib
 import importlib.abc
 import importlib.util
 import sys
@@ -28,6 +34,21 @@ class _CheckoutFinder(importlib.abc.MetaPathFinder):
         return importlib.util.spec_from_file_location(
             name, init, submodule_search_locations=[str(init.parent)]
         )
+
+
+def __getattr__(name: str):
+    # a submodule's name is asked for while it is imported (``from mbicp_viz import cli``)
+    if name.startswith("_") or (_HERE / name).is_dir() or (_HERE / f"{name}.py").is_file():
+        raise AttributeError(name)
+    api = importlib.import_module(f"{__name__}.api")
+    if name not in api.__all__:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(api, name)
+
+
+def __dir__() -> list[str]:
+    api = importlib.import_module(f"{__name__}.api")
+    return sorted({*globals(), *api.__all__})
 
 
 if not (_HERE / "core").is_dir():  # a checkout (installed, core/ sits inside the package)

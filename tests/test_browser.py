@@ -791,3 +791,43 @@ def test_a_box_left_without_enter_says_so_on_the_page(browser, app):
     assert wait_for(lambda: session.state.params["improved"].Bw == pytest.approx(math.radians(60)))
     assert wait_for(lambda: page.get_by_text("is not applied yet").count() == 0)
     page.close()
+
+
+def test_the_debugger_opened_from_a_notebook_cell_shows_in_the_cell(browser, tmp_path):
+    """``mv.open_debugger`` in a Jupyter kernel (nbclient): the cell's output embeds the debugger;
+    put in a page as Jupyter puts it, it opens on the run view of the rows given; stopping it from
+    the next cell ends the server."""
+    import urllib.request
+
+    import nbformat
+    from nbclient import NotebookClient
+
+    from mbicp_viz.views import scene
+
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [
+        nbformat.v4.new_code_cell(
+            "import mbicp_viz as mv\n"
+            f"log = mv.read_log({str(INTEL)!r})\n"
+            "rows = mv.run(log, guess='identity', limit=20, workers=1)\n"
+            "debugger = mv.open_debugger(log, rows=rows)\n"
+            "debugger"
+        ),
+        nbformat.v4.new_code_cell("debugger.stop()"),
+    ]
+    client = NotebookClient(nb, timeout=600, kernel_name="python3")
+    with client.setup_kernel():
+        client.execute_cell(nb.cells[0], 0)
+        shown = [o.data.get("text/html", "") for o in nb.cells[0].outputs if "data" in o]
+        (html,) = [h for h in shown if "<iframe" in h]
+        url = re.search(r'src="(http://127\.0\.0\.1:\d+)"', html)[1]
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.set_content(f"<h3>a notebook cell's output</h3>{html}")
+        frame = page.frame_locator("iframe")
+        frame.get_by_role("slider").first.wait_for(timeout=60000)
+        frame.locator(".mbicp-legend").get_by_text(scene.RUN_MAP.label).wait_for(timeout=60000)
+        page.screenshot(path=str(tmp_path / "notebook-debugger.png"))
+        page.close()
+        client.execute_cell(nb.cells[1], 1)
+        with pytest.raises(OSError):
+            urllib.request.urlopen(url, timeout=5)

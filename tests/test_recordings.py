@@ -85,7 +85,7 @@ def test_corridor_degeneracy_points_along_the_corridor():
 def test_every_recording_has_a_blueprint_and_a_note():
     for name in NAMES:
         reader = RrdReader(str(RECORDINGS / f"{name}.rrd"))
-        assert reader.blueprints
+        assert reader.blueprints()
         paths = {c.entity_path for c in reader.stream().to_chunks()}
         assert "/about" in paths
 

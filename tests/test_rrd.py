@@ -94,7 +94,7 @@ def test_resampling_grid_and_teaching_layers_are_recorded(recorded):
 
 def test_blueprint_is_stored_and_verify_passes(recorded):
     path, _ = recorded
-    assert RrdReader(str(path)).blueprints  # a default blueprint travels with the file
+    assert RrdReader(str(path)).blueprints()  # a default blueprint travels with the file
     res = subprocess.run([RERUN, "rrd", "verify", str(path)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
 
@@ -147,7 +147,7 @@ def test_eval_sequence_records_the_scan_timeline(tmp_path):
     traj = cols["/sequence/sequence/trajectory"]["LineStrips2D:strips"]
     assert [len(v[0]) for _, v in sorted(traj)] == list(range(1, 8))  # grows one pose per scan
     assert len(cols["/sequence/log"]["TextLog:text"]) == 6
-    assert RrdReader(str(rrd)).blueprints
+    assert RrdReader(str(rrd)).blueprints()
 
 
 def _listeners(port: int) -> set[str]:

@@ -33,6 +33,14 @@ def lesson(
             "step, and lesson.rrd (a step timeline, the step's text, its layers)",
         ),
     ] = None,
+    notebooks: Annotated[
+        Path | None,
+        typer.Option(
+            "--notebooks",
+            help="write the lesson to this folder as Jupyter notebooks instead of serving it, "
+            'one per step (run them with pip install "mbicp-viz[notebook]")',
+        ),
+    ] = None,
     port: ServePortOpt = 8080,
     for_seconds: ForOpt = None,
 ):
@@ -43,8 +51,19 @@ def lesson(
     steps = tuple(load_lesson(directory))
     if step > len(steps):
         raise InputError(f"the lesson has {len(steps)} steps", field="--step")
+    if export is not None and notebooks is not None:
+        raise InputError("give --export or --notebooks, not both", field="--notebooks")
+    for out, option in ((export, "--export"), (notebooks, "--notebooks")):
+        if out is not None and out.exists() and not out.is_dir():
+            raise InputError("exists and is not a folder", str(out), field=option)
     if export is not None:
         _export(steps, export)
+        return
+    if notebooks is not None:
+        from mbicp_viz.views.lesson.notebooks import write_notebooks
+
+        paths = write_notebooks(steps, notebooks, directory)
+        typer.echo(f"written {len(paths)} notebooks to {notebooks} (open them with: jupyter lab)")
         return
     from mbicp_viz.views.debugger.lesson import step_source
 
@@ -56,8 +75,6 @@ def _export(steps, out: Path) -> None:
     from mbicp_viz.views.lesson.recording import record_lesson
     from mbicp_viz.views.lesson.steps import run_step
 
-    if out.exists() and not out.is_dir():
-        raise InputError("exists and is not a folder", str(out), field="--export")
     runs = []
     for s in steps:
         runs.append(run_step(s))

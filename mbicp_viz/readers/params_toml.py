@@ -15,7 +15,7 @@ import functools
 import math
 import tomllib
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from mbicp_viz.core import MATCHERS, ParamError, Params, SearchParams, field_specs
@@ -81,7 +81,15 @@ def params_from_mapping(
 ) -> Params:
     """``params_type`` from TOML keys (``_deg`` for radians); errors name the key
     (``table.key``)."""
-    specs = {s.name: s for s in field_specs(params_type)}
+    return with_values(params_type(), values, path, table)
+
+
+def with_values(
+    params: Params, values: dict, path: str | None = None, table: str | None = None
+) -> Params:
+    """``params`` with ``values`` over them, named as TOML names them (``_deg`` for radians);
+    errors name the key (``table.key``)."""
+    specs = {s.name: s for s in field_specs(type(params))}
     kwargs = {}
     for key, value in values.items():
         where = f"{table}.{key}" if table else key
@@ -96,7 +104,7 @@ def params_from_mapping(
             value = _radians(specs[name], value, path, where)
         kwargs[name] = value
     try:
-        return params_type(**kwargs)
+        return replace(params, **kwargs)
     except ParamError as e:
         raise InputError(e.message, path, field=f"{table}.{e.name}" if table else e.name) from None
 
@@ -163,12 +171,28 @@ def _search(data: dict, path: Path) -> SearchParams:
     return params_from_mapping(SearchParams, table, str(path), SEARCH_TABLE)
 
 
+def _toml_value(spec, value) -> tuple[str, object, str]:
+    """A field as a TOML file names it: key, value and unit (angles in degrees, ``NAME_deg``)."""
+    if spec.unit == "rad":
+        return f"{spec.name}_deg", math.degrees(value), "deg"
+    return spec.name, value, spec.unit
+
+
+def changed_values(params: Params) -> dict[str, object]:
+    """The fields that differ from the matcher's defaults, as a TOML file names them (angles in
+    degrees to 12 digits: 50.0, not 50.00000000000001)."""
+    default, out = type(params)(), {}
+    for s in field_specs(type(params)):
+        if getattr(params, s.name) != getattr(default, s.name):
+            key, value, unit = _toml_value(s, getattr(params, s.name))
+            out[key] = float(f"{value:.12g}") if unit == "deg" else value
+    return out
+
+
 def _lines(params: Params) -> list[str]:
     lines = []
     for s in field_specs(type(params)):
-        v, key, unit = getattr(params, s.name), s.name, s.unit
-        if s.unit == "rad":
-            key, v, unit = f"{s.name}_deg", math.degrees(v), "deg"
+        key, v, unit = _toml_value(s, getattr(params, s.name))
         text = ("true" if v else "false") if isinstance(v, bool) else repr(v)
         lines.append(f"{key} = {text}  # [{unit}] {s.help}")
     return lines

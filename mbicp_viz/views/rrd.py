@@ -289,6 +289,38 @@ class RerunObserver:
         )
 
 
+def pair_blueprint(matches: list[PairMatch], teaching: bool = False, about: bool = False):
+    """The blueprint of a pair's recording: ``blueprint`` for the matches' roots."""
+    from mbicp_viz.core import MATCHERS
+
+    roots = [m.matcher for m in matches]
+    return blueprint(roots, teaching, about, {r for r in roots if MATCHERS[r].polar})
+
+
+def log_matches(
+    stream: rr.RecordingStream,
+    matches: list[PairMatch],
+    teaching: bool = False,
+    about: str | None = None,
+) -> None:
+    """Replay each match's events (``PairMatch.events``) under its matcher's root, with its record
+    beside them (``ROOT/record``, JSON); ``about`` (Markdown) as a document beside the runs."""
+    if about is not None:
+        stream.log(ABOUT, rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
+    for m in matches:
+        if m.events is None:
+            raise InputError(
+                f"the match of scans {m.ref} -> {m.obj} kept no iterations: match it with "
+                "record=True to record it",
+                field="matches",
+            )
+        observer = RerunObserver(stream, m.matcher, teaching, m.truth, m.odometry)
+        for ev in m.events.events:
+            observer(ev)
+        stream.log(f"{m.matcher}/{RECORD}", rr.TextDocument(record_text(m)), static=True)
+    stream.flush()
+
+
 def record(
     matches: list[PairMatch],
     path: str | None = None,
@@ -297,16 +329,10 @@ def record(
     recording_id: str = "mbicp-viz",
     about: str | None = None,
 ) -> None:
-    """Replay each match's events (``PairMatch.events``) under its matcher's root, with its record
-    beside them (``ROOT/record``, JSON); write ``path`` (.rrd) and/or stream to ``connect``.
-
-    ``about`` (Markdown) is stored as a document beside the runs: what the recording shows.
-    """
-    from mbicp_viz.core import MATCHERS
-
+    """``log_matches`` into ``path`` (.rrd, written whole) and/or streamed to ``connect``, with
+    ``pair_blueprint``."""
     stream = new_stream(recording_id, live=connect is not None)
-    roots = [m.matcher for m in matches]
-    bp = blueprint(roots, teaching, about is not None, {r for r in roots if MATCHERS[r].polar})
+    bp = pair_blueprint(matches, teaching, about is not None)
     with ExitStack() as stack:
         if path is not None:
             stack.enter_context(saving(stream, path, bp))
@@ -314,14 +340,7 @@ def record(
             stack.callback(stream.disconnect)
         if connect is not None:
             stream.connect_grpc(connect, default_blueprint=bp)
-        if about is not None:
-            stream.log(ABOUT, rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
-        for m in matches:
-            observer = RerunObserver(stream, m.matcher, teaching, m.truth, m.odometry)
-            for ev in m.events.events:
-                observer(ev)
-            stream.log(f"{m.matcher}/{RECORD}", rr.TextDocument(record_text(m)), static=True)
-        stream.flush()
+        log_matches(stream, matches, teaching, about)
 
 
 def record_text(m: PairMatch) -> str:
@@ -401,19 +420,15 @@ def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
     return subprocess.call(cmd)
 
 
-def record_sequence(
-    log, rows: list[PairMatch], path: str, recording_id: str = "mbicp-viz/sequence"
-) -> None:
-    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, the
-    flagged pairs on it, each pair's health plotted, per-pair log."""
-    from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
+SEQUENCE_ROOT = "sequence"
 
-    stream = new_stream(recording_id)
-    root = "sequence"
-    space = f"/{root}/{scene.SEQUENCE}"
-    bp = rrb.Blueprint(
+
+def sequence_blueprint() -> rrb.Blueprint:
+    """Trajectory and map beside the health plots and the per-pair log; time panel on ``scan``."""
+    root = SEQUENCE_ROOT
+    return rrb.Blueprint(
         rrb.Horizontal(
-            y_up_view(space, "trajectory and map (first scan's frame, m)"),
+            y_up_view(f"/{root}/{scene.SEQUENCE}", "trajectory and map (first scan's frame, m)"),
             rrb.Vertical(
                 rrb.TimeSeriesView(
                     origin=f"/{root}/{scene.HEALTH}",
@@ -427,25 +442,38 @@ def record_sequence(
         rrb.TimePanel(timeline="scan", expanded=True),
         collapse_panels=True,
     )
-    with saving(stream, path, bp):
-        log_y_up(stream, space)
-        poses, stored = accumulate(rows), log_poses(log, rows)
-        by_obj = {row.obj: row for row in rows}
-        # a flagged pair is marked where it placed its second scan
-        flagged = [n + 1 for n, row in enumerate(rows) if row.flags]
-        for n, k in enumerate(scan_indices(rows)):
-            stream.set_time("scan", sequence=k)
-            traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
-            stored_traj = (
-                None if stored is None else np.array([[p.x, p.y] for p in stored[: n + 1]])
-            )
-            suspects = np.array([[poses[f].x, poses[f].y] for f in flagged if f <= n]).reshape(
-                -1, 2
-            )
-            for layer in scene.sequence_layers(
-                k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k), suspects
-            ):
-                log_layer(stream, root, layer)
+
+
+def log_sequence(stream: rr.RecordingStream, log, rows: list[PairMatch]) -> None:
+    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, the
+    flagged pairs on it, each pair's health plotted, per-pair log."""
+    from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
+
+    root = SEQUENCE_ROOT
+    log_y_up(stream, f"/{root}/{scene.SEQUENCE}")
+    poses, stored = accumulate(rows), log_poses(log, rows)
+    by_obj = {row.obj: row for row in rows}
+    # a flagged pair is marked where it placed its second scan
+    flagged = [n + 1 for n, row in enumerate(rows) if row.flags]
+    for n, k in enumerate(scan_indices(rows)):
+        stream.set_time("scan", sequence=k)
+        traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
+        stored_traj = None if stored is None else np.array([[p.x, p.y] for p in stored[: n + 1]])
+        suspects = np.array([[poses[f].x, poses[f].y] for f in flagged if f <= n]).reshape(-1, 2)
+        for layer in scene.sequence_layers(
+            k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k), suspects
+        ):
+            log_layer(stream, root, layer)
+    stream.flush()
+
+
+def record_sequence(
+    log, rows: list[PairMatch], path: str, recording_id: str = "mbicp-viz/sequence"
+) -> None:
+    """``log_sequence`` into ``path`` (.rrd, written whole) with ``sequence_blueprint``."""
+    stream = new_stream(recording_id)
+    with saving(stream, path, sequence_blueprint()):
+        log_sequence(stream, log, rows)
 
 
 def record_basin(atlas, path: str) -> None:

@@ -91,7 +91,7 @@ class RunPanel:
             f"{e.trans.std(ddof=1) if len(e.index) > 1 else 0.0:.3f} m (Kümmerle et al.)"
         )
         self.pick_relation = gui.add_dropdown(
-            "relations, costliest first", ["(none)", *self.relation_labels], "(none)"
+            "relations, costliest first", ["(none)", *self.relation_labels], initial_value="(none)"
         )
         self.pick_relation.on_update(lambda _: self.s.guarded(self.relation_picked))
 

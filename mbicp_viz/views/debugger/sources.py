@@ -63,8 +63,6 @@ def files_source(
         )
         return Source(f"{first} -> {second}", log, guess_kind=guess)
     log = read_log(first, options)
-    if len(log.record_numbers(2)) < 2:
-        raise InputError("needs at least two usable scans (or give two files)", first)
     run = rows_of_log(rows, log) if rows is not None else []
     both = None
     if versus is not None:
@@ -79,7 +77,39 @@ def files_source(
             "--relations scores a run: give the rows of `eval sequence` with --rows",
             field="--relations",
         )
-    failed, suspects, label = _failures(run, rows) if rows is not None else ([], [], "")
+    return log_source(
+        first,
+        log,
+        pair,
+        guess,
+        options,
+        run,
+        f"{rows}: {len(run)} rows" if rows is not None else "",
+        both,
+        read_relations(relations) if relations is not None else None,
+        offset,
+    )
+
+
+def log_source(
+    label: str,
+    log: ScanLog,
+    pair: tuple[int, int] | None = None,
+    guess: Guess = Guess.stored,
+    options: ReadOptions | None = None,
+    run: list[PairMatch] = (),
+    rows_label: str = "",
+    versus=None,
+    relations: list | None = None,
+    offset: float = 0.0,
+) -> Source:
+    """The debugger on ``log``: any two scans can be picked; with a ``run``'s rows, its failures
+    and suspicious pairs open as they ran, the worst first (the first opened unless ``pair`` is
+    given), and a chained run has its run view."""
+    if len(log.record_numbers(2)) < 2:
+        raise InputError("needs at least two usable scans (or give two files)", log.path)
+    run = list(run)
+    failed, suspects = _failures(run) if run else ([], [])
     opened = (failed or suspects or [None])[0] if pair is None else None
     i, j = (
         pair
@@ -90,7 +120,7 @@ def files_source(
     )
     log.scan(i), log.scan(j)  # an unusable or missing scan is refused here, in one line
     return Source(
-        first,
+        label,
         log,
         (i % log.records, j % log.records),
         pick_pair=True,
@@ -98,22 +128,22 @@ def files_source(
         failures=failed,
         suspects=suspects,
         run=run if is_chain(run) else None,
-        versus=both,
-        relations=read_relations(relations) if relations is not None else None,
+        versus=versus,
+        relations=relations,
         offset=offset,
-        rows_label=label,
+        rows_label=rows_label,
         opened=opened,
         options=options,
     )
 
 
-def _failures(rows: list[PairMatch], path: str) -> tuple[list[PairMatch], list[PairMatch], str]:
+def _failures(rows: list[PairMatch]) -> tuple[list[PairMatch], list[PairMatch]]:
     """The failed rows of an evaluation, worst first, and its flagged rows, the most suspicious
     first."""
     from mbicp_viz.evaluation.failures import worst_first
     from mbicp_viz.evaluation.health import ranked
 
-    return worst_first(rows), ranked(rows), f"{path}: {len(rows)} rows"
+    return worst_first(rows), ranked(rows)
 
 
 def demo_source(path: str) -> Source:
