@@ -218,3 +218,21 @@ def test_tune_on_your_log_finds_settings_no_worse_than_the_defaults(tmp_path):
         default, abs=5e-5
     )
     assert "[improved]\nmad_k = " in res.stdout
+
+
+def test_parameters_from_a_toml_file_and_from_a_dataclass(tmp_path):
+    """A file ``params --out`` wrote, edited, reads back with values over it; the dataclass itself
+    is taken as it is."""
+    out = tmp_path / "mine.toml"
+    res = CliRunner().invoke(cli, ["params", "--algo", "mbicp", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    out.write_text(out.read_text().replace("Bw_deg = ", "Bw_deg = 12.5 #"))
+    p = mv.params("mbicp", out, L=2.0)
+    assert np.degrees(p.Bw) == pytest.approx(12.5) and p.L == 2.0
+    from mbicp_viz.core import MbicpParams
+
+    log = mv.read_log(BAG)
+    assert mv.match(log, 10, 11, MbicpParams(L=2.0)).params == MbicpParams(L=2.0)
+    with pytest.raises(mv.InputError, match=r"mine\.toml"):
+        out.write_text("Bw_deg = 'wide'\n")
+        mv.params("mbicp", out)

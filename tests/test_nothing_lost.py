@@ -71,7 +71,7 @@ def interrupt_the_fourth_match(monkeypatch):
     in this process, the signal's handler is the command's own)."""
     import mbicp_viz.evaluation.sequence as seq
 
-    real, calls = seq._match_row, []
+    real, calls = seq.match_row, []
 
     def row(job, **kw):
         calls.append(job)
@@ -79,7 +79,7 @@ def interrupt_the_fourth_match(monkeypatch):
             os.kill(os.getpid(), signal.SIGINT)
         return real(job, **kw)
 
-    monkeypatch.setattr(seq, "_match_row", row)
+    monkeypatch.setattr(seq, "match_row", row)
 
 
 def test_ctrl_c_keeps_the_rows_beside_a_complete_file_and_the_same_command_resumes(

@@ -12,7 +12,7 @@ import sys
 import typer
 from typer.core import TyperGroup
 
-from . import bench, evaluate, files, lesson, match, serve, tune
+from . import bench, evaluate, files, lesson, live, match, serve, tune
 
 
 class OneLineErrors(TyperGroup):
@@ -49,7 +49,7 @@ app = typer.Typer(
     "improved "
     "MbICP, PSM, PMWN).",
 )
-for group in (match, serve, lesson, evaluate, bench, files, tune):
+for group in (match, serve, live, lesson, evaluate, bench, files, tune):
     group.register(app)
 
 

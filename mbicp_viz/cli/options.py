@@ -251,7 +251,7 @@ def check_perturb(perturb: tuple[float, float]) -> tuple[float, float]:
 
 
 # Options that name a file a command writes, by the same names in every command.
-OUTPUT_FILES = ("rrd", "out", "png", "tum", "tum_ref", "csv")
+OUTPUT_FILES = ("rrd", "out", "png", "tum", "tum_ref", "csv", "save")
 
 
 def _option(name: str) -> str:

@@ -90,12 +90,12 @@ def match_sequence(
             on_row(rows[-1])
 
     ordered_map(
-        partial(_match_row, stream=log.topic, budget_s=budget_s), jobs(), workers, take, len(pairs)
+        partial(match_row, stream=log.topic, budget_s=budget_s), jobs(), workers, take, len(pairs)
     )
     return rows
 
 
-def _match_row(job, stream: str | None, budget_s: float | None) -> PairMatch:
+def match_row(job, stream: str | None, budget_s: float | None) -> PairMatch:
     path, i, j, ref, obj, params, guess, truth, search, frames, base = job
     t0 = time.perf_counter()
     g, source = pair_guess(ref, obj, guess, search, missing_ok=True)

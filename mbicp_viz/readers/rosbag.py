@@ -83,9 +83,9 @@ def open_bag(p: Path, typestore: str):
     refused here, before any message is decoded."""
     from rosbags.highlevel import AnyReader
 
-    reader = AnyReader([p], default_typestore=_typestore(typestore))
+    reader = AnyReader([p], default_typestore=typestore_named(typestore))
     reader.open()
-    if not any(_normalise(c.msgtype) == LASER_SCAN for c in reader.connections):
+    if not any(ros2_type(c.msgtype) == LASER_SCAN for c in reader.connections):
         has = "; ".join(
             f"{c.topic} ({c.msgtype}, {c.msgcount} messages)" for c in reader.connections
         )
@@ -119,7 +119,7 @@ def decoded_messages(reader, path: str, connections, start=None, stop=None):
         yield c, t, decode(reader.deserialize, raw, c.msgtype, p, f"at {t} ns")
 
 
-def _typestore(name: str):
+def typestore_named(name: str):
     from rosbags.typesys import Stores, get_typestore
 
     try:
@@ -168,7 +168,7 @@ def decode(deserialize, raw, msgtype: str, p: Path, n: int | str):
         raise InputError(
             f"message {n} ({msgtype}) cannot be decoded: {type(e).__name__}: {str(e)[:200]}", str(p)
         ) from None
-    kind = _normalise(msgtype)
+    kind = ros2_type(msgtype)
     if type(msg) not in _CHECKED:
         _has_fields(msg, _FIELDS.get(kind, ()), f"message {n} ({msgtype})", p)
         if kind != TF:
@@ -203,7 +203,7 @@ def _has_fields(msg, fields, what: str, p: Path) -> None:
             )
 
 
-def _normalise(msgtype: str) -> str:
+def ros2_type(msgtype: str) -> str:
     """ROS 1 names types ``pkg/Type``; rosbags uses ``pkg/msg/Type``."""
     pkg, _, name = msgtype.rpartition("/")
     return msgtype if pkg.endswith("/msg") else f"{pkg}/msg/{name}"
@@ -348,7 +348,7 @@ def _chunk_records(data: bytes, p: Path, store, conns: dict, out: list) -> None:
     for op, h, d in _records(data, 0, p):
         if op == _OP_CONN:
             conn = _header(d, p)
-            msgtype = _normalise(conn["type"].decode("utf-8", "replace"))
+            msgtype = ros2_type(conn["type"].decode("utf-8", "replace"))
             conns[struct.unpack("<I", h["conn"])[0]] = (
                 h["topic"].decode("utf-8", "replace"),
                 msgtype,
@@ -531,7 +531,7 @@ def _indexed_log(
     by_topic: dict[str, list] = {}
     for c in reader.connections:
         by_topic.setdefault(c.topic, []).append(c)
-    kinds = {t: _normalise(cs[0].msgtype) for t, cs in by_topic.items()}
+    kinds = {t: ros2_type(cs[0].msgtype) for t, cs in by_topic.items()}
 
     def first(t: str):
         return next(decoded_messages(reader, path, by_topic[t]))[2]

@@ -65,15 +65,18 @@ def write(path: Path, robot: Robot, kind: str, chunk_bytes: int = 768 * 1024) ->
 def _typestore(ros1: bool):
     from rosbags.typesys import Stores, get_typestore
 
-    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-    if ros1:  # Noetic's store lacks tf2_msgs; its definition is one line
-        from rosbags.typesys import get_types_from_msg
+    return ros1_typestore() if ros1 else get_typestore(Stores.ROS2_HUMBLE)
 
-        ts.register(
-            get_types_from_msg(
-                "geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"
-            )
-        )
+
+def ros1_typestore():
+    """Noetic's message types, with tf2_msgs (which its store lacks; the definition is one
+    line)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    ts.register(
+        get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage")
+    )
     return ts
 
 

@@ -1,0 +1,368 @@
+"""A live run: a Foxglove server's scans matched against the previous one as they arrive, as
+``eval sequence`` matches a bag's (``evaluation/sequence.match_row``), with the last seconds of
+messages kept to be saved as a bag that every other command reads.
+
+Three threads: the receiver (reconnecting when the connection is lost), the matcher (always the
+newest scan: when it falls behind it skips, and counts, the scans in between) and the caller's.
+Odometry comes from an Odometry topic; a scan waits for odometry past its stamp (at most
+``ODOMETRY_WAIT_S``) so that its guess is interpolated as a bag's is; the laser's mount from
+``/tf_static``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from mbicp_viz.choices import MATCH_BUDGET_S, Guess
+from mbicp_viz.core import Params, Scan, UnusableScan
+from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.sequence import match_row
+from mbicp_viz.readers.log import Frames
+from mbicp_viz.readers.pair_match import PairMatch
+from mbicp_viz.readers.rosbag import LASER_SCAN, ODOMETRY, TF, laser_scan, odometry_track
+from mbicp_viz.readers.tf import TfTree
+
+from . import client
+from .decode import Decoder, kind
+
+ODOMETRY_WAIT_S = 0.5  # a scan waits this long for odometry past its stamp
+NO_SCAN_S = 5.0  # a server that advertises no scan topic this long after connecting is refused
+RECONNECT_S = (0.2, 0.5, 1.0, 2.0)  # waits between attempts, the last repeated
+MAX_BUFFER_BYTES = 512 * 1024 * 1024  # the buffer keeps its seconds, or this much if less
+
+
+@dataclass(frozen=True)
+class Raw:
+    """A message as it came: kept to be saved."""
+
+    topic: str
+    msgtype: str
+    encoding: str
+    log_time_ns: int
+    payload: bytes
+
+
+@dataclass
+class Status:
+    """What the run has done, for the status line and the page."""
+
+    connected: bool = False
+    scans: int = 0
+    matched: int = 0
+    skipped: int = 0  # scans the matcher left out to keep up
+    unusable: int = 0
+    undecodable: int = 0
+    lag_s: float | None = None  # from a scan's arrival to its pair's result (the last one)
+    reconnects: int = 0
+    buffer_s: float = 0.0
+    buffer_bytes: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    def line(self) -> str:
+        lag = "-" if self.lag_s is None else f"{1000 * self.lag_s:.0f} ms"
+        return (
+            f"{'connected' if self.connected else 'reconnecting'}: {self.scans} scans, "
+            f"{self.matched} matched, {self.skipped} skipped to keep up, {self.unusable} unusable; "
+            f"result {lag} after the scan arrived; buffer {self.buffer_s:.0f} s, "
+            f"{self.buffer_bytes / 1e6:.1f} MB"
+        )
+
+
+class LiveRun:
+    """``url``'s scans on ``topic`` (None: the one LaserScan topic) matched with ``params``."""
+
+    def __init__(
+        self,
+        url: str,
+        params: Params,
+        topic: str | None = None,
+        buffer_s: float = 60.0,
+        typestore: str = "ROS2_HUMBLE",
+        guess: Guess = Guess.stored,
+        budget_s: float | None = MATCH_BUDGET_S,
+    ):
+        self.url, self.params, self.topic, self.buffer_s = url, params, topic, buffer_s
+        self.guess, self.budget_s = guess, budget_s
+        self.decoder = Decoder(url, typestore)
+        self.status = Status()
+        self.rows: deque[tuple[float, PairMatch]] = deque()  # (stamp of its object scan, row)
+        self.buffer: deque[Raw] = deque()
+        self._odometry: deque = deque()  # decoded Odometry messages of the buffer's window
+        self._tf = TfTree()
+        self._scan_channel: client.Channel | None = None
+        self._odometry_topic = False  # an Odometry topic is subscribed: scans wait for it
+        self._advertised: list[client.Channel] = []
+        self._connected_at = time.monotonic()
+        self._pending: tuple[int, object, float] | None = None  # the newest scan not yet matched
+        self._previous: tuple[int, Scan] | None = None
+        self._lock = threading.Condition()
+        self._stop = threading.Event()
+        self._error: InputError | None = None
+        self._ws = None
+        first = client.connect(url)  # a wrong URL or server is refused here, in one line
+        self._threads = [
+            threading.Thread(target=self._receive, args=(first,), daemon=True),
+            threading.Thread(target=self._match, daemon=True),
+        ]
+        for t in self._threads:
+            t.start()
+
+    # --- receiving ---------------------------------------------------------------------------
+
+    def _wanted(self, channel: client.Channel) -> bool:
+        k = kind(channel)
+        if k == LASER_SCAN:
+            if self.topic is not None and channel.topic != self.topic:
+                return False
+            with self._lock:
+                if self._scan_channel is None or self._scan_channel.topic == channel.topic:
+                    self._scan_channel = channel
+                    return True
+            return False
+        if k == ODOMETRY:
+            with self._lock:
+                self._odometry_topic = True
+        return k in (ODOMETRY, TF)
+
+    def _receive(self, ws) -> None:
+        attempt = 0
+        while not self._stop.is_set():
+            try:
+                if ws is None:
+                    ws = client.connect(self.url)
+                self._ws, attempt = ws, 0
+                with self._lock:
+                    self.status.connected = True
+                for m in client.messages(ws, self.url, self._wanted, self._on_channels):
+                    self._take(m)
+            except client.Lost:
+                pass
+            except InputError as e:
+                if self.status.reconnects == 0 and not self.status.scans:
+                    self._fail(e)  # never worked: a wrong server, not a dropped one
+                    return
+            finally:
+                if ws is not None:
+                    ws.close()
+                ws = self._ws = None
+            if self._stop.is_set():
+                return
+            with self._lock:
+                if self.status.connected:
+                    self.status.reconnects += 1
+                    self.status.notes.append(
+                        f"the connection to {self.url} was lost: reconnecting (the buffer is kept)"
+                    )
+                self.status.connected = False
+            self._stop.wait(RECONNECT_S[min(attempt, len(RECONNECT_S) - 1)])
+            attempt += 1
+
+    def _on_channels(self, channels: list[client.Channel]) -> None:
+        with self._lock:
+            self._advertised = channels
+
+    def _no_scan_topic(self) -> InputError:
+        """What the server offers instead of a scan topic this can read."""
+        offered = (
+            ", ".join(f"{c.topic} ({c.schema_name}, {c.encoding})" for c in self._advertised)
+            or "nothing"
+        )
+        wanted = (
+            f"does not offer the LaserScan topic {self.topic}"
+            if self.topic
+            else "offers no LaserScan topic"
+        )
+        return InputError(
+            f"{self.url} {wanted} in an encoding this reads (cdr, ros1); it offers: {offered}",
+            field="--topic" if self.topic else "URL",
+        )
+
+    def _fail(self, e: InputError) -> None:
+        with self._lock:
+            self._error = e
+            self._lock.notify_all()
+        self._stop.set()
+
+    def _take(self, m: client.Received) -> None:
+        k = kind(m.channel)
+        raw = Raw(m.channel.topic, k, m.channel.encoding, m.log_time_ns, m.payload)
+        with self._lock:
+            self._keep(raw)
+            n = self.status.scans if k == LASER_SCAN else len(self.buffer)
+        try:
+            msg = self.decoder(m.channel, m.payload, n)
+        except InputError as e:
+            with self._lock:
+                self.status.undecodable += 1
+                if self.status.undecodable == 1:
+                    self.status.notes.append(f"skipped: {e}")
+            return
+        with self._lock:
+            if k == LASER_SCAN:
+                if self._pending is not None:
+                    self.status.skipped += 1
+                self._pending = (self.status.scans, msg, time.monotonic())
+                self.status.scans += 1
+            elif k == ODOMETRY:
+                self._odometry.append(msg)
+            elif m.channel.topic.lstrip("/") in ("tf", "tf_static"):
+                self._tf.add(msg, m.log_time_ns * 1e-9, m.channel.topic.lstrip("/") == "tf_static")
+            self._lock.notify_all()
+
+    def _keep(self, raw: Raw) -> None:
+        """``raw`` into the buffer, which drops what is older than its seconds (tf_static is kept:
+        a bag without it has no mount)."""
+        self.buffer.append(raw)
+        self.status.buffer_bytes += len(raw.payload)
+        newest = raw.log_time_ns
+        while self.buffer and (
+            newest - self.buffer[0].log_time_ns > self.buffer_s * 1e9
+            or self.status.buffer_bytes > MAX_BUFFER_BYTES
+        ):
+            if self.buffer[0].topic.lstrip("/") == "tf_static":
+                self.buffer.rotate(-1)  # moved to the newest end: kept
+                if self.buffer[0] is raw:
+                    break
+                continue
+            self.status.buffer_bytes -= len(self.buffer.popleft().payload)
+        self.status.buffer_s = (newest - self.buffer[0].log_time_ns) * 1e-9
+
+    # --- matching ----------------------------------------------------------------------------
+
+    def _odometry_ready(self, stamp: float, received: float) -> bool:
+        if not self._odometry_topic or self.guess not in (Guess.stored, Guess.odometry):
+            return True
+        if time.monotonic() - received > ODOMETRY_WAIT_S:
+            return True
+        if not self._odometry:
+            return False
+        last = self._odometry[-1].header.stamp
+        return last.sec + 1e-9 * last.nanosec >= stamp
+
+    def _next_scan(self):
+        with self._lock:
+            while not self._stop.is_set():
+                if self._pending is not None:
+                    k, msg, received = self._pending
+                    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+                    if self._odometry_ready(stamp, received):
+                        self._pending = None
+                        return k, msg, received, self._track(stamp)
+                elif (
+                    self._scan_channel is None and time.monotonic() - self._connected_at > NO_SCAN_S
+                ):
+                    raise self._no_scan_topic()
+                self._lock.wait(0.05)
+        return None
+
+    def _track(self, stamp: float):
+        """The odometry around ``stamp`` (stamps, base poses), older messages dropped."""
+        while len(self._odometry) > 2:
+            s = self._odometry[1].header.stamp
+            if s.sec + 1e-9 * s.nanosec >= stamp - 2.0:
+                break
+            self._odometry.popleft()
+        return odometry_track(list(self._odometry)) if self._odometry else None
+
+    def frames(self, frame_id: str) -> Frames:
+        with self._lock:
+            mount = self._tf.mount(frame_id, self.url) if frame_id else None
+        if mount is None:
+            return Frames(frame_id=frame_id)
+        return Frames(mount.pose, mount.source, mount.base_frame, frame_id)
+
+    def _match(self) -> None:
+        try:
+            while (nxt := self._next_scan()) is not None:
+                self._match_one(*nxt)
+        except InputError as e:
+            self._fail(e)
+
+    def _match_one(self, k: int, msg, received: float, track) -> None:
+        frame_id = msg.header.frame_id.lstrip("/")
+        frames = self.frames(frame_id)
+        scan = laser_scan(msg, self.url, k, False, track, frames.mount)
+        if isinstance(scan, UnusableScan):
+            with self._lock:
+                self.status.unusable += 1
+            return
+        previous, self._previous = self._previous, (k, scan)
+        if previous is None:
+            return
+        i, ref = previous
+        job = (self.url, i, k, ref, scan, self.params, self.guess, None, None, frames, True)
+        m = match_row(job, self.topic or self._scan_channel.topic, self.budget_s)
+        with self._lock:
+            self.rows.append((scan.stamp or 0.0, m))
+            while self.rows and self.rows[0][0] < self.rows[-1][0] - self.buffer_s:
+                self.rows.popleft()  # the rows of the buffer's seconds
+            self.status.matched += 1
+            self.status.lag_s = time.monotonic() - received
+
+    # --- the caller's ------------------------------------------------------------------------
+
+    def error(self) -> InputError | None:
+        with self._lock:
+            return self._error
+
+    def snapshot(self) -> tuple[Status, list[PairMatch]]:
+        with self._lock:
+            return replace(self.status, notes=list(self.status.notes)), [r for _, r in self.rows]
+
+    def stop(self) -> None:
+        self._stop.set()
+        ws = self._ws
+        if ws is not None:
+            ws.close()
+        for t in self._threads:
+            t.join(timeout=10)
+
+    def save(self, path: Path) -> int:
+        """The buffer as a bag (``.mcap``: ROS 2 MCAP of CDR messages; ``.bag``: ROS 1 of ROS 1
+        messages), written whole; the number of messages."""
+        with self._lock:
+            messages = list(self.buffer)
+        return save_bag(messages, Path(path))
+
+
+def save_bag(messages: list[Raw], path: Path) -> int:
+    """``messages`` as a ROS 1 bag (``path`` ending ``.bag``: ROS 1 messages) or else a ROS 2 bag
+    folder in MCAP storage (CDR messages), written whole; how many."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from mbicp_viz.outputs import written, written_folder
+    from mbicp_viz.writers.bag import ros1_typestore
+
+    ros1 = path.suffix == ".bag"
+    wrong = {m.encoding for m in messages} - {"ros1" if ros1 else "cdr"}
+    if wrong:
+        raise InputError(
+            f"the robot sends {', '.join(sorted(wrong))} messages: save them "
+            + ("as a ROS 2 bag (a name without .bag)" if ros1 else "as a ROS 1 bag (NAME.bag)"),
+            str(path),
+            field="--save",
+        )
+    messages = sorted(messages, key=lambda m: m.log_time_ns)
+    if ros1:
+        from rosbags.rosbag1 import Writer
+
+        ts, open_writer, output = ros1_typestore(), Writer, written
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        ts, output = get_typestore(Stores.ROS2_HUMBLE), written_folder
+
+        def open_writer(p):
+            return Writer(p, version=8, storage_plugin=StoragePlugin.MCAP)
+
+    with output(path) as tmp, open_writer(tmp) as w:
+        conns = {}
+        for m in messages:
+            if m.topic not in conns:
+                conns[m.topic] = w.add_connection(m.topic, m.msgtype, typestore=ts)
+            w.write(conns[m.topic], m.log_time_ns, m.payload)
+    return len(messages)

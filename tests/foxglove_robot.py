@@ -1,0 +1,70 @@
+"""A robot as the live command meets one: the official Foxglove SDK's WebSocket server (the one
+foxglove_bridge's successors run) publishing a real bag's messages, raw as the bag holds them (CDR
+from a ROS 2 bag, ROS 1 from a ROS 1 bag), with their original stamps as log times."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import foxglove
+from foxglove import Channel, Schema
+from foxglove.websocket import ServerListener
+
+from .conftest import wait_for
+
+
+class _Subscriptions(ServerListener):
+    def __init__(self):
+        self.topics: set[str] = set()
+
+    def on_subscribe(self, client, channel) -> None:
+        self.topics.add(channel.topic)
+
+
+class FoxgloveRobot:
+    """Serves ``bag`` on 127.0.0.1 (``port`` 0: a free one); ``publish`` sends its messages once
+    the client subscribed to ``topics``, ``rate`` times faster than they were recorded."""
+
+    def __init__(self, bag: Path, port: int = 0):
+        from rosbags.highlevel import AnyReader
+
+        self.bag, self.ros1 = bag, bag.suffix == ".bag"
+        self.listener = _Subscriptions()
+        self.server = foxglove.start_server(port=port, server_listener=self.listener)
+        self.port = self.server.port
+        with AnyReader([bag]) as reader:
+            self.channels = {c.topic: self._channel(c) for c in reader.connections}
+            self.messages = [(c.topic, t, raw) for c, t, raw in reader.messages()]
+
+    @property
+    def url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}"
+
+    def _channel(self, c) -> Channel:
+        name = c.msgtype.replace("/msg/", "/") if self.ros1 else c.msgtype
+        return Channel(
+            c.topic,
+            message_encoding="ros1" if self.ros1 else "cdr",
+            schema=Schema(
+                name=name,
+                encoding="ros1msg" if self.ros1 else "ros2msg",
+                data=c.msgdef.data.encode(),
+            ),
+        )
+
+    def publish(self, topics=("/scan",), rate: float = 10.0, first: int = 0, count=None) -> None:
+        assert wait_for(lambda: set(topics) <= self.listener.topics, 60)
+        messages = self.messages[first : None if count is None else first + count]
+        t0, start = messages[0][1], time.monotonic()
+        for topic, t, raw in messages:
+            due = start + (t - t0) * 1e-9 / rate  # the robot's own pace, sped up
+            while (now := time.monotonic()) < due:
+                threading.Event().wait(due - now)
+            self.channels[topic].log(raw, log_time=t)
+
+    def stop(self) -> None:
+        self.server.stop()
+        for ch in self.channels.values():
+            ch.close()

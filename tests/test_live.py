@@ -1,0 +1,191 @@
+"""``mbicp-viz live`` against a real Foxglove SDK WebSocket server publishing real bags' messages
+(CDR from a ROS 2 MCAP bag, ROS 1 from a ROS 1 bag) with their original stamps: the live poses are
+``eval sequence``'s on the same bag, the buffer saves as a bag every command reads, a restarted
+server is reconnected, and a wrong server is one line."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+
+import numpy as np
+import pytest
+
+from mbicp_viz.core import ImprovedParams, Pose2
+from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.sequence import match_sequence
+from mbicp_viz.live.run import LiveRun
+from mbicp_viz.readers import read_log
+
+from . import bags
+from .conftest import wait_for
+from .foxglove_robot import FoxgloveRobot
+
+SCANS = 40
+TOPICS = ("/scan", "/odom", "/tf_static")
+
+
+@pytest.fixture(scope="module", params=["mcap", "ros1"])
+def bag(request, intel, tmp_path_factory):
+    """A real bag of Intel scans (odometry on /odom, the laser's mount on /tf_static) and the file
+    a Foxglove server publishes it from."""
+    folder = tmp_path_factory.mktemp("live")
+    kind = request.param
+    path = folder / ("robot.bag" if kind == "ros1" else "robot")
+    bags.write(path, bags.intel_robot(intel, 0, SCANS, Pose2(0.12, -0.03, 0.05)), kind)
+    return path, path if kind == "ros1" else next(path.glob("*.mcap"))
+
+
+def same(a, b) -> bool:
+    return (a.ref, a.obj, a.result.pose, a.result.iterations, a.guess, a.guess_source, a.frame) == (
+        b.ref,
+        b.obj,
+        b.result.pose,
+        b.result.iterations,
+        b.guess,
+        b.guess_source,
+        b.frame,
+    )
+
+
+def test_live_poses_are_eval_sequences_and_the_buffer_saves_as_a_bag(bag, tmp_path):
+    path, served = bag
+    robot = FoxgloveRobot(served)
+    run = LiveRun(robot.url, ImprovedParams())
+    try:
+        robot.publish(TOPICS, rate=10.0)
+        assert wait_for(lambda: run.snapshot()[0].scans == SCANS, 60)
+        assert wait_for(lambda: run.snapshot()[0].matched + run.snapshot()[0].skipped >= SCANS - 2)
+        status, rows = run.snapshot()
+        log = read_log(path)
+        expected = {(m.ref, m.obj): m for m in match_sequence(log, ImprovedParams(), workers=1)}
+        consecutive = [m for m in rows if m.obj == m.ref + 1]
+        assert len(consecutive) >= 0.75 * (SCANS - 1), status.line()
+        for m in consecutive:
+            assert same(m, expected[(m.ref, m.obj)]), (m.ref, m.obj)
+        assert rows[0].frame == "base_link" and rows[0].guess_source == "odometry"
+        # the buffer, saved, is the bag again
+        out = tmp_path / ("saved.bag" if path.suffix == ".bag" else "saved")
+        assert run.save(out) == len(robot.messages)
+        again = read_log(out)
+        assert again.records == SCANS and again.frames.mount == log.frames.mount
+        for k in (0, SCANS // 2, SCANS - 1):
+            a, b = again.scan(k), log.scan(k)
+            assert np.array_equal(a.ranges, b.ranges) and a.stamp == b.stamp
+            assert a.odometry == b.odometry
+    finally:
+        run.stop()
+        robot.stop()
+
+
+def test_a_restarted_server_is_reconnected_and_the_buffer_kept(bag, tmp_path):
+    _, served = bag
+    robot = FoxgloveRobot(served)
+    run = LiveRun(robot.url, ImprovedParams())
+    half = len(robot.messages) // 2
+    try:
+        robot.publish(TOPICS, rate=20.0, count=half)
+        assert wait_for(lambda: run.snapshot()[0].scans >= SCANS // 2 - 1)
+        robot.stop()
+        assert wait_for(lambda: not run.snapshot()[0].connected)
+        robot = FoxgloveRobot(served, port=robot.port)  # the bridge comes back
+        robot.publish(("/scan", "/odom"), rate=20.0, first=half)
+        assert wait_for(lambda: run.snapshot()[0].scans >= SCANS - 1, 60)
+        status, rows = run.snapshot()
+        assert status.connected and status.reconnects == 1
+        assert any("reconnecting (the buffer is kept)" in n for n in status.notes)
+        assert rows[-1].obj >= SCANS - 2
+        # both halves are in the buffer, the mount of the first half's /tf_static with them
+        out = tmp_path / "both.bag" if served.suffix == ".bag" else tmp_path / "both"
+        run.save(out)
+        assert read_log(out).records >= SCANS - 1
+    finally:
+        run.stop()
+        robot.stop()
+
+
+def test_the_command_prints_each_pair_and_ctrl_c_saves_the_buffer(bag, tmp_path):
+    path, served = bag
+    robot = FoxgloveRobot(served)
+    out = tmp_path / ("live.bag" if path.suffix == ".bag" else "live")
+    cmd = [sys.executable, "-m", "mbicp_viz", "live", robot.url, "--save", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+    reader.start()
+    try:
+        robot.publish(TOPICS, rate=10.0)
+        assert wait_for(lambda: len(lines) >= SCANS // 2, 60), proc.stderr
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0, proc.stderr.read()
+        reader.join(10)
+        expected = {
+            (m.ref, m.obj): m for m in match_sequence(read_log(path), ImprovedParams(), workers=1)
+        }
+        checked = 0
+        for line in lines:
+            i, j = (int(v) for v in line.split(":")[0].split()[1::2])
+            if j == i + 1:
+                p = expected[(i, j)].result.pose
+                assert line.startswith(f"scans {i} -> {j}: x {p.x:+.4f} m, y {p.y:+.4f} m, "), line
+                checked += 1
+        assert checked >= SCANS // 4
+        assert "saved the last" in proc.stderr.read()
+        assert read_log(out).records >= SCANS // 2
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        robot.stop()
+
+
+def test_a_server_that_is_not_a_foxglove_bridge_is_one_line(tmp_path):
+    """An HTTP server answers the websocket handshake with a plain page: one line, exit 2."""
+    page = subprocess.Popen(
+        [sys.executable, "-m", "http.server", "0", "--bind", "127.0.0.1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=tmp_path,
+    )
+    try:
+        first = page.stdout.readline()  # "Serving HTTP on 127.0.0.1 port N ..."
+        port = int(first.split(" port ")[1].split()[0])
+        res = subprocess.run(
+            [sys.executable, "-m", "mbicp_viz", "live", f"ws://127.0.0.1:{port}"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert res.returncode == 2 and "Traceback" not in res.stderr
+        assert "not a Foxglove WebSocket server" in res.stderr
+        assert len(res.stderr.strip().splitlines()) == 1
+    finally:
+        page.terminate()
+        page.wait()
+
+
+def test_a_server_without_a_scan_topic_is_refused_naming_what_it_offers(bag):
+    _, served = bag
+    robot = FoxgloveRobot(served)
+    robot.channels.pop("/scan").close()  # the robot's laser driver is down
+    try:
+        run = LiveRun(robot.url, ImprovedParams())
+        assert wait_for(lambda: run.error() is not None, 30)
+        e = run.error()
+        assert isinstance(e, InputError) and "offers no LaserScan topic" in str(e)
+        assert "/odom (nav_msgs" in str(e)
+        run.stop()
+        with pytest.raises(InputError, match="does not offer the LaserScan topic /front"):
+            run = LiveRun(robot.url, ImprovedParams(), topic="/front")
+            assert wait_for(lambda: run.error() is not None, 30)
+            raise run.error()
+    finally:
+        robot.stop()
+
+
+def test_a_wrong_url_is_one_line():
+    for url, what in (("http://robot:8765", "not a websocket URL"), ("ws://127.0.0.1:1", "cannot")):
+        with pytest.raises(InputError, match=what):
+            LiveRun(url, ImprovedParams())
