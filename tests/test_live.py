@@ -189,3 +189,50 @@ def test_a_wrong_url_is_one_line():
     for url, what in (("http://robot:8765", "not a websocket URL"), ("ws://127.0.0.1:1", "cannot")):
         with pytest.raises(InputError, match=what):
             LiveRun(url, ImprovedParams())
+
+
+def test_a_frozen_buffer_opens_in_the_debugger_with_its_pairs_as_matched_live(bag, tmp_path):
+    """Freeze: the buffer's run view in a real headless Chromium; "open this pair" opens the pair
+    debugger on the pair as it was matched live."""
+    from playwright.sync_api import sync_playwright
+
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.app import App
+    from mbicp_viz.views.debugger.sources import log_source
+
+    from .test_browser import ARGS, CHROMIUM, open_tab
+
+    _, served = bag
+    robot = FoxgloveRobot(served)
+    run = LiveRun(robot.url, ImprovedParams(), buffer_s=12.0)  # the last 12 s of a 20 s drive
+    try:
+        robot.publish(TOPICS, rate=10.0)
+        assert wait_for(lambda: run.snapshot()[0].scans == SCANS, 60)
+        assert wait_for(lambda: run.snapshot()[0].matched + run.snapshot()[0].skipped >= SCANS - 2)
+        log, rows = run.freeze(tmp_path)
+        _, live_rows = run.snapshot()
+    finally:
+        run.stop()
+        robot.stop()
+    assert 20 <= log.records <= 27  # 12 s of scans every 0.5 s, give or take the window's ends
+    shift = SCANS - log.records
+    assert rows[-1].result.pose == live_rows[-1].result.pose and rows[-1].obj + shift == SCANS - 1
+    for r in rows:  # the frozen log's scans are the ones matched live
+        assert log.scan(r.obj).stamp == pytest.approx(100.0 + 0.5 * (r.obj + shift))
+    app = App(log_source("frozen", log, run=rows, rows_label="live"), "127.0.0.1", 0)
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            page, session = open_tab(browser, app)
+            legend = page.locator(".mbicp-legend")
+            legend.get_by_text(scene.RUN_MAP.label).wait_for(timeout=30000)
+            page.screenshot(path=str(tmp_path / "frozen-run.png"))
+            page.get_by_role("button", name="open this pair").click()
+            row = rows[session.run.n]
+            assert wait_for(lambda: session.state.pair == (row.ref, row.obj))
+            assert session.state.guess == row.guess
+            legend.get_by_text(scene.REFERENCE.label, exact=True).wait_for(timeout=30000)
+            page.screenshot(path=str(tmp_path / "frozen-pair.png"))
+            browser.close()
+    finally:
+        app.stop()

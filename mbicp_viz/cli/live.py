@@ -23,7 +23,7 @@ from .options import (
     say,
     user_errors,
 )
-from .serve import ForOpt
+from .serve import ForOpt, ServePortOpt, open_debugger
 
 STATUS_EVERY_S = 1.0
 
@@ -54,6 +54,15 @@ def live(
             "messages) or a ROS 2 bag folder in MCAP storage (CDR messages)",
         ),
     ] = None,
+    serve: Annotated[
+        bool,
+        typer.Option(
+            "--serve",
+            help="when stopped, freeze: open the buffer in the debugger on 127.0.0.1 (its run view "
+            "of the pairs matched, any pair opening in the pair debugger)",
+        ),
+    ] = False,
+    port: ServePortOpt = 8080,
     for_seconds: ForOpt = None,
     budget_s: BudgetOpt = MATCH_BUDGET_S,
 ):
@@ -94,6 +103,22 @@ def live(
     if save is not None:
         n = run.save(save)
         say(f"saved the last {status.buffer_s:.0f} s ({n} messages) to {save}")
+    if serve:
+        _frozen(run, url, port, budget_s)
+
+
+def _frozen(run, url: str, port: int, budget_s: float) -> None:
+    """The buffer in the debugger: its run view, each pair as it was matched live."""
+    import tempfile
+    from dataclasses import replace
+
+    from mbicp_viz.views.debugger.sources import log_source
+
+    with tempfile.TemporaryDirectory(prefix="mbicp-viz-live-") as folder:
+        log, rows = run.freeze(folder)
+        label = f"the last {len(rows)} pairs matched live from {url}"
+        source = log_source(f"{url} (frozen)", log, run=rows, rows_label=label)
+        open_debugger(replace(source, budget_s=budget_s), "127.0.0.1", port, (), None)
 
 
 def _pair_line(m) -> str:

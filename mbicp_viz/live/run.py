@@ -321,6 +321,23 @@ class LiveRun:
         for t in self._threads:
             t.join(timeout=10)
 
+    def freeze(self, folder: Path):
+        """The buffer as a log and the rows of its pairs, record numbers the log's: saved in
+        ``folder`` as a bag (a ROS 1 bag for ROS 1 messages, else a ROS 2 MCAP bag) and read
+        back, for the debugger or any command."""
+        from mbicp_viz.readers import read_log
+
+        with self._lock:
+            messages, scans = list(self.buffer), self.status.scans
+            rows = [r for _, r in self.rows]
+        ros1 = any(m.encoding == "ros1" for m in messages)
+        path = Path(folder) / ("buffer.bag" if ros1 else "buffer")
+        save_bag(messages, path)
+        first = scans - sum(m.msgtype == LASER_SCAN for m in messages)  # its first scan's number
+        rows = [replace(r, ref=r.ref - first, obj=r.obj - first) for r in rows if r.ref >= first]
+        # numbered as a rows file's lines, which the debugger's report names
+        return read_log(path), [replace(r, line=k) for k, r in enumerate(rows, 1)]
+
     def save(self, path: Path) -> int:
         """The buffer as a bag (``.mcap``: ROS 2 MCAP of CDR messages; ``.bag``: ROS 1 of ROS 1
         messages), written whole; the number of messages."""
