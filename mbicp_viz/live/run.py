@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from mbicp_viz.choices import MATCH_BUDGET_S, Guess
-from mbicp_viz.core import Params, Scan, UnusableScan
+from mbicp_viz.core import Params, Scan, ScanError, UnusableScan
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.sequence import match_row
 from mbicp_viz.readers.log import Frames
@@ -285,7 +285,10 @@ class LiveRun:
     def _match_one(self, k: int, msg, received: float, track) -> None:
         frame_id = msg.header.frame_id.lstrip("/")
         frames = self.frames(frame_id)
-        scan = laser_scan(msg, self.url, k, False, track, frames.mount)
+        try:
+            scan = laser_scan(msg, self.url, k, False, track, frames.mount)
+        except ScanError as e:  # inconsistent arrays (a damaged message): counted as unusable
+            scan = UnusableScan(e.source, e.reason)
         if isinstance(scan, UnusableScan):
             with self._lock:
                 self.status.unusable += 1
