@@ -54,11 +54,18 @@ class FoxgloveRobot:
             ),
         )
 
-    def publish(self, topics=("/scan",), rate: float = 10.0, first: int = 0, count=None) -> None:
+    def publish(
+        self, topics=("/scan",), rate: float = 10.0, first: int = 0, count=None, before_scan=None
+    ) -> None:
+        """``before_scan(n)``, when given, is called before the n-th scan message (from 0) is
+        sent: a test waits there for the client to have taken the scans before it."""
         assert wait_for(lambda: set(topics) <= self.listener.topics, 60)
         messages = self.messages[first : None if count is None else first + count]
-        t0, start = messages[0][1], time.monotonic()
+        t0, start, scans = messages[0][1], time.monotonic(), 0
         for topic, t, raw in messages:
+            if topic == "/scan" and before_scan is not None:
+                before_scan(scans)
+                scans += 1
             due = start + (t - t0) * 1e-9 / rate  # the robot's own pace, sped up
             while (now := time.monotonic()) < due:
                 threading.Event().wait(due - now)
