@@ -5,6 +5,7 @@ server is reconnected, and a wrong server is one line."""
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -16,12 +17,12 @@ import pytest
 from mbicp_viz.core import ImprovedParams, Pose2
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.sequence import match_sequence
+from mbicp_viz.live.publisher import FoxgloveRobot
 from mbicp_viz.live.run import LiveRun
 from mbicp_viz.readers import read_log
 
 from . import bags
 from .conftest import wait_for
-from .foxglove_robot import FoxgloveRobot
 
 SCANS = 40
 TOPICS = ("/scan", "/odom", "/tf_static")
@@ -265,3 +266,21 @@ def test_a_frozen_buffer_opens_in_the_debugger_with_its_pairs_as_matched_live(ba
             browser.close()
     finally:
         app.stop()
+
+
+def test_bench_live_reports_what_it_matched_and_how_late(tmp_path):
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+
+    from .conftest import HOKUYO_BAG
+
+    res = CliRunner().invoke(
+        cli, ["bench", "live", "--from", str(HOKUYO_BAG), "--seconds", "2", "--rate-hz", "20"]
+    )
+    assert res.exit_code == 0, res.output
+    assert "bench live: 41 scans of 1081 beams at 20 Hz over 2 s, improved" in res.output
+    got = re.search(r"received (\d+), matched (\d+), skipped (\d+)", res.output)
+    received, matched, skipped = (int(g) for g in got.groups())
+    assert received == 41 and matched + skipped + 1 == received
+    assert re.search(r"median [\d.]+ ms, 95th percentile [\d.]+ ms", res.output)

@@ -259,6 +259,79 @@ def bag(
     )
 
 
+def live(
+    source: Annotated[
+        str, typer.Option("--from", help="the real recording whose scans are played to and fro")
+    ],
+    seconds: Annotated[
+        float, typer.Option("--seconds", min=1.0, help="length of the drive")
+    ] = 30.0,
+    beams: Annotated[
+        int | None,
+        typer.Option("--beams", min=2, max=100_000, help="resample each scan to this many beams"),
+    ] = 1081,
+    rate_hz: Annotated[float, typer.Option("--rate-hz", min=0.1, max=1000)] = 40.0,
+    matcher: MatcherOpt = DEFAULT_MATCHER,
+    params: ParamsOpt = None,
+    topic: TopicOpt = None,
+):
+    """Does `live` keep up? A robot played by the Foxglove SDK's server at its own pace (a ROS 2
+    MCAP bag written from a real recording: its scans resampled, odometry and mount), matched
+    live: scans sent, matched and skipped, and how long after each scan arrived its result was
+    ready."""
+    import tempfile
+    import time
+
+    import numpy as np
+
+    from mbicp_viz.core import tiers
+    from mbicp_viz.errors import InputError
+    from mbicp_viz.evaluation.bench import machine_line
+    from mbicp_viz.live.publisher import FoxgloveRobot
+    from mbicp_viz.live.run import LiveRun
+    from mbicp_viz.readers.params_toml import read_params
+    from mbicp_viz.writers.bag import write
+    from mbicp_viz.writers.replay import replayed
+
+    tiers.quick_start()
+    p = read_params(params, [matcher.value]).matchers[matcher.value]
+    try:
+        robot = replayed(read_log_saying(source, read_options(topic)), seconds, beams, rate_hz)
+    except ValueError as e:
+        raise InputError(str(e), field="--from") from None
+    with tempfile.TemporaryDirectory(prefix="mbicp-viz-bench-live-") as folder:
+        bag = write(Path(folder) / "robot", robot, "mcap")
+        server = FoxgloveRobot(next(bag.glob("*.mcap")))
+        run = LiveRun(server.url, p, buffer_s=seconds + 10.0)
+        try:
+            # at the robot's own pace, once the run has subscribed to what it reads
+            server.publish(tuple(t for t in server.channels if t in ("/scan", "/odom")), 1.0)
+            deadline = time.monotonic() + 10.0  # the last frames still on the wire
+            while run.snapshot()[0].scans < len(robot.stamps) and time.monotonic() < deadline:
+                run.wait_idle(timeout_s=0.1)
+            run.wait_idle(timeout_s=60.0)
+            status, _ = run.snapshot()
+            lags = np.array(run.lags) * 1000.0
+        finally:
+            run.stop()
+            server.stop()
+    sent = len(robot.stamps)
+    typer.echo(
+        f"bench live: {sent} scans of {len(robot.topics[0].scans[0].ranges)} beams at "
+        f"{rate_hz:g} Hz over {seconds:g} s, {matcher.value}; {machine_line()}"
+    )
+    typer.echo(
+        f"received {status.scans}, matched {status.matched}, skipped {status.skipped} to keep up "
+        f"({100.0 * status.skipped / max(status.scans, 1):.1f} %), unusable {status.unusable}"
+    )
+    if len(lags):
+        typer.echo(
+            f"result after the scan arrived: median {np.median(lags):.1f} ms, 95th percentile "
+            f"{np.percentile(lags, 95):.1f} ms, max {lags.max():.1f} ms (a scan every "
+            f"{1000.0 / rate_hz:.1f} ms)"
+        )
+
+
 def throughput(
     source: Annotated[
         str, typer.Option("--from", help="the real recording whose scans are played to and fro")
@@ -344,6 +417,7 @@ def register(app: typer.Typer) -> None:
         ("startup", startup),
         ("bag", bag),
         ("throughput", throughput),
+        ("live", live),
         ("open", opening),
     ):
         group.command(name)(user_errors(fn))

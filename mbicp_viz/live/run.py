@@ -17,6 +17,8 @@ from collections import deque
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from mbicp_viz.choices import MATCH_BUDGET_S, Guess
 from mbicp_viz.core import Params, Scan, ScanError, UnusableScan
 from mbicp_viz.errors import InputError
@@ -89,6 +91,7 @@ class LiveRun:
         self.guess, self.budget_s = guess, budget_s
         self.decoder = Decoder(url, typestore)
         self.status = Status()
+        self.lags: deque[float] = deque(maxlen=100_000)  # [s] each pair's, for bench live
         self.rows: deque[tuple[float, PairMatch]] = deque()  # (stamp of its object scan, row)
         self.buffer: deque[Raw] = deque()
         self._odometry: deque = deque()  # decoded Odometry messages of the buffer's window
@@ -99,10 +102,12 @@ class LiveRun:
         self._connected_at = time.monotonic()
         self._pending: tuple[int, object, float] | None = None  # the newest scan not yet matched
         self._previous: tuple[int, Scan] | None = None
+        self._busy = False  # the matcher is matching a scan
         self._lock = threading.Condition()
         self._stop = threading.Event()
         self._error: InputError | None = None
         self._ws = None
+        _warm_up(params)  # the robot's first scans are not skipped while kernels load
         first = client.connect(url)  # a wrong URL or server is refused here, in one line
         self._threads = [
             threading.Thread(target=self._receive, args=(first,), daemon=True),
@@ -250,7 +255,7 @@ class LiveRun:
                     k, msg, received = self._pending
                     stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
                     if self._odometry_ready(stamp, received):
-                        self._pending = None
+                        self._pending, self._busy = None, True
                         return k, msg, received, self._track(stamp)
                 elif (
                     self._scan_channel is None and time.monotonic() - self._connected_at > NO_SCAN_S
@@ -278,7 +283,12 @@ class LiveRun:
     def _match(self) -> None:
         try:
             while (nxt := self._next_scan()) is not None:
-                self._match_one(*nxt)
+                try:
+                    self._match_one(*nxt)
+                finally:
+                    with self._lock:
+                        self._busy = False
+                        self._lock.notify_all()
         except InputError as e:
             self._fail(e)
 
@@ -305,8 +315,14 @@ class LiveRun:
                 self.rows.popleft()  # the rows of the buffer's seconds
             self.status.matched += 1
             self.status.lag_s = time.monotonic() - received
+            self.lags.append(self.status.lag_s)
 
     # --- the caller's ------------------------------------------------------------------------
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Until every scan received is matched or skipped (or ``timeout_s``)."""
+        with self._lock:
+            return self._lock.wait_for(lambda: self._pending is None and not self._busy, timeout_s)
 
     def error(self) -> InputError | None:
         with self._lock:
@@ -347,6 +363,20 @@ class LiveRun:
         with self._lock:
             messages = list(self.buffer)
         return save_bag(messages, Path(path))
+
+
+def _warm_up(params: Params) -> None:
+    """Load the matcher's compiled kernels (numba's cache) with one iteration on a made-up room:
+    the first live match then costs what the others do."""
+    from mbicp_viz.core import Pose2, make_scan, match
+    from mbicp_viz.core.budget import Halt, limited
+
+    bearings = np.linspace(-2.0, 2.0, 361)
+    room = make_scan(3.0 / np.maximum(np.abs(np.cos(bearings)), 0.3), bearings)
+    done = Halt()
+    done.stop("warmed up")
+    with limited(None, done):
+        match(room, room, Pose2(0.01, 0.0, 0.01), params)
 
 
 def save_bag(messages: list[Raw], path: Path) -> int:

@@ -1,6 +1,7 @@
-"""A robot as the live command meets one: the official Foxglove SDK's WebSocket server (the one
-foxglove_bridge's successors run) publishing a real bag's messages, raw as the bag holds them (CDR
-from a ROS 2 bag, ROS 1 from a ROS 1 bag), with their original stamps as log times."""
+"""A robot as the live command meets one, for ``bench live`` and the tests: the official Foxglove
+SDK's WebSocket server (``pip install foxglove-sdk``) publishing a bag's messages, raw as the bag
+holds them (CDR from a ROS 2 bag, ROS 1 from a ROS 1 bag), with their original stamps as log
+times."""
 
 from __future__ import annotations
 
@@ -8,19 +9,30 @@ import threading
 import time
 from pathlib import Path
 
-import foxglove
-from foxglove import Channel, Schema
-from foxglove.websocket import ServerListener
+from mbicp_viz.errors import InputError
 
-from .conftest import wait_for
+try:
+    import foxglove
+    from foxglove import Channel, Schema
+    from foxglove.websocket import ServerListener
+except ImportError:  # bench live says what to install
+    foxglove = None
+    ServerListener = object
 
 
 class _Subscriptions(ServerListener):
     def __init__(self):
         self.topics: set[str] = set()
+        self.changed = threading.Condition()
 
     def on_subscribe(self, client, channel) -> None:
-        self.topics.add(channel.topic)
+        with self.changed:
+            self.topics.add(channel.topic)
+            self.changed.notify_all()
+
+    def wait(self, topics, timeout_s: float) -> bool:
+        with self.changed:
+            return self.changed.wait_for(lambda: set(topics) <= self.topics, timeout_s)
 
 
 class FoxgloveRobot:
@@ -30,12 +42,15 @@ class FoxgloveRobot:
     def __init__(self, bag: Path, port: int = 0):
         from rosbags.highlevel import AnyReader
 
+        if foxglove is None:
+            raise InputError("publishing a bag needs the Foxglove SDK: pip install foxglove-sdk")
         self.bag, self.ros1 = bag, bag.suffix == ".bag"
         self.listener = _Subscriptions()
         self.server = foxglove.start_server(port=port, server_listener=self.listener)
         self.port = self.server.port
         with AnyReader([bag]) as reader:
             self.channels = {c.topic: self._channel(c) for c in reader.connections}
+            self.scan_topics = {c.topic for c in reader.connections if c.msgtype.endswith("Scan")}
             self.messages = [(c.topic, t, raw) for c, t, raw in reader.messages()]
 
     @property
@@ -59,11 +74,12 @@ class FoxgloveRobot:
     ) -> None:
         """``before_scan(n)``, when given, is called before the n-th scan message (from 0) is
         sent: a test waits there for the client to have taken the scans before it."""
-        assert wait_for(lambda: set(topics) <= self.listener.topics, 60)
+        if not self.listener.wait(topics, 60.0):
+            raise InputError(f"nobody subscribed to {', '.join(topics)} within 60 s", self.url)
         messages = self.messages[first : None if count is None else first + count]
         t0, start, scans = messages[0][1], time.monotonic(), 0
         for topic, t, raw in messages:
-            if topic == "/scan" and before_scan is not None:
+            if topic in self.scan_topics and before_scan is not None:
                 before_scan(scans)
                 scans += 1
             due = start + (t - t0) * 1e-9 / rate  # the robot's own pace, sped up
