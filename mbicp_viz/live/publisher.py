@@ -30,6 +30,15 @@ class _Subscriptions(ServerListener):
             self.topics.add(channel.topic)
             self.changed.notify_all()
 
+    @staticmethod
+    def settled(received, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while not received():
+            if time.monotonic() > deadline:
+                return False
+            threading.Event().wait(0.01)
+        return True
+
     def wait(self, topics, timeout_s: float) -> bool:
         with self.changed:
             return self.changed.wait_for(lambda: set(topics) <= self.topics, timeout_s)
@@ -70,13 +79,29 @@ class FoxgloveRobot:
         )
 
     def publish(
-        self, topics=("/scan",), rate: float = 10.0, first: int = 0, count=None, before_scan=None
+        self,
+        topics=("/scan",),
+        rate: float = 10.0,
+        first: int = 0,
+        count=None,
+        before_scan=None,
+        received=None,
     ) -> None:
-        """``before_scan(n)``, when given, is called before the n-th scan message (from 0) is
-        sent: a test waits there for the client to have taken the scans before it."""
+        """Send the messages once the client subscribed to ``topics``, ``rate`` times faster than
+        they were recorded. ``received()``, when given, says whether the client has the first
+        message: it is sent again until it does (a subscription the server has announced may take
+        effect a moment later). ``before_scan(n)`` is called before the n-th scan message (from 0)
+        is sent: a test waits there for the client to have taken the scans before it."""
         if not self.listener.wait(topics, 60.0):
             raise InputError(f"nobody subscribed to {', '.join(topics)} within 60 s", self.url)
         messages = self.messages[first : None if count is None else first + count]
+        if received is not None:
+            topic, t, raw = messages[0]
+            for _ in range(100):
+                self.channels[topic].log(raw, log_time=t)
+                if self.listener.settled(received, 0.5):
+                    break
+            messages = messages[1:]
         t0, start, scans = messages[0][1], time.monotonic(), 0
         for topic, t, raw in messages:
             if topic in self.scan_topics and before_scan is not None:
