@@ -104,6 +104,7 @@ def test_a_matcher_behind_skips_to_the_newest_scan_and_says_how_many(bag):
     robot = FoxgloveRobot(served)
     run = LiveRun(robot.url, ImprovedParams(), guess="identity")
     try:
+
         def before_scan(n: int) -> None:  # the first scan starts the chain, then the burst
             assert n != 1 or wait_for(lambda: caught_up(run, 1), 60)
 
@@ -149,21 +150,40 @@ def test_a_restarted_server_is_reconnected_and_the_buffer_kept(bag, tmp_path):
         robot.stop()
 
 
-def test_the_command_prints_each_pair_and_ctrl_c_saves_the_buffer(bag, tmp_path):
+def test_the_command_prints_each_pair_serves_the_page_and_ctrl_c_saves_the_buffer(bag, tmp_path):
+    """``live URL --save BAG --rrd FILE --serve``: a line per pair on stdout, the live page served
+    on 127.0.0.1 meanwhile, and on Ctrl-C the buffer saved as a bag and as a run's .rrd."""
+    import urllib.request
+
+    from rerun.chunk import RrdReader
+
     path, served = bag
     robot = FoxgloveRobot(served)
     out = tmp_path / ("live.bag" if path.suffix == ".bag" else "live")
+    rrd = tmp_path / "live.rrd"
     cmd = [sys.executable, "-m", "mbicp_viz", "live", robot.url, "--save", str(out)]
+    cmd += ["--rrd", str(rrd), "--serve", "--port", "0"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
-    reader.start()
+    said: list[str] = []
+    readers = [
+        threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True),
+        threading.Thread(target=lambda: said.extend(proc.stderr), daemon=True),
+    ]
+    for r in readers:
+        r.start()
     try:
+        assert wait_for(lambda: any("the live page is at" in line for line in said), 60), said
+        url = next(line for line in said if "the live page is at" in line).split()[-1]
+        assert url.startswith("http://127.0.0.1:")
+        with urllib.request.urlopen(url, timeout=30) as page:
+            assert page.status == 200
         robot.publish(TOPICS, rate=10.0)
-        assert wait_for(lambda: len(lines) >= SCANS // 2, 60), proc.stderr
+        assert wait_for(lambda: len(lines) >= SCANS // 2, 60), said
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 0, proc.stderr.read()
-        reader.join(10)
+        assert proc.wait(timeout=30) == 0, said
+        for r in readers:
+            r.join(10)
         expected = {
             (m.ref, m.obj): m for m in match_sequence(read_log(path), ImprovedParams(), workers=1)
         }
@@ -175,8 +195,13 @@ def test_the_command_prints_each_pair_and_ctrl_c_saves_the_buffer(bag, tmp_path)
                 assert line.startswith(f"scans {i} -> {j}: x {p.x:+.4f} m, y {p.y:+.4f} m, "), line
                 checked += 1
         assert checked >= SCANS // 4
-        assert "saved the last" in proc.stderr.read()
+        assert any("saved the last" in line for line in said)
         assert read_log(out).records >= SCANS // 2
+        saved = next(line for line in said if "saved the buffer's" in line)
+        pairs = int(saved.split("buffer's ")[1].split()[0])
+        assert pairs >= SCANS // 2 - 1 and not any("Traceback" in line for line in said)
+        entities = {c.entity_path for c in RrdReader(str(rrd)).stream().to_chunks()}
+        assert any(e.endswith("/trajectory") for e in entities), entities
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -279,6 +304,80 @@ def test_a_frozen_buffer_opens_in_the_debugger_with_its_pairs_as_matched_live(ba
             browser.close()
     finally:
         app.stop()
+
+
+def test_the_live_page_grows_with_the_run_freezes_opens_a_pair_and_resumes(bag, tmp_path):
+    """The live page in a real headless Chromium while a robot drives: the status, the laser's
+    mount and the run grow; "freeze" opens the buffer's run view, a pair of it opens as it was
+    matched live; "resume" goes live again and follows the scans sent since."""
+    from playwright.sync_api import sync_playwright
+
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.app import App
+
+    from .test_browser import ARGS, CHROMIUM
+
+    _, served = bag
+    robot = FoxgloveRobot(served)
+    run = LiveRun(robot.url, ImprovedParams())
+    app = App(None, "127.0.0.1", 0, live=run)
+    half = len(robot.messages) // 2
+
+    def lockstep(n: int) -> None:  # each scan sent once the one before is matched
+        assert wait_for(lambda: caught_up(run, n), 60), run.snapshot()[0].line()
+
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.goto(f"http://127.0.0.1:{app.port}")
+            page.get_by_text("waiting for the first pair").wait_for(timeout=60000)
+            robot.publish(TOPICS, 20.0, count=half, before_scan=lockstep, received=lambda: has(run))
+            first = sum(m[0] == "/scan" for m in robot.messages[:half])
+            assert wait_for(lambda: run.wait_idle(0) and run.snapshot()[0].scans == first)
+            matched = run.snapshot()[0].matched
+            assert matched == first - 1
+            page.get_by_text(f"{matched} matched, 0 skipped to keep up").wait_for(timeout=30000)
+            page.get_by_text("laser mount (").wait_for(timeout=30000)
+            page.get_by_text("x +0.120 m, y -0.030 m, theta +2.86 deg in base_link").wait_for()
+            legend = page.locator(".mbicp-legend")
+            for style in (scene.RUN_TRAJECTORY, scene.RUN_MAP, scene.RUN_OBJECT):
+                legend.get_by_text(style.label, exact=True).wait_for(timeout=30000)
+            legend.get_by_text("the buffer's first scan's (base_link)").wait_for()
+            page.get_by_text("how far behind the robot").wait_for()
+            page.screenshot(path=str(tmp_path / "live.png"))
+            tab = next(iter(app.sessions.values()))
+            assert wait_for(lambda: tab.drawn and tab.drawn[0] == len(run.view()[2]) == matched)
+
+            page.get_by_role("button", name="freeze").click()
+            page.get_by_role("button", name="resume").wait_for(timeout=60000)
+            assert wait_for(lambda: tab.session is not None and tab.session.run is not None)
+            frozen = tab.session.run.model.rows
+            assert len(frozen) == matched
+            assert frozen[-1].result.pose == run.snapshot()[1][-1].result.pose
+            page.get_by_text(f"{matched} pairs matched with improved").wait_for(timeout=30000)
+            page.get_by_role("button", name="open this pair").click()
+            row = frozen[tab.session.run.n]
+            assert wait_for(lambda: tab.session.state.pair == (row.ref, row.obj))
+            legend.get_by_text(scene.REFERENCE.label, exact=True).wait_for(timeout=30000)
+            page.screenshot(path=str(tmp_path / "frozen.png"))
+
+            sent = run.snapshot()[0].scans
+            then = lambda n: lockstep(n + sent)  # noqa: E731
+            robot.publish(("/scan", "/odom"), 20.0, first=half, before_scan=then)
+            assert wait_for(lambda: run.wait_idle(0) and run.snapshot()[0].scans == SCANS, 60)
+            page.get_by_role("button", name="resume").click()
+            page.get_by_role("button", name="freeze").wait_for(timeout=30000)
+            matched = run.snapshot()[0].matched
+            page.get_by_text(f"{matched} matched, 0 skipped").wait_for(timeout=30000)
+            assert matched == SCANS - 1
+            assert wait_for(lambda: tab.drawn[:2] == (matched, SCANS - 1))  # the newest pair
+            page.screenshot(path=str(tmp_path / "resumed.png"))
+            browser.close()
+    finally:
+        app.stop()
+        run.stop()
+        robot.stop()
 
 
 def test_bench_live_reports_what_it_matched_and_how_late(tmp_path):

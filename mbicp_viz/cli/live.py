@@ -18,12 +18,13 @@ from .options import (
     GuessOpt,
     MatcherOpt,
     ParamsOpt,
+    RrdOpt,
     TopicOpt,
     TypestoreOpt,
     say,
     user_errors,
 )
-from .serve import ForOpt, ServePortOpt, open_debugger
+from .serve import ForOpt, ServePortOpt
 
 STATUS_EVERY_S = 1.0
 
@@ -54,12 +55,13 @@ def live(
             "messages) or a ROS 2 bag folder in MCAP storage (CDR messages)",
         ),
     ] = None,
+    rrd: RrdOpt = None,
     serve: Annotated[
         bool,
         typer.Option(
             "--serve",
-            help="when stopped, freeze: open the buffer in the debugger on 127.0.0.1 (its run view "
-            "of the pairs matched, any pair opening in the pair debugger)",
+            help="the live page on 127.0.0.1: the run growing, each pair's health and lag; "
+            "'freeze' opens the buffer in the debugger (its run view, any pair's iterations)",
         ),
     ] = False,
     port: ServePortOpt = 8080,
@@ -69,7 +71,7 @@ def live(
     """Match a running robot's scans as they arrive (each against the previous one, guess as
     `eval sequence` takes it): one line per pair on stdout, the status each second on stderr,
     until Ctrl-C (or --for-seconds); the last --buffer-s seconds of messages are kept for
-    --save."""
+    --save and --rrd."""
     from mbicp_viz.core import tiers
     from mbicp_viz.evaluation.pool import stopping
     from mbicp_viz.live.run import LiveRun
@@ -78,9 +80,15 @@ def live(
     tiers.quick_start()
     p = read_params(params, [matcher.value]).matchers[matcher.value]
     run = LiveRun(url, p, topic, buffer_s, typestore, guess, budget_s)
-    say(f"mbicp-viz: live from {url}; Ctrl-C stops" + (f" and saves to {save}" if save else ""))
-    done, shown, notes = threading.Event(), 0, 0
+    saved = " and ".join(str(p) for p in (save, rrd) if p is not None)
+    say(f"mbicp-viz: live from {url}; Ctrl-C stops" + (f" and saves to {saved}" if saved else ""))
+    done, shown, notes, page = threading.Event(), 0, 0, None
     try:
+        if serve:
+            from mbicp_viz.views.debugger.app import App
+
+            page = App(None, "127.0.0.1", port, live=run)
+            say(f"mbicp-viz: the live page is at http://127.0.0.1:{page.port}")
         with stopping(done):
             waited = 0.0
             while not done.wait(STATUS_EVERY_S) and (for_seconds is None or waited < for_seconds):
@@ -97,28 +105,31 @@ def live(
                 shown = status.matched
                 say(status.line())
     finally:
+        if page is not None:
+            page.stop()
         run.stop()
     status, _ = run.snapshot()
     say(status.line())
     if save is not None:
         n = run.save(save)
         say(f"saved the last {status.buffer_s:.0f} s ({n} messages) to {save}")
-    if serve:
-        _frozen(run, url, port, budget_s)
+    if rrd is not None:
+        _save_rrd(run, rrd)
 
 
-def _frozen(run, url: str, port: int, budget_s: float) -> None:
-    """The buffer in the debugger: its run view, each pair as it was matched live."""
+def _save_rrd(run, path: Path) -> None:
+    """The buffer's run (the pairs matched live on its scans) as an .rrd, written whole."""
     import tempfile
-    from dataclasses import replace
 
-    from mbicp_viz.views.debugger.sources import log_source
+    from mbicp_viz.views.rrd import record_sequence
 
     with tempfile.TemporaryDirectory(prefix="mbicp-viz-live-") as folder:
-        log, rows = run.freeze(folder)
-        label = f"the last {len(rows)} pairs matched live from {url}"
-        source = log_source(f"{url} (frozen)", log, run=rows, rows_label=label)
-        open_debugger(replace(source, budget_s=budget_s), "127.0.0.1", port, (), None)
+        log, rows = run.freeze(Path(folder))
+        if not rows:
+            say(f"nothing matched: {path} not written")
+            return
+        record_sequence(log, rows, str(path))
+    say(f"saved the buffer's {len(rows)} pairs to {path}")
 
 
 def _pair_line(m) -> str:

@@ -23,7 +23,7 @@ from mbicp_viz.choices import MATCH_BUDGET_S, Guess
 from mbicp_viz.core import Params, Scan, ScanError, UnusableScan
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.sequence import match_row
-from mbicp_viz.readers.log import Frames
+from mbicp_viz.readers.log import Frames, ScanLog
 from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.rosbag import LASER_SCAN, ODOMETRY, TF, laser_scan, odometry_track
 from mbicp_viz.readers.tf import TfTree
@@ -92,7 +92,9 @@ class LiveRun:
         self.decoder = Decoder(url, typestore)
         self.status = Status()
         self.lags: deque[float] = deque(maxlen=100_000)  # [s] each pair's, for bench live
-        self.rows: deque[tuple[float, PairMatch]] = deque()  # (stamp of its object scan, row)
+        # (stamp of its object scan, row, lag [s]): the pairs of the buffer's seconds
+        self.rows: deque[tuple[float, PairMatch, float]] = deque()
+        self.scans: deque[tuple[int, Scan]] = deque()  # the chain's scans (number, scan), for view
         self.buffer: deque[Raw] = deque()
         self._odometry: deque = deque()  # decoded Odometry messages of the buffer's window
         self._tf = TfTree()
@@ -102,6 +104,7 @@ class LiveRun:
         self._connected_at = time.monotonic()
         self._pending: tuple[int, object, float] | None = None  # the newest scan not yet matched
         self._previous: tuple[int, Scan] | None = None
+        self._frame_id = ""  # the laser's, as its scans name it
         self._busy = False  # the matcher is matching a scan
         self._lock = threading.Condition()
         self._stop = threading.Event()
@@ -293,7 +296,7 @@ class LiveRun:
             self._fail(e)
 
     def _match_one(self, k: int, msg, received: float, track) -> None:
-        frame_id = msg.header.frame_id.lstrip("/")
+        frame_id = self._frame_id = msg.header.frame_id.lstrip("/")
         frames = self.frames(frame_id)
         try:
             scan = laser_scan(msg, self.url, k, False, track, frames.mount)
@@ -305,17 +308,25 @@ class LiveRun:
             return
         previous, self._previous = self._previous, (k, scan)
         if previous is None:
+            with self._lock:
+                self.scans.append((k, scan))
             return
         i, ref = previous
         job = (self.url, i, k, ref, scan, self.params, self.guess, None, None, frames, True)
         m = match_row(job, self.topic or self._scan_channel.topic, self.budget_s)
         with self._lock:
-            self.rows.append((scan.stamp or 0.0, m))
+            lag = time.monotonic() - received
+            if self.scans and self.scans[-1][0] != i:  # the chain restarted (an unusable scan)
+                self.scans.clear()
+            self.scans.extend([previous] * (not self.scans) + [(k, scan)])
+            self.rows.append((scan.stamp or 0.0, m, lag))
             while self.rows and self.rows[0][0] < self.rows[-1][0] - self.buffer_s:
                 self.rows.popleft()  # the rows of the buffer's seconds
+            while self.scans and self.rows and self.scans[0][0] < self.rows[0][1].ref:
+                self.scans.popleft()
             self.status.matched += 1
-            self.status.lag_s = time.monotonic() - received
-            self.lags.append(self.status.lag_s)
+            self.status.lag_s = lag
+            self.lags.append(lag)
 
     # --- the caller's ------------------------------------------------------------------------
 
@@ -330,7 +341,20 @@ class LiveRun:
 
     def snapshot(self) -> tuple[Status, list[PairMatch]]:
         with self._lock:
-            return replace(self.status, notes=list(self.status.notes)), [r for _, r in self.rows]
+            return replace(self.status, notes=list(self.status.notes)), [r for _, r, _ in self.rows]
+
+    def view(self) -> tuple[Status, ScanLog, list[PairMatch], list[float]]:
+        """What the live page draws: the status, the chain's last unbroken stretch in the buffer
+        as a log of its scans (read from memory, not saved) with its rows numbered as that log's
+        records, and each row's lag [s]."""
+        with self._lock:
+            status = replace(self.status, notes=list(self.status.notes))
+            scans, kept = list(self.scans), list(self.rows)
+        number = {k: n for n, (k, _) in enumerate(scans)}
+        kept = [(r, lag) for _, r, lag in kept if r.ref in number and r.obj in number]
+        rows = [replace(r, ref=number[r.ref], obj=number[r.obj]) for r, _ in kept]
+        log = ScanLog(self.url, [s for _, s in scans], frames=self.frames(self._frame_id))
+        return status, log, rows, [lag for _, lag in kept]
 
     def stop(self) -> None:
         self._stop.set()
@@ -348,7 +372,7 @@ class LiveRun:
 
         with self._lock:
             messages, scans = list(self.buffer), self.status.scans
-            rows = [r for _, r in self.rows]
+            rows = [r for _, r, _ in self.rows]
         ros1 = any(m.encoding == "ros1" for m in messages)
         path = Path(folder) / ("buffer.bag" if ros1 else "buffer")
         save_bag(messages, path)

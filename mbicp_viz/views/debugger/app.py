@@ -12,10 +12,13 @@ until the compiled code is ready.
 from __future__ import annotations
 
 import functools
+import sys
+import tempfile
 import threading
 import traceback
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stdout
+from pathlib import Path
 
 import viser
 
@@ -58,27 +61,35 @@ def checked_from_the_start(check) -> Iterator[None]:
 
 
 class App:
-    """A viser server with one Session per connected browser tab."""
+    """A viser server with one Session per connected browser tab, or on a live run
+    (``live.run.LiveRun``, ``source`` None) one ``live.LiveTab`` per tab."""
 
     def __init__(
         self,
-        source: Source,
+        source: Source | None,
         host: str = "127.0.0.1",
         port: int = 8080,
         allow_origins: tuple[str, ...] = (),
+        live=None,
     ):
         # a person waits on this page: never a compile stall (before any kernel runs)
         tiers.quick_start()
         self.source, self.host, self.allow_origins = source, host, set(allow_origins)
+        self.live = live
+        # a live tab's frozen buffers, removed with the server
+        self.folder = tempfile.TemporaryDirectory(prefix="mbicp-viz-live-") if live else None
         self.sessions: dict[int, Session] = {}
         self.refused: dict[int, str] = {}  # client id -> the origin whose websocket was closed
         self._lock = threading.Lock()
         self.ready = threading.Event()
-        with checked_from_the_start(self._check_origin):
+        # viser prints its banner on stdout, which is a command's data (``live``'s pairs)
+        with checked_from_the_start(self._check_origin), redirect_stdout(sys.stderr):
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        # where every tab starts
-        TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())
-        threading.Thread(target=self._warm_up, daemon=True).start()
+        if live is not None:  # its matcher's kernels are loaded: it is matching
+            self.ready.set()
+        else:  # where every tab starts
+            TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())
+            threading.Thread(target=self._warm_up, daemon=True).start()
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
 
@@ -133,6 +144,13 @@ class App:
     def _connect(self, client: viser.ClientHandle) -> None:
         if client.client_id in self.refused:  # a message that arrived before the close
             return
+        if self.live is not None:
+            from .live import LiveTab
+
+            tab = LiveTab(client, self.live, Path(self.folder.name), self.live.budget_s)
+            with self._lock:
+                self.sessions[client.client_id] = tab
+            return
         session = Session(client, self.source, self.ready)
         with self._lock:
             self.sessions[client.client_id] = session
@@ -149,5 +167,8 @@ class App:
 
         for s in list(self.sessions.values()):
             s.close()
-        self.server.stop()
+        with redirect_stdout(sys.stderr):
+            self.server.stop()
         stop_recorder()
+        if self.folder is not None:
+            self.folder.cleanup()

@@ -1,0 +1,226 @@
+"""The live page (``live URL --serve``): a running robot's run as it grows, in the world frame of
+the buffer's first scan (its trajectory, the map, the newest pair's scans), the health of every
+pair in the buffer, how far behind the robot each result came, and the status (connected, scans
+matched and skipped, the buffer's seconds and size). "freeze" opens the buffer in the debugger
+(its run view, any pair in the pair debugger with everything it has); "resume" goes live again.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import threading
+import traceback
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import viser
+import viser.uplot as uplot
+
+from .. import scene, viser_draw
+from . import panels
+from .camera import TopDownCamera
+from .run_model import RunModel
+
+REFRESH_S = 0.5  # the page follows the run this often
+LAG = scene.Style("lag: from a scan's arrival to its result [ms]", (220, 40, 40))
+PERIOD = scene.Style("one scan period of the robot [ms]", (120, 120, 120))
+
+
+class LiveTab:
+    """One browser tab on a live run (``live.run.LiveRun``): the live view, or the debugger on a
+    frozen buffer (saved under ``folder``) until "resume"."""
+
+    def __init__(self, client: viser.ClientHandle, run, folder: Path, budget_s: float | None):
+        self.client, self.run, self.folder, self.budget_s = client, run, folder, budget_s
+        self.lock = threading.RLock()
+        self.session = None  # the debugger on a frozen buffer
+        self.closed = threading.Event()
+        self.camera = TopDownCamera(client)
+        with self.lock:
+            self.show_live()
+        threading.Thread(target=self._follow, daemon=True).start()
+
+    # ---- live ---------------------------------------------------------------------------------
+    def show_live(self) -> None:
+        gui = self.client.gui
+        gui.reset()
+        self.client.scene.reset()
+        gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
+        gui.main_panel.dock_right()
+        gui.add_markdown(f"**mbicp-viz** — live from {self.run.url}")
+        self.h_status = gui.add_markdown("waiting for the first pair …")
+        self.h_notes = gui.add_markdown("")
+        freeze = gui.add_button(
+            "freeze", hint="open the buffer in the debugger: its run, any pair's iterations"
+        )
+        freeze.on_click(lambda _: self._guarded(self.freeze))
+        self.h_legend = gui.add_html(panels.legend_html([]))
+        gui.add_button("fit the view").on_click(lambda _: self._guarded(self.fit))
+        series = (
+            uplot.Series(label="s"),
+            panels._line("overlap [%]", "pct", scene.SURFACE),
+            panels._line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
+            panels._line("flagged", "pct", scene.SUSPECT),
+            panels._line("residual [mm]", "mm", scene.RESIDUAL),
+        )
+        self.health = gui.add_uplot(
+            data=tuple(np.zeros(0) for _ in series),
+            series=series,
+            aspect=1.6,
+            title="health of each pair in the buffer",
+            **self._axes(1.0),
+        )
+        self.lateness = gui.add_uplot(
+            data=(np.zeros(0), np.zeros(0), np.zeros(0)),
+            series=(
+                uplot.Series(label="s"),
+                panels._line("lag [ms]", "ms", LAG),
+                panels._line("scan period [ms]", "ms", PERIOD, dash=True),
+            ),
+            aspect=2.2,
+            title="how far behind the robot: each result after its scan arrived",
+            **panels._numeric("time of the scan [s], 0 = the newest", ("ms", "[ms]", 3, 1.0)),
+        )
+        self.nodes: dict[str, object] = {}
+        self.drawn: tuple = ()  # what the scene shows: (pairs, the newest pair's scans)
+        self.box: np.ndarray | None = None  # what the view was fitted to (lo, hi) [m]
+        self.extent = np.zeros((1, 2))
+
+    @staticmethod
+    def _axes(top_mm: float) -> dict:
+        return panels._numeric(
+            "time of the scan [s], 0 = the newest",
+            ("pct", "overlap [%]", 3, 105.0),
+            ("mm", "[mm]", 1, top_mm),
+        )
+
+    def _follow(self) -> None:
+        while not self.closed.wait(REFRESH_S):
+            with self.lock:
+                if self.session is None and not self.closed.is_set():
+                    self._guarded(self.refresh)
+
+    def _guarded(self, fn) -> None:
+        """A callback under the tab's lock; a bug is said on the page and the run goes on."""
+        try:
+            with self.lock:
+                fn()
+        except Exception as e:
+            self.h_status.content = panels.warning(f"Internal error: {type(e).__name__}: {e}")
+            traceback.print_exc()
+
+    def refresh(self) -> None:
+        """The status each time; the scene and the plots when a pair was added."""
+        status, log, rows, lags = self.run.view()
+        error = self.run.error()
+        line = status.line()
+        self.h_status.content = (
+            panels.warning(str(error)) if error is not None else line[0].upper() + line[1:]
+        )
+        self.h_notes.content = "  \n".join(
+            [_mount_text(log.frames), *(f"*{n}*" for n in status.notes[-3:])]
+        )
+        if not rows:
+            return
+        key = (len(rows), rows[-1].obj, rows[-1].result.pose)
+        if key == self.drawn:
+            return
+        self.drawn = key
+        model = RunModel(log, rows)
+        self.draw(model)
+        self.plot(model, log, lags)
+
+    def draw(self, model: RunModel) -> None:
+        pts = model.extent()
+        self.extent = pts
+        scale = scene.scene_scale(pts)
+        n = len(model.rows) - 1
+        layers = [
+            *scene.run_track_layers(model.tracks(), scale),
+            *scene.run_map_layers([np.concatenate([xy for _, xy in model.chunks])], scale),
+            *scene.run_pair_layers(model.pair_at(n), scale),
+        ]
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        if self.box is None or np.any(lo < self.box[0]) or np.any(hi > self.box[1]):
+            self.fit()  # the run left the view
+        with self.client.atomic():
+            drawn = {}
+            for layer in layers:
+                name = f"/{layer.path}"
+                drawn[name] = viser_draw.draw(self.client.scene, name, layer)
+            for name in self.nodes.keys() - drawn.keys():
+                self.nodes[name].remove()
+            self.nodes = drawn
+        shown = {layer.style.label: layer.style for layer in layers if scene.has_content(layer)}
+        frame = f"the world frame: the buffer's first scan's ({model.rows[0].frame})"
+        self.h_legend.content = panels.legend_html(list(shown.values()), self.grid_m, frame)
+
+    def fit(self) -> None:
+        """Top-down over the run so far, with room to grow, and a metric grid under it."""
+        lo, hi = self.extent.min(axis=0), self.extent.max(axis=0)
+        margin = np.maximum(0.25 * (hi - lo), 2.0)
+        self.box = np.stack([lo - margin, hi + margin])
+        self.camera.fit(self.box)
+        self.grid_m = viser_draw.metric_grid(self.client.scene, self.box)
+
+    def plot(self, model: RunModel, log, lags: list[float]) -> None:
+        t = np.array([log.scan(r.obj).stamp or 0.0 for r in model.rows])
+        t = t - t[-1]
+        _, overlap, odo, flagged, residual = model.series()
+        # the time axis set each time (the page keeps an auto range from the plot's first data)
+        x = {"x": uplot.Scale(time=False, auto=False, range=(min(float(t[0]), -1.0), 0.0))}
+        self.health.data = (t, overlap, odo, flagged, residual)
+        self.health.scales = self._axes(panels._top([*odo, *residual]))["scales"] | x
+        period = np.median(np.diff(t)) * 1000 if len(t) > 1 else np.nan
+        lag_ms = 1000 * np.asarray(lags)
+        self.lateness.data = (t, lag_ms, np.full(len(t), period))
+        top = panels._top([*lag_ms, period])
+        self.lateness.scales = panels._numeric("", ("ms", "", 3, top))["scales"] | x
+
+    # ---- frozen -------------------------------------------------------------------------------
+    def freeze(self) -> None:
+        """The buffer saved as a bag and opened in the debugger, each pair as it was matched."""
+        from .session import Session
+        from .sources import log_source
+
+        folder = Path(tempfile.mkdtemp(prefix="frozen-", dir=self.folder))
+        log, rows = self.run.freeze(folder)
+        if not rows:
+            self.h_status.content = panels.warning("nothing to freeze yet: no pair matched")
+            return
+        label = f"the last {len(rows)} pairs matched live from {self.run.url}"
+        source = log_source(f"{self.run.url} (frozen)", log, run=rows, rows_label=label)
+        gui = self.client.gui
+        gui.reset()
+        self.client.scene.reset()
+        self.nodes, self.drawn, self.box = {}, (), None
+        gui.add_button("resume", order=0.5, color="green", hint="back to the live run").on_click(
+            lambda _: self._guarded(self.resume)
+        )
+        self.session = Session(self.client, replace(source, budget_s=self.budget_s))
+
+    def resume(self) -> None:
+        self.session.close()
+        self.session = None
+        self.show_live()
+        self.refresh()
+
+    def close(self) -> None:
+        self.closed.set()
+        self.camera.stop()
+        with self.lock:
+            if self.session is not None:
+                self.session.close()
+
+
+def _mount_text(frames) -> str:
+    """The laser's mount on the robot as tf gave it, or that it has none."""
+    if frames.mount_source is None:
+        return "laser mount: none on /tf_static yet (poses are the laser's)"
+    m = frames.mount
+    return (
+        f"laser mount ({frames.mount_source}): {frames.frame_id} at x {m.x:+.3f} m, "
+        f"y {m.y:+.3f} m, theta {math.degrees(m.theta):+.2f} deg in {frames.base_frame}"
+    )
