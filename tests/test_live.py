@@ -61,28 +61,33 @@ def same(a, b) -> bool:
     )
 
 
-def test_live_poses_are_eval_sequences_and_the_buffer_saves_as_a_bag(bag, tmp_path):
+def lockstep_run(robot: FoxgloveRobot, path, topics=TOPICS) -> tuple[LiveRun, list]:
     """Each scan sent once the one before it is matched (a robot slow enough for the matcher):
-    every pair equals eval sequence's."""
-    path, served = bag
-    robot = FoxgloveRobot(served)
+    every pair equals eval sequence's on the bag at ``path``; the run, still connected."""
     run = LiveRun(robot.url, ImprovedParams())
 
+    def before_scan(n: int) -> None:
+        assert wait_for(lambda: caught_up(run, n), 60), run.snapshot()[0].line()
+
+    robot.publish(topics, rate=10.0, before_scan=before_scan, received=lambda: has(run))
+    assert wait_for(lambda: run.snapshot()[0].matched == SCANS - 1, 60)
+    status, rows = run.snapshot()
+    assert status.skipped == 0 and status.unusable == 0
+    expected = match_sequence(read_log(path), ImprovedParams(), workers=1)
+    assert len(rows) == len(expected) == SCANS - 1
+    for m, e in zip(rows, expected):
+        assert same(m, e), (m.ref, m.obj)
+    assert rows[0].frame == "base_link" and rows[0].guess_source == "odometry"
+    return run, rows
+
+
+def test_live_poses_are_eval_sequences_and_the_buffer_saves_as_a_bag(bag, tmp_path):
+    path, served = bag
+    robot = FoxgloveRobot(served)
+    run = None
     try:
-
-        def before_scan(n: int) -> None:
-            assert wait_for(lambda: caught_up(run, n), 60), run.snapshot()[0].line()
-
-        robot.publish(TOPICS, rate=10.0, before_scan=before_scan, received=lambda: has(run))
-        assert wait_for(lambda: run.snapshot()[0].matched == SCANS - 1, 60)
-        status, rows = run.snapshot()
-        assert status.skipped == 0 and status.unusable == 0
+        run, _ = lockstep_run(robot, path)
         log = read_log(path)
-        expected = match_sequence(log, ImprovedParams(), workers=1)
-        assert len(rows) == len(expected) == SCANS - 1
-        for m, e in zip(rows, expected):
-            assert same(m, e), (m.ref, m.obj)
-        assert rows[0].frame == "base_link" and rows[0].guess_source == "odometry"
         # the buffer, saved, is the bag again
         out = tmp_path / ("saved.bag" if path.suffix == ".bag" else "saved")
         assert run.save(out) >= len(robot.messages)
@@ -93,8 +98,27 @@ def test_live_poses_are_eval_sequences_and_the_buffer_saves_as_a_bag(bag, tmp_pa
             assert np.array_equal(a.ranges, b.ranges) and a.stamp == b.stamp
             assert a.odometry == b.odometry
     finally:
-        run.stop()
+        if run is not None:
+            run.stop()
         robot.stop()
+
+
+def test_odometry_on_tf_is_the_guess_as_a_bags_is(intel, tmp_path):
+    """A robot whose odometry is only odom -> base_link on /tf (a TurtleBot's): the live pairs
+    equal eval sequence's on its bag, guessed from that odometry."""
+    path = tmp_path / "robot"
+    robot = bags.intel_robot(intel, 0, SCANS, Pose2(0.12, -0.03, 0.05), odometry_on="/tf")
+    bags.write(path, robot, "mcap")
+    server = FoxgloveRobot(next(path.glob("*.mcap")))
+    assert "/odom" not in server.channels
+    run = None
+    try:
+        run, rows = lockstep_run(server, path, ("/scan", "/tf", "/tf_static"))
+        assert read_log(path).odometry_source.startswith("tf odom -> base_link")
+    finally:
+        if run is not None:
+            run.stop()
+        server.stop()
 
 
 def test_a_matcher_behind_skips_to_the_newest_scan_and_says_how_many(bag):

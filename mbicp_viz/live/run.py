@@ -4,7 +4,8 @@ messages kept to be saved as a bag that every other command reads.
 
 Three threads: the receiver (reconnecting when the connection is lost), the matcher (always the
 newest scan: when it falls behind it skips, and counts, the scans in between) and the caller's.
-Odometry comes from an Odometry topic; a scan waits for odometry past its stamp (at most
+Odometry comes from an Odometry topic, else from the base's track on ``/tf`` (``odom`` -> the base),
+as a bag's (``readers/rosbag.py``); a scan waits for odometry past its stamp (at most
 ``ODOMETRY_WAIT_S``) so that its guess is interpolated as a bag's is; the laser's mount from
 ``/tf_static``.
 """
@@ -25,7 +26,14 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.sequence import match_row
 from mbicp_viz.readers.log import Frames, ScanLog
 from mbicp_viz.readers.pair_match import PairMatch
-from mbicp_viz.readers.rosbag import LASER_SCAN, ODOMETRY, TF, laser_scan, odometry_track
+from mbicp_viz.readers.rosbag import (
+    LASER_SCAN,
+    ODOMETRY,
+    TF,
+    laser_scan,
+    odometry_track,
+    tf_base,
+)
 from mbicp_viz.readers.tf import TfTree
 
 from . import client
@@ -241,15 +249,16 @@ class LiveRun:
 
     # --- matching ----------------------------------------------------------------------------
 
-    def _odometry_ready(self, stamp: float, received: float) -> bool:
-        if not self._odometry_topic or self.guess not in (Guess.stored, Guess.odometry):
+    def _odometry_ready(self, stamp: float, received: float, track) -> bool:
+        """Whether the odometry reaches past ``stamp`` (or there is none to wait for, or the scan
+        has waited long enough)."""
+        if self.guess not in (Guess.stored, Guess.odometry):
             return True
         if time.monotonic() - received > ODOMETRY_WAIT_S:
             return True
-        if not self._odometry:
-            return False
-        last = self._odometry[-1].header.stamp
-        return last.sec + 1e-9 * last.nanosec >= stamp
+        if track is None:  # none yet: an Odometry topic's first message is awaited
+            return not self._odometry_topic
+        return track[0][-1] >= stamp
 
     def _next_scan(self):
         with self._lock:
@@ -257,9 +266,10 @@ class LiveRun:
                 if self._pending is not None:
                     k, msg, received = self._pending
                     stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-                    if self._odometry_ready(stamp, received):
+                    track = self._track(stamp, msg.header.frame_id.lstrip("/"))
+                    if self._odometry_ready(stamp, received, track):
                         self._pending, self._busy = None, True
-                        return k, msg, received, self._track(stamp)
+                        return k, msg, received, track
                 elif (
                     self._scan_channel is None and time.monotonic() - self._connected_at > NO_SCAN_S
                 ):
@@ -267,14 +277,19 @@ class LiveRun:
                 self._lock.wait(0.05)
         return None
 
-    def _track(self, stamp: float):
-        """The odometry around ``stamp`` (stamps, base poses), older messages dropped."""
+    def _track(self, stamp: float, frame_id: str):
+        """The odometry around ``stamp`` (stamps, base poses): an Odometry topic's, else the
+        track on /tf of the base the laser ``frame_id`` hangs from; older messages dropped."""
         while len(self._odometry) > 2:
             s = self._odometry[1].header.stamp
             if s.sec + 1e-9 * s.nanosec >= stamp - 2.0:
                 break
             self._odometry.popleft()
-        return odometry_track(list(self._odometry)) if self._odometry else None
+        self._tf.drop_before(stamp - 2.0)
+        if self._odometry_topic:
+            return odometry_track(list(self._odometry)) if self._odometry else None
+        base = tf_base(self._tf, self._tf.mount(frame_id, self.url))
+        return None if base is None else self._tf.odometry_track(base)[1:]
 
     def frames(self, frame_id: str) -> Frames:
         with self._lock:

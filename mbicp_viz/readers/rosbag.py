@@ -428,11 +428,11 @@ def _odometry(messages: list[Message], tf: TfTree, mount: Mount | None):
             f"{topics[0]} (nav_msgs/Odometry)",
             *odometry_track([m.msg for m in messages if m.topic == topics[0]]),
         )
-    base = _tf_base(tf, mount)
+    base = tf_base(tf, mount)
     return None if base is None else tf.odometry_track(base)
 
 
-def _tf_base(tf: TfTree, mount: Mount | None) -> str | None:
+def tf_base(tf: TfTree, mount: Mount | None) -> str | None:
     """The base frame whose track /tf gives (the one the laser hangs from, else the first below
     odom), or None."""
     for base in [mount.base_frame] if mount is not None else BASE_FRAMES:
@@ -553,7 +553,7 @@ def _indexed_log(
     odometry, source = None, None
     if odom_topics := _odometry_topics(kinds.items()):
         odometry, source = OdometrySource(odom_topics[0]), f"{odom_topics[0]} (nav_msgs/Odometry)"
-    elif (base := _tf_base(tf, laser_mount)) is not None:
+    elif (base := tf_base(tf, laser_mount)) is not None:
         odometry, source = OdometrySource("/tf", base), tf.odometry_track(base)[0]
     frames, mount = _frames(tf, frame_id, path, given, source, notes)
     store = BagScans(

@@ -101,6 +101,16 @@ class TfTree:
                 t = tr.header.stamp.sec + 1e-9 * tr.header.stamp.nanosec
                 self.timed.setdefault(key, []).append((t if t > 0 else (stamp or 0.0), T))
 
+    def drop_before(self, t: float) -> None:
+        """Forget the timed transforms older than ``t`` [s] but the last one before it (what
+        interpolating at ``t`` needs): a live run's tree stays the size of its last seconds."""
+        for values in self.timed.values():
+            k = 0
+            while k + 1 < len(values) and values[k + 1][0] <= t:
+                k += 1
+            if k:
+                del values[:k]
+
     def frames_only(self) -> TfTree:
         """The static transforms and the first value of each timed one (what ``constant`` reads):
         the tree a window of /tf messages is added to."""
