@@ -412,7 +412,8 @@ def test_bench_live_reports_what_it_matched_and_how_late(tmp_path):
     from .conftest import HOKUYO_BAG
 
     res = CliRunner().invoke(
-        cli, ["bench", "live", "--from", str(HOKUYO_BAG), "--seconds", "2", "--rate-hz", "20"]
+        cli,
+        ["bench", "live", "--from", str(HOKUYO_BAG), "--seconds", "2", "--rate-hz", "20", "--page"],
     )
     assert res.exit_code == 0, res.output
     assert "bench live: 41 scans of 1081 beams at 20 Hz over 2 s, improved" in res.output
@@ -420,3 +421,4 @@ def test_bench_live_reports_what_it_matched_and_how_late(tmp_path):
     received, matched, skipped = (int(g) for g in got.groups())
     assert received == 41 and matched + skipped + 1 == received
     assert re.search(r"median [\d.]+ ms, 95th percentile [\d.]+ ms", res.output)
+    assert re.search(r"the live page: [1-9]\d* refreshes, median [\d.]+ ms", res.output)

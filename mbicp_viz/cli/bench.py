@@ -274,6 +274,14 @@ def live(
     matcher: MatcherOpt = DEFAULT_MATCHER,
     params: ParamsOpt = None,
     topic: TopicOpt = None,
+    page: Annotated[
+        bool,
+        typer.Option(
+            "--page",
+            help="with the live page's work alongside (drawn as for a tab, on a server no browser "
+            "opens): how long each refresh of it takes",
+        ),
+    ] = False,
 ):
     """Does `live` keep up? A robot played by the Foxglove SDK's server at its own pace (a ROS 2
     MCAP bag written from a real recording: its scans resampled, odometry and mount), matched
@@ -303,6 +311,7 @@ def live(
         bag = write(Path(folder) / "robot", robot, "mcap")
         server = FoxgloveRobot(next(bag.glob("*.mcap")))
         run = LiveRun(server.url, p, buffer_s=seconds + 10.0)
+        tab = _live_page(run, Path(folder)) if page else None
         try:
             # at the robot's own pace, once the run has subscribed to what it reads
             server.publish(tuple(t for t in server.channels if t in ("/scan", "/odom")), 1.0)
@@ -313,6 +322,9 @@ def live(
             status, _ = run.snapshot()
             lags = np.array(run.lags) * 1000.0
         finally:
+            if tab is not None:
+                tab.close()
+                tab.client.stop()
             run.stop()
             server.stop()
     sent = len(robot.stamps)
@@ -330,6 +342,26 @@ def live(
             f"{np.percentile(lags, 95):.1f} ms, max {lags.max():.1f} ms (a scan every "
             f"{1000.0 / rate_hz:.1f} ms)"
         )
+    if tab is not None and tab.refresh_s:
+        took = np.array(tab.refresh_s) * 1000.0
+        typer.echo(
+            f"the live page: {len(took)} refreshes, median {np.median(took):.1f} ms, max "
+            f"{took.max():.1f} ms (one every {1000.0 * tab.every_s:.0f} ms)"
+        )
+
+
+def _live_page(run, folder: Path):
+    """The live page's work for ``bench live --page``: a tab's drawing, on a server of its own."""
+    import contextlib
+    import sys
+
+    import viser
+
+    from mbicp_viz.views.debugger.live import LiveTab
+
+    with contextlib.redirect_stdout(sys.stderr):
+        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    return LiveTab(server, run, folder, None)
 
 
 def throughput(

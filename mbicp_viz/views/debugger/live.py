@@ -10,7 +10,9 @@ from __future__ import annotations
 import math
 import tempfile
 import threading
+import time
 import traceback
+from collections import deque
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,8 +34,17 @@ class LiveTab:
     """One browser tab on a live run (``live.run.LiveRun``): the live view, or the debugger on a
     frozen buffer (saved under ``folder``) until "resume"."""
 
-    def __init__(self, client: viser.ClientHandle, run, folder: Path, budget_s: float | None):
+    def __init__(
+        self,
+        client: viser.ClientHandle | viser.ViserServer,
+        run,
+        folder: Path,
+        budget_s: float | None,
+    ):
+        """``client``: a browser tab, or a server (``bench live --page``: the page's work)."""
         self.client, self.run, self.folder, self.budget_s = client, run, folder, budget_s
+        self.every_s = REFRESH_S
+        self.refresh_s: deque[float] = deque(maxlen=10_000)  # [s] each refresh that drew
         self.lock = threading.RLock()
         self.session = None  # the debugger on a frozen buffer
         self.closed = threading.Event()
@@ -97,7 +108,7 @@ class LiveTab:
         )
 
     def _follow(self) -> None:
-        while not self.closed.wait(REFRESH_S):
+        while not self.closed.wait(self.every_s):
             with self.lock:
                 if self.session is None and not self.closed.is_set():
                     self._guarded(self.refresh)
@@ -128,9 +139,11 @@ class LiveTab:
         if key == self.drawn:
             return
         self.drawn = key
+        t0 = time.perf_counter()
         model = RunModel(log, rows)
         self.draw(model)
         self.plot(model, log, lags)
+        self.refresh_s.append(time.perf_counter() - t0)
 
     def draw(self, model: RunModel) -> None:
         pts = model.extent()
