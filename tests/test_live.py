@@ -355,7 +355,7 @@ def test_the_live_page_grows_with_the_run_freezes_opens_a_pair_and_resumes(bag, 
             browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
             page = browser.new_page(viewport={"width": 1400, "height": 900})
             page.goto(f"http://127.0.0.1:{app.port}")
-            page.get_by_text("waiting for the first pair").wait_for(timeout=60000)
+            page.get_by_text("Connected: 0 scans").wait_for(timeout=60000)  # before any scan
             robot.publish(TOPICS, 20.0, count=half, before_scan=lockstep, received=lambda: has(run))
             first = sum(m[0] == "/scan" for m in robot.messages[:half])
             assert wait_for(lambda: run.wait_idle(0) and run.snapshot()[0].scans == first)
