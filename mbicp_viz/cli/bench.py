@@ -352,16 +352,10 @@ def live(
 
 def _live_page(run, folder: Path):
     """The live page's work for ``bench live --page``: a tab's drawing, on a server of its own."""
-    import contextlib
-    import sys
-
-    import viser
-
+    from mbicp_viz.views.debugger.app import viser_server
     from mbicp_viz.views.debugger.live import LiveTab
 
-    with contextlib.redirect_stdout(sys.stderr):
-        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    return LiveTab(server, run, folder, None)
+    return LiveTab(viser_server("127.0.0.1", 0), run, folder, None)
 
 
 def throughput(

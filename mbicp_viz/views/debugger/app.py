@@ -60,6 +60,13 @@ def checked_from_the_start(check) -> Iterator[None]:
             viser.infra.WebsockServer.start = start
 
 
+def viser_server(host: str, port: int) -> viser.ViserServer:
+    """A viser server whose banner goes to stderr: stdout is a command's data (``live``'s
+    pairs)."""
+    with redirect_stdout(sys.stderr):
+        return viser.ViserServer(host=host, port=port, verbose=False)
+
+
 class App:
     """A viser server with one Session per connected browser tab, or on a live run
     (``live.run.LiveRun``, ``source`` None) one ``live.LiveTab`` per tab."""
@@ -82,9 +89,8 @@ class App:
         self.refused: dict[int, str] = {}  # client id -> the origin whose websocket was closed
         self._lock = threading.Lock()
         self.ready = threading.Event()
-        # viser prints its banner on stdout, which is a command's data (``live``'s pairs)
-        with checked_from_the_start(self._check_origin), redirect_stdout(sys.stderr):
-            self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        with checked_from_the_start(self._check_origin):
+            self.server = viser_server(host, port)
         if live is not None:  # its matcher's kernels are loaded: it is matching
             self.ready.set()
         else:  # where every tab starts

@@ -26,6 +26,7 @@ from .camera import TopDownCamera
 from .run_model import RunModel
 
 REFRESH_S = 0.5  # the page follows the run this often
+TIME_AXIS = "time of the scan [s], 0 = the newest"
 LAG = scene.Style("lag: from a scan's arrival to its result [ms]", (220, 40, 40))
 PERIOD = scene.Style("one scan period of the robot [ms]", (120, 120, 120))
 
@@ -69,19 +70,13 @@ class LiveTab:
         freeze.on_click(lambda _: self._guarded(self.freeze))
         self.h_legend = gui.add_html(panels.legend_html([]))
         gui.add_button("fit the view").on_click(lambda _: self._guarded(self.fit))
-        series = (
-            uplot.Series(label="s"),
-            panels._line("overlap [%]", "pct", scene.SURFACE),
-            panels._line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
-            panels._line("flagged", "pct", scene.SUSPECT),
-            panels._line("residual [mm]", "mm", scene.RESIDUAL),
-        )
+        series = tuple(panels.health_legend("s"))
         self.health = gui.add_uplot(
             data=tuple(np.zeros(0) for _ in series),
             series=series,
             aspect=1.6,
             title="health of each pair in the buffer",
-            **self._axes(1.0),
+            **panels.health_axes(TIME_AXIS, 1.0),
         )
         self.lateness = gui.add_uplot(
             data=(np.zeros(0), np.zeros(0), np.zeros(0)),
@@ -92,20 +87,12 @@ class LiveTab:
             ),
             aspect=2.2,
             title="how far behind the robot: each result after its scan arrived",
-            **panels._numeric("time of the scan [s], 0 = the newest", ("ms", "[ms]", 3, 1.0)),
+            **panels._numeric(TIME_AXIS, ("ms", "[ms]", 3, 1.0)),
         )
         self.nodes: dict[str, object] = {}
         self.drawn: tuple = ()  # what the scene shows: (pairs, the newest pair's scans)
         self.box: np.ndarray | None = None  # what the view was fitted to (lo, hi) [m]
         self.extent = np.zeros((1, 2))
-
-    @staticmethod
-    def _axes(top_mm: float) -> dict:
-        return panels._numeric(
-            "time of the scan [s], 0 = the newest",
-            ("pct", "overlap [%]", 3, 105.0),
-            ("mm", "[mm]", 1, top_mm),
-        )
 
     def _follow(self) -> None:
         while not self.closed.wait(self.every_s):
@@ -185,7 +172,7 @@ class LiveTab:
         # the time axis set each time (the page keeps an auto range from the plot's first data)
         x = {"x": uplot.Scale(time=False, auto=False, range=(min(float(t[0]), -1.0), 0.0))}
         self.health.data = (t, overlap, odo, flagged, residual)
-        self.health.scales = self._axes(panels._top([*odo, *residual]))["scales"] | x
+        self.health.scales = panels.health_axes("", panels._top([*odo, *residual]))["scales"] | x
         period = np.median(np.diff(t)) * 1000 if len(t) > 1 else np.nan
         lag_ms = 1000 * np.asarray(lags)
         self.lateness.data = (t, lag_ms, np.full(len(t), period))

@@ -144,6 +144,22 @@ def _numeric(x_label: str, *axes: tuple[str, str, int, float]) -> dict:
     )
 
 
+def health_legend(x_label: str) -> list[uplot.Series]:
+    """The lines of a run's health timeline (``RunModel.series``), after its x."""
+    return [
+        uplot.Series(label=x_label),
+        _line("overlap [%]", "pct", scene.SURFACE),
+        _line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
+        _line("flagged", "pct", scene.SUSPECT),
+        _line("residual [mm]", "mm", scene.RESIDUAL),
+    ]
+
+
+def health_axes(x_label: str, top_mm: float) -> dict:
+    """The health timeline's axes: overlap [%] on the right, millimetres up to ``top_mm``."""
+    return _numeric(x_label, ("pct", "overlap [%]", 3, 105.0), ("mm", "[mm]", 1, top_mm))
+
+
 def _line(label: str, scale: str, style: scene.Style, dash: bool = False) -> uplot.Series:
     return uplot.Series(
         label=label, scale=scale, stroke=_css(style.color), width=2, dash=[6, 4] if dash else None

@@ -8,7 +8,6 @@ The run itself is ``run_model.RunModel``.
 from __future__ import annotations
 
 import numpy as np
-import viser.uplot as uplot
 
 from .. import scene, viser_draw
 from . import panels
@@ -50,13 +49,7 @@ class RunPanel:
                 (float(np.nanmax(v)) for v in (data[2], *data[4:]) if np.any(np.isfinite(v))),
                 default=1.0,
             )
-            series = [
-                uplot.Series(label="pair"),
-                panels._line("overlap [%]", "pct", scene.SURFACE),
-                panels._line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
-                panels._line("flagged", "pct", scene.SUSPECT),
-                panels._line("residual [mm]", "mm", scene.RESIDUAL),
-            ]
+            series = panels.health_legend("pair")
             if model.versus is not None:
                 series.append(panels._line("A and B apart [mm]", "mm", scene.RUN_OTHER))
             self.plot = gui.add_uplot(
@@ -64,9 +57,7 @@ class RunPanel:
                 series=tuple(series),
                 aspect=1.6,
                 title="health of every pair",
-                **panels._numeric(
-                    "pair", ("pct", "overlap [%]", 3, 105.0), ("mm", "[mm]", 1, top * 1.08)
-                ),
+                **panels.health_axes("pair", top * 1.08),
             )
         self.toggle.on_click(lambda _: session.guarded(self.switch))
         self.slider.on_update(lambda _: session.guarded(self.draw))
