@@ -17,8 +17,9 @@ import pytest
 
 from mbicp_viz.core import MATCHERS
 from mbicp_viz.evaluation.sequence import match_sequence
+from mbicp_viz.evaluation.trajectory import is_run
 from mbicp_viz.readers import read_log
-from mbicp_viz.views.debugger.run_model import RunModel, is_chain
+from mbicp_viz.views.debugger.run_model import RunModel
 
 from .conftest import INTEL
 
@@ -31,7 +32,7 @@ def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses(chunks, monkey
     monkeypatch.setattr(run, "MAP_CHUNKS", chunks)
     log = read_log(str(INTEL))
     rows = match_sequence(log, MATCHERS["improved"].params_type(), guess="odometry", workers=1)
-    assert is_chain(rows) and not is_chain(rows[:3] + rows[4:])
+    assert is_run(rows) and not is_run(rows[:3] + rows[4:])
     model = RunModel(log, rows)
     mount = log.frames.mount
     for n in (0, 17, 30, len(rows) - 1):

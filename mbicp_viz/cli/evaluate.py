@@ -101,6 +101,28 @@ KalmanOpt = Annotated[
         "map then use the fused track",
     ),
 ]
+KeyframeOpt = Annotated[
+    float,
+    typer.Option(
+        "--keyframe-m",
+        min=0.0,
+        callback=finite,
+        help="a key-frame run: match each scan against the last key frame, a new one once the "
+        "robot has moved this far [m] or turned --keyframe-deg from it (or its match failed); "
+        "one process; 0.6 did best on the full Intel and ACES logs. 0: each scan against the one "
+        "before",
+    ),
+]
+KeyframeDegOpt = Annotated[
+    float,
+    typer.Option(
+        "--keyframe-deg",
+        min=0.0,
+        max=180.0,
+        callback=finite,
+        help="with --keyframe-m: the turn [deg] from the key frame that makes a new one",
+    ),
+]
 
 
 def sequence(
@@ -124,6 +146,8 @@ def sequence(
     upside_down: UpsideDownOpt = False,
     deskew: DeskewOpt = None,
     budget_s: BudgetOpt = MATCH_BUDGET_S,
+    keyframe_m: KeyframeOpt = 0.0,
+    keyframe_deg: KeyframeDegOpt = 30.0,
     serve: Annotated[
         bool,
         typer.Option(
@@ -135,8 +159,9 @@ def sequence(
     port: ServePortOpt = 8080,
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else
-    identity)."""
+    identity), or each scan against the last key frame (--keyframe-m)."""
     from mbicp_viz.core import Termination
+    from mbicp_viz.evaluation.keyframes import KeyFrames
     from mbicp_viz.evaluation.sequence import match_sequence
     from mbicp_viz.readers.pair_match import PairMatch, parse_pair_match
     from mbicp_viz.readers.params_toml import read_params
@@ -149,6 +174,7 @@ def sequence(
     lg = read_log_saying(log, reading)
     t0, resumed = time.perf_counter(), []  # the run's pace counts finding its pairs
     pairs = lg.consecutive_pairs(limit)
+    keyframes = KeyFrames(keyframe_m, math.radians(keyframe_deg)) if keyframe_m > 0 else None
     run = {
         "command": "eval sequence",
         "log": log_identity(log),
@@ -160,6 +186,7 @@ def sequence(
         "truth": truth,
         "frame": frame.value,
         "budget_s": budget_s,
+        "keyframes": None if keyframes is None else keyframes.as_dict(),
     }
 
     def match(on_row, done):
@@ -176,9 +203,12 @@ def sequence(
             base=frame is Frame.base,
             done=done,
             budget_s=budget_s,
+            keyframes=keyframes,
         )
 
-    rows = matched_rows(out, run, pairs, match, PairMatch.to_json, parse_pair_match)
+    # a key-frame run's references are decided as it goes: a resumed run is checked on its scans
+    plan = pairs if keyframes is None else [pairs[0], *((None, j) for _, j in pairs[1:])]
+    rows = matched_rows(out, run, plan, match, PairMatch.to_json, parse_pair_match)
     say(_pace(lg, rows[resumed[0] :], time.perf_counter() - t0))
     halted = sum(r.result.reason is Termination.HALTED for r in rows)
     typer.echo(

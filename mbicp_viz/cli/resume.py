@@ -32,12 +32,15 @@ def settings_of(reading) -> dict:
 
 def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]], decode) -> PartialRows:
     """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left
-    (``decode``-d from the file, path and line)."""
+    (``decode``-d from the file, path and line). A pair of ``pairs`` whose reference is None
+    takes any (a key-frame run decides it as it goes)."""
     from mbicp_viz.readers.rows import PartialRows
 
     rows = PartialRows(out, run, decode)
     done = rows.pairs
-    if done != [tuple(p) for p in pairs[: len(done)]]:
+    if len(done) > len(pairs) or any(
+        p[1] != d[1] or p[0] not in (None, d[0]) for p, d in zip(pairs, done)
+    ):
         raise InputError(
             "its rows are not this run's first pairs: delete it to start afresh", str(rows.path)
         )

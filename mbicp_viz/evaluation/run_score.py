@@ -31,6 +31,7 @@ from .trajectory import (
     accumulate,
     kalman,
     odometry_chain,
+    off_the_run,
     stamps,
 )
 
@@ -136,16 +137,16 @@ def run_tracks(
 ) -> dict[str, tuple[list[float], list[Pose2]]]:
     """The trajectories an ``eval sequence`` run's rows give, each with its stamps (+ ``offset``,
     the relations' clock): the matches chained, their Kalman fusion with the odometry and the raw
-    odometry (both where the log has odometry for every scan). The rows must form a chain."""
-    for k in range(1, len(rows)):
-        if rows[k].ref != rows[k - 1].obj:
-            raise InputError(
-                f"the rows are no chain: scans {rows[k].ref} -> {rows[k].obj} follow "
-                f"{rows[k - 1].ref} -> {rows[k - 1].obj} (eval sequence writes one)",
-                path,
-                rows[k].line,
-                field="ref",
-            )
+    odometry (both where the log has odometry for every scan). The rows must form a chain (each
+    from a scan placed before: the one before it, or a key frame)."""
+    if (k := off_the_run(rows)) is not None:
+        raise InputError(
+            f"the rows are no chain: scans {rows[k].ref} -> {rows[k].obj} do not start from a "
+            "scan the rows before placed, or place one again (eval sequence writes a chain)",
+            path,
+            rows[k].line,
+            field="ref",
+        )
     t = [s + offset for s in stamps(log, rows)]
     tracks = {"matches chained": (t, accumulate(rows))}
     if (odometry := odometry_chain(log, rows)) is not None:

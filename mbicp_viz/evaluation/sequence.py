@@ -18,6 +18,7 @@ from mbicp_viz.readers.pair_match import PairMatch, Suspicion
 
 from .criteria import CONSECUTIVE, Criteria
 from .health import out_of_place
+from .keyframes import KeyFrames
 from .pairs import STORED_ANSWER, Guess, pair_guess, stored_truth
 from .pool import ordered_map
 from .single import Setup, match_pair, scored
@@ -50,9 +51,12 @@ def match_sequence(
     base: bool = True,
     done: list[PairMatch] = (),
     budget_s: float | None = MATCH_BUDGET_S,
+    keyframes: KeyFrames | None = None,
 ) -> list[PairMatch]:
-    """One record per consecutive pair of usable scans, in order: the match's motion (of the robot's
-    base when ``base`` and the log knows the laser's mount), how well it lays the scans on each
+    """One record per consecutive pair of usable scans, in order (with ``keyframes``, per scan
+    against the last key frame, evaluation/keyframes.py, on one process): the match's motion (of
+    the robot's base when ``base`` and the log knows the laser's mount), how well it lays the scans
+    on each
     other, its distance from the log's odometry when the log has some, and with ``truth="pose"``
     its error against the log's scan poses, and the signs that it went wrong (evaluation/health.py:
     a pair's own, and whether its first scan is out of place). The pairs of ``done``
@@ -68,19 +72,34 @@ def match_sequence(
         )
     pairs = log.consecutive_pairs(limit)[len(done) :]
     stamps: dict[int, float | None] = {}  # of the scans sent and not yet seen back
+    steady, rows = Steadiness(log, done, stamps), []
 
-    def jobs():  # made as the workers need them: the log is read front to back once
-        if not pairs:
-            return
+    def job(i: int, ref, j: int, obj) -> tuple:
+        return (log.path, i, j, ref, obj, params, guess, truth, search, log.frames, base)
+
+    def consecutive():  # made as the workers need them: the log is read front to back once
         scans = log.scans_from(pairs[0][0])
         i, ref = next(scans)
         for (j, obj), pair in zip(scans, pairs):
             assert (i, j) == pair, "the log's usable scans changed under the run"
             stamps[i], stamps[j] = ref.stamp, obj.stamp
-            yield (log.path, i, j, ref, obj, params, guess, truth, search, log.frames, base)
+            yield job(i, ref, j, obj)
             i, ref = j, obj
 
-    steady, rows = Steadiness(log, done, stamps), []
+    def from_key_frames():  # one at a time: a scan's reference depends on the match before
+        key = keyframes.key_after(done) if done else pairs[0][0]
+        scans, todo = log.scans_from(key), iter(pairs)
+        i, ref = next(scans)
+        for j, obj in scans:
+            if j <= pairs[0][0]:  # a resumed run's scans matched before
+                continue
+            pair = next(todo, None)
+            if pair is None:
+                return
+            assert j == pair[1], "the log's usable scans changed under the run"
+            yield job(i, ref, j, obj)
+            if keyframes.due(rows[-1]):
+                i, ref = j, obj
 
     def take(m: PairMatch) -> None:
         if m.params == params:  # one object for the run's rows, not one copy from each worker
@@ -89,8 +108,14 @@ def match_sequence(
         if on_row is not None:
             on_row(rows[-1])
 
+    if not pairs:
+        return rows
     ordered_map(
-        partial(match_row, stream=log.topic, budget_s=budget_s), jobs(), workers, take, len(pairs)
+        partial(match_row, stream=log.topic, budget_s=budget_s),
+        consecutive() if keyframes is None else from_key_frames(),
+        workers if keyframes is None else 1,
+        take,
+        len(pairs),
     )
     return rows
 

@@ -1,7 +1,9 @@
-"""Trajectories from consecutive matches: accumulation, a Kalman filter with odometry, TUM files,
+"""Trajectories from a run's matches: accumulation, a Kalman filter with odometry, TUM files,
 plots.
 
-The world frame is the first scan's sensor frame. Paper 003 §5.3 builds its maps with a Kalman
+A run's rows each place a new scan from one placed before: the scan before it (consecutive pairs)
+or the last key frame (a key-frame run, evaluation/keyframes.py). The world frame is the first
+scan's sensor frame. Paper 003 §5.3 builds its maps with a Kalman
 filter fusing the matcher with odometry; ``kalman`` does that on SE(2): odometry increments
 predict, the matcher's increments (composed on the previous estimate) correct.
 """
@@ -26,16 +28,33 @@ STORED = "log poses"
 
 
 def accumulate(rows: list[PairMatch]) -> list[Pose2]:
-    """Poses of scans rows[0].ref, rows[k].obj ... composed from the matched increments."""
-    return chained([r.result.pose for r in rows])
+    """Poses of scans rows[0].ref, rows[k].obj ... composed from the matched motions."""
+    return placed(rows, [r.result.pose for r in rows])
 
 
-def chained(motions: list[Pose2]) -> list[Pose2]:
-    """The poses a chain of ``motions`` visits, from the identity."""
-    poses = [Pose2()]
-    for m in motions:
-        poses.append(poses[-1] @ m)
-    return poses
+def placed(rows: list[PairMatch], motions: list[Pose2]) -> list[Pose2]:
+    """The poses of the scans the rows visit, from the identity at the first: each row's motion
+    composed on the pose of the scan it starts from."""
+    at = {rows[0].ref: Pose2()}
+    for r, m in zip(rows, motions):
+        at[r.obj] = at[r.ref] @ m
+    return [at[k] for k in scan_indices(rows)]
+
+
+def is_run(rows: list[PairMatch]) -> bool:
+    """Whether the rows are a run: each pair places a new scan from one the run placed before."""
+    return bool(rows) and off_the_run(rows) is None
+
+
+def off_the_run(rows: list[PairMatch]) -> int | None:
+    """The first row that starts from a scan the rows before it did not place, or places one
+    again (None: the rows are a run)."""
+    seen = {rows[0].ref} if rows else set()
+    for k, r in enumerate(rows):
+        if r.ref not in seen or r.obj in seen:
+            return k
+        seen.add(r.obj)
+    return None
 
 
 def odometry_chain(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
@@ -45,11 +64,11 @@ def odometry_chain(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
     if any(r.odometry is None for r in rows):
         return None
     base = rows[0].frame != "laser"
-    return chained([log.frames.reported(r.odometry, base) for r in rows])
+    return placed(rows, [log.frames.reported(r.odometry, base) for r in rows])
 
 
 def scan_indices(rows: list[PairMatch]) -> list[int]:
-    """The scans a sequence of consecutive rows visits."""
+    """The scans a run visits, in its order."""
     return [rows[0].ref] + [r.obj for r in rows]
 
 
@@ -106,18 +125,20 @@ def kalman(
 ) -> list[Pose2]:
     """EKF over the scan poses: predict with the odometry increment (noise ``q_sigma`` per axis:
     m, m, rad), update with the matcher's increment composed on the previous estimate (noise
-    ``r_sigma``). A match that did not converge is skipped (prediction only)."""
+    ``r_sigma``). A match that did not converge is skipped (prediction only). In a key-frame run
+    the match is composed on the key frame's estimate (its correlation with the newest estimate is
+    left out, as a filter over the newest pose alone must)."""
     Q, R = np.diag(np.square(q_sigma)), np.diag(np.square(r_sigma))
     x, P = Pose2(), np.zeros((3, 3))
-    out = [x]
+    out, at = [x], {rows[0].ref: x} if rows else {}
     for k, row in enumerate(rows):
         u = relative(odometry[k], odometry[k + 1])
         Jx, Ju = _jacobians(x, u)
         prior, Pp = x @ u, Jx @ P @ Jx.T + Ju @ Q @ Ju.T
         if row.result.converged:
-            m = row.result.pose
-            Jx_m, Ju_m = _jacobians(x, m)
-            z = x @ m
+            m, start = row.result.pose, at[row.ref]
+            _, Ju_m = _jacobians(start, m)
+            z = start @ m
             Rz = Ju_m @ R @ Ju_m.T
             innov = np.array(
                 [
@@ -131,6 +152,7 @@ def kalman(
             Pp = (np.eye(3) - K) @ Pp
         x, P = prior, Pp
         out.append(x)
+        at[row.obj] = x
     return out
 
 

@@ -40,11 +40,6 @@ MAP_CHUNKS = 100
 MAP_SAMPLE = 50  # scans whose valid readings say how many a run's scans hold (the map's step)
 
 
-def is_chain(rows: list[PairMatch]) -> bool:
-    """Whether the rows are a run: each pair starts at the scan the one before ended at."""
-    return len(rows) > 0 and all(b.ref == a.obj for a, b in zip(rows, rows[1:]))
-
-
 @dataclass
 class RunModel:
     """A run's rows on their log: the poses and the map, computed once."""

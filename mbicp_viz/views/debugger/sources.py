@@ -6,13 +6,13 @@ from mbicp_viz.core import Pose2
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess
 from mbicp_viz.evaluation.scenarios import find_scenario
+from mbicp_viz.evaluation.trajectory import is_run
 from mbicp_viz.evaluation.versus import versus as compare_runs
 from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 from mbicp_viz.readers.pair_match import PairMatch
 from mbicp_viz.readers.relations import read_relations
 from mbicp_viz.readers.rows import rows_of_log
 
-from .run_model import is_chain
 from .state import Source
 
 
@@ -72,7 +72,7 @@ def files_source(
             )
         both = compare_runs(run, rows_of_log(versus, log), rows, versus)
         run = both.a
-    if relations is not None and (rows is None or not is_chain(run)):
+    if relations is not None and (rows is None or not is_run(run)):
         raise InputError(
             "--relations scores a run: give the rows of `eval sequence` with --rows",
             field="--relations",
@@ -127,7 +127,7 @@ def log_source(
         guess_kind=guess,
         failures=failed,
         suspects=suspects,
-        run=run if is_chain(run) else None,
+        run=run if is_run(run) else None,
         versus=versus,
         relations=relations,
         offset=offset,
