@@ -582,6 +582,14 @@ def relations(
             "odometry, beside the published figures",
         ),
     ] = None,
+    close_loops: Annotated[
+        bool,
+        typer.Option(
+            "--close-loops",
+            help="with --run: close the run's loops (key frames matched against old ones with the "
+            "run's matcher and parameters, a pose graph on GTSAM) and score the optimised run too",
+        ),
+    ] = False,
 ):
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors; or, with
     --run, score a whole run's trajectory on the relations."""
@@ -597,8 +605,10 @@ def relations(
     reading = read_options(topic)
     lg = read_log_saying(log, reading)
     if run_rows is not None:
-        _score_run(lg, run_rows, relations_file, offset, tolerance)
+        _score_run(lg, run_rows, relations_file, offset, tolerance, close_loops)
         return
+    if close_loops:
+        raise InputError("--close-loops closes the loops of a run: give --run ROWS", field="--run")
     pf = read_params(params, [matcher.value])
     p, search = pf.matchers[matcher.value], pf.search
     found, missing = relation_pairs(lg, read_relations(relations_file), offset, tolerance)
@@ -631,8 +641,11 @@ def relations(
         typer.echo(stored)
 
 
-def _score_run(lg, rows_path: str, relations_file: str, offset: float, tolerance: float) -> None:
-    """``eval relations LOG RELATIONS --run ROWS``: each trajectory of the run, scored."""
+def _score_run(
+    lg, rows_path: str, relations_file: str, offset: float, tolerance: float, loops: bool
+) -> None:
+    """``eval relations LOG RELATIONS --run ROWS [--close-loops]``: each trajectory of the run,
+    scored."""
     from mbicp_viz.evaluation.run_score import published_line, run_tracks, score_track
     from mbicp_viz.readers.relations import read_relations
     from mbicp_viz.readers.rows import rows_of_log
@@ -640,6 +653,8 @@ def _score_run(lg, rows_path: str, relations_file: str, offset: float, tolerance
     relations = read_relations(relations_file)
     rows = rows_of_log(rows_path, lg)
     tracks = run_tracks(lg, rows, rows_path, offset)
+    if loops:
+        tracks[LOOPS_CLOSED] = (tracks["matches chained"][0], _closed(lg, rows))
     typer.echo(
         f"{rows_path}: {rows[0].matcher}, {len(rows)} pairs chained ({rows[0].frame} motions); "
         f"{len(relations)} relations of {relations_file}"
@@ -660,6 +675,21 @@ def _score_run(lg, rows_path: str, relations_file: str, offset: float, tolerance
                 f"  relation {k + 1} ({rel.t1:.3f} s -> {rel.t2:.3f} s): {et:.3f} m, "
                 f"{math.degrees(er):.2f} deg"
             )
+
+
+LOOPS_CLOSED = "pose graph (loops closed)"
+
+
+def _closed(lg, rows: list) -> list:
+    """The run with its loops closed (evaluation/loops.py), what it did said on stderr."""
+    from mbicp_viz.evaluation.loops import LoopParams, close_loops, plan
+
+    p = LoopParams()
+    with Progress(len(plan(rows, p)[1]) - 1, "closing loops") as bar:
+        closed = close_loops(lg, rows, rows[0].params, p, on_key=lambda n, total: bar.update(1))
+    for line in closed.summary():
+        say(line)
+    return closed.optimised
 
 
 def basin(

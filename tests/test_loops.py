@@ -1,0 +1,199 @@
+"""Loop closures (evaluation/loops.py): the chain's uncertainty, candidates verified by real scan
+matches, a pose graph on the real GTSAM that turns off a wrong closure, and the score with loops
+closed on the command line."""
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from mbicp_viz.cli import app
+from mbicp_viz.core import ImprovedParams, MatchResult, Pose2, Termination, relative
+from mbicp_viz.evaluation.keyframes import KeyFrames
+from mbicp_viz.evaluation.loops import (
+    ACCEPTED,
+    ChainUncertainty,
+    Closure,
+    LoopParams,
+    PoseGraph,
+    close_loops,
+)
+from mbicp_viz.readers import read_log
+from mbicp_viz.readers.pair_match import PairMatch
+from mbicp_viz.readers.rows import rows_of_log
+
+from .conftest import DATA, HOKUYO_BAG
+
+runner = CliRunner()
+
+steps = st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-0.5, 0.5)).map(lambda s: Pose2(*s))
+sigmas = st.tuples(st.floats(0.001, 0.1), st.floats(0.001, 0.1), st.floats(0.001, 0.05))
+
+
+def chain(motions: list[Pose2]) -> list[Pose2]:
+    out = [Pose2()]
+    for m in motions:
+        out.append(out[-1] @ m)
+    return out
+
+
+@settings(max_examples=40)
+@given(st.lists(st.tuples(steps, sigmas), min_size=1, max_size=8), st.data())
+def test_the_chain_uncertainty_is_the_first_order_propagation_of_its_edges(edges, data):
+    """Against the Jacobian of the last position in every edge's noise, taken numerically."""
+    motions = [m for m, _ in edges]
+    covs = [np.diag(np.square(s)) for _, s in edges]
+    poses = chain(motions)
+    n = len(poses) - 1
+    j = data.draw(st.integers(0, n - 1))
+    h, jac = 1e-6, []
+    for e in range(j, n):  # the edges between key frame j and n
+        for axis in range(3):
+            d = np.zeros(3)
+            d[axis] = h
+            moved = list(motions)
+            # a match's covariance is on its motion's parameters (x, y in the frame it starts from)
+            moved[e] = Pose2(*(motions[e].as_array() + d))
+            q = relative(chain(moved)[j], chain(moved)[n])
+            p = relative(poses[j], poses[n])
+            jac.append((np.array([q.x - p.x, q.y - p.y]) / h, covs[e][axis, axis]))
+    # in the world frame: the relative position's covariance turned by key frame j's heading
+    r = np.array(
+        [
+            [math.cos(poses[j].theta), -math.sin(poses[j].theta)],
+            [math.sin(poses[j].theta), math.cos(poses[j].theta)],
+        ]
+    )
+    expected = sum(var * r @ np.outer(g, g) @ r.T for g, var in jac)
+    got = ChainUncertainty(poses, covs).position_covariances(n)[j]
+    assert np.allclose(got, expected, rtol=1e-3, atol=1e-9)
+
+
+def closure(old: int, key: int, motion: Pose2) -> Closure:
+    cov = np.diag(np.square([0.02, 0.02, math.radians(0.5)]))
+    r = MatchResult("improved", motion, True, Termination.CONVERGED, 5, 0.0, 300, 0, cov, None)
+    return Closure(
+        old, key, PairMatch(old, key, ImprovedParams(), Pose2(), "", r, "laser"), "", 0.1
+    )
+
+
+def test_graduated_non_convexity_turns_off_the_wrong_closure_of_a_square():
+    """A robot drives a 4 m square three times, its heading drifting 0.01 rad a step; the right
+    closures bring it home, a wrong one (a place 3 m away taken for this one) is turned off."""
+    lap = ([Pose2(0.5, 0.0, 0.0)] * 7 + [Pose2(0.5, 0.0, math.pi / 2)]) * 4  # 32 steps
+    truth = chain(lap * 3)
+    drift = [Pose2(m.x, m.y, m.theta + 0.01) for m in lap * 3]
+    cov = np.diag(np.square([0.01, 0.01, math.radians(0.5)]))
+    graph, estimate = PoseGraph(), chain(drift)
+    for n, m in enumerate(drift, start=1):
+        graph.add_step(m, cov, estimate[n])
+    right = [closure(k, k + 32, relative(truth[k], truth[k + 32])) for k in range(2, 64, 5)]
+    wrong = closure(10, 42, relative(truth[10], truth[42]) @ Pose2(3.0, 0.0, 0.0))
+    for c in [*right, wrong]:
+        graph.add_closure(c.old, c.key, c)
+    graph.optimise()
+    assert graph.turned_off() == [wrong]
+    home = graph.pose(len(drift))
+    assert math.hypot(home.x - truth[-1].x, home.y - truth[-1].y) < 0.2
+    ends = chain(drift)[-1]
+    assert math.hypot(ends.x - truth[-1].x, ends.y - truth[-1].y) > 2.0  # the chain alone
+
+
+def test_a_hand_held_run_closes_its_loops_with_real_matches(tmp_path):
+    """The hand-held Hokuyo sweeps the same room back and forth: key frames see old ones again."""
+    out = tmp_path / "rows.json"
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(HOKUYO_BAG),
+            "--out",
+            str(out),
+            "--limit",
+            "300",
+            "--keyframe-m",
+            "0.05",
+            "--keyframe-deg",
+            "5",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    log = read_log(str(HOKUYO_BAG))
+    rows = rows_of_log(str(out), log)
+    p = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
+    closed = close_loops(log, rows, ImprovedParams(), p)
+    accepted = [c for c in closed.closures if c.verdict == ACCEPTED]
+    assert accepted and len(closed.optimised) == len(closed.chained) == len(rows) + 1
+    for c in accepted:  # each judged on its own real match
+        assert c.match.result.converged and c.match.overlap >= p.min_overlap
+        assert c.peak_ratio < p.peak_ratio and (c.old, c.key) == (c.match.ref, c.match.obj)
+    assert any(
+        math.hypot(a.x - b.x, a.y - b.y) > 1e-3 for a, b in zip(closed.chained, closed.optimised)
+    )
+    assert closed.summary()[0].startswith(f"loops: {len(closed.keys)} key frames")
+
+
+def test_a_scan_from_elsewhere_is_not_taken_for_a_loop(tmp_path):
+    out = tmp_path / "rows.json"
+    args = [
+        "eval",
+        "sequence",
+        str(HOKUYO_BAG),
+        "--out",
+        str(out),
+        "--limit",
+        "300",
+        "--keyframe-m",
+        "0.05",
+        "--keyframe-deg",
+        "5",
+    ]
+    assert runner.invoke(app, args).exit_code == 0
+    log = read_log(str(HOKUYO_BAG))
+    rows = rows_of_log(str(out), log)
+    p = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
+    honest = close_loops(log, rows, ImprovedParams(), p)
+    key = max(honest.closures, key=lambda c: c.verdict == ACCEPTED).key
+    elsewhere = read_log(str(DATA / "laserazosSM3-40.log")).scan(20)  # another robot's building
+    real = log.scan
+
+    def scan(k):
+        return elsewhere if k == key else real(k)
+
+    log.scan = scan
+    swapped = close_loops(log, rows, ImprovedParams(), p)
+    assert [c for c in swapped.closures if c.key == key]
+    assert all(c.verdict != ACCEPTED for c in swapped.closures if c.key == key)
+
+
+def test_the_run_score_with_loops_closed_on_a_log_without_loops_says_so(tmp_path):
+    log, relations = DATA / "intel-relations.log", DATA / "intel-relations.relations"
+    rows = tmp_path / "rows.json"
+    res = runner.invoke(
+        app, ["eval", "sequence", str(log), "--guess", "odometry", "--out", str(rows)]
+    )
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "relations",
+            str(log),
+            str(relations),
+            "--run",
+            str(rows),
+            "--offset",
+            "976052857.337",
+            "--close-loops",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    assert "no loop closed: the optimised run is the chained one" in res.stderr
+    chained = next(x for x in res.stdout.splitlines() if "matches chained:" in x)
+    closed = next(x for x in res.stdout.splitlines() if "pose graph (loops closed):" in x)
+    assert chained.split(":", 1)[1] == closed.split(":", 1)[1]
+    res = runner.invoke(app, ["eval", "relations", str(log), str(relations), "--close-loops"])
+    assert res.exit_code == 2 and "--close-loops closes the loops of a run" in res.stderr
