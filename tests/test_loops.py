@@ -13,7 +13,6 @@ from mbicp_viz.cli import app
 from mbicp_viz.core import ImprovedParams, MatchResult, Pose2, Termination, relative
 from mbicp_viz.evaluation.keyframes import KeyFrames
 from mbicp_viz.evaluation.loops import (
-    ACCEPTED,
     ChainUncertainty,
     Closure,
     LoopParams,
@@ -21,8 +20,9 @@ from mbicp_viz.evaluation.loops import (
     close_loops,
 )
 from mbicp_viz.readers import read_log
-from mbicp_viz.readers.pair_match import PairMatch
+from mbicp_viz.readers.pair_match import PairMatch, Verdict
 from mbicp_viz.readers.rows import rows_of_log
+from mbicp_viz.views import scene
 
 from .conftest import DATA, HOKUYO_BAG
 
@@ -125,7 +125,7 @@ def test_a_hand_held_run_closes_its_loops_with_real_matches(tmp_path):
     rows = rows_of_log(str(out), log)
     p = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
     closed = close_loops(log, rows, ImprovedParams(), p)
-    accepted = [c for c in closed.closures if c.verdict == ACCEPTED]
+    accepted = [c for c in closed.closures if c.verdict is Verdict.ACCEPTED]
     assert accepted and len(closed.optimised) == len(closed.chained) == len(rows) + 1
     for c in accepted:  # each judged on its own real match
         assert c.match.result.converged and c.match.overlap >= p.min_overlap
@@ -156,7 +156,7 @@ def test_a_scan_from_elsewhere_is_not_taken_for_a_loop(tmp_path):
     rows = rows_of_log(str(out), log)
     p = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
     honest = close_loops(log, rows, ImprovedParams(), p)
-    key = max(honest.closures, key=lambda c: c.verdict == ACCEPTED).key
+    key = max(honest.closures, key=lambda c: c.verdict is Verdict.ACCEPTED).key
     elsewhere = read_log(str(DATA / "laserazosSM3-40.log")).scan(20)  # another robot's building
     real = log.scan
 
@@ -166,7 +166,7 @@ def test_a_scan_from_elsewhere_is_not_taken_for_a_loop(tmp_path):
     log.scan = scan
     swapped = close_loops(log, rows, ImprovedParams(), p)
     assert [c for c in swapped.closures if c.key == key]
-    assert all(c.verdict != ACCEPTED for c in swapped.closures if c.key == key)
+    assert all(c.verdict is not Verdict.ACCEPTED for c in swapped.closures if c.key == key)
 
 
 def test_the_run_score_with_loops_closed_on_a_log_without_loops_says_so(tmp_path):
@@ -197,3 +197,49 @@ def test_the_run_score_with_loops_closed_on_a_log_without_loops_says_so(tmp_path
     assert chained.split(":", 1)[1] == closed.split(":", 1)[1]
     res = runner.invoke(app, ["eval", "relations", str(log), str(relations), "--close-loops"])
     assert res.exit_code == 2 and "--close-loops closes the loops of a run" in res.stderr
+
+
+def test_the_whole_run_recording_holds_the_run_with_its_loops_closed(tmp_path):
+    """eval sequence --close-loops --rrd: a space of its own, read back and drawn by rerun."""
+    from .conftest import viewer_screenshot
+    from .test_rrd import columns
+
+    rrd, out = tmp_path / "run.rrd", tmp_path / "rows.json"
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "sequence",
+            str(HOKUYO_BAG),
+            "--out",
+            str(out),
+            "--limit",
+            "300",
+            "--keyframe-m",
+            "0.05",
+            "--keyframe-deg",
+            "5",
+            "--close-loops",
+            "--loop-gap-m",
+            "0.3",
+            "--rrd",
+            str(rrd),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    summary = next(x for x in res.stderr.splitlines() if x.startswith("loops: "))
+    accepted = int(summary.split(" accepted")[0].rsplit(" ", 1)[1])
+    assert accepted > 0
+    cols = columns(rrd)
+    (segments,) = [v for _, v in cols["/sequence/loops/accepted"]["LineStrips2D:strips"]]
+    assert len(segments) == accepted and all(len(s) == 2 for s in segments)
+    (track,) = [v for _, v in cols["/sequence/loops/trajectory"]["LineStrips2D:strips"]]
+    assert len(track[0]) == 301  # every scan of the run, at its optimised pose
+    img = viewer_screenshot(rrd, tmp_path / "run.png")
+    left = img[:, : img.shape[1] // 2]
+    green = np.flatnonzero(
+        (np.abs(left - np.array(scene.CLOSURE[Verdict.ACCEPTED].color)).max(axis=2) < 40).sum(1)
+    )
+    assert len(green) > 5
+    # the chained run's view above, the loops' below: accepted closures only in the lower one
+    assert green.min() > img.shape[0] * 0.4

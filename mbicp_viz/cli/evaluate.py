@@ -123,6 +123,16 @@ KeyframeDegOpt = Annotated[
         help="with --keyframe-m: the turn [deg] from the key frame that makes a new one",
     ),
 ]
+LoopGapOpt = Annotated[
+    float,
+    typer.Option(
+        "--loop-gap-m",
+        min=0.0,
+        callback=finite,
+        help="with --close-loops: a key frame this far back along the run [m] is old enough to "
+        "close a loop with",
+    ),
+]
 
 
 def sequence(
@@ -148,6 +158,16 @@ def sequence(
     budget_s: BudgetOpt = MATCH_BUDGET_S,
     keyframe_m: KeyframeOpt = 0.0,
     keyframe_deg: KeyframeDegOpt = 30.0,
+    close_loops: Annotated[
+        bool,
+        typer.Option(
+            "--close-loops",
+            help="then close the run's loops (evaluation/loops.py: key frames matched against old "
+            "ones with this matcher, a pose graph on GTSAM); with --rrd, the optimised run and "
+            "every candidate are a layer of the recording",
+        ),
+    ] = False,
+    loop_gap_m: LoopGapOpt = 10.0,
     serve: Annotated[
         bool,
         typer.Option(
@@ -162,6 +182,7 @@ def sequence(
     identity), or each scan against the last key frame (--keyframe-m)."""
     from mbicp_viz.core import Termination
     from mbicp_viz.evaluation.keyframes import KeyFrames
+    from mbicp_viz.evaluation.loops import LoopParams
     from mbicp_viz.evaluation.sequence import match_sequence
     from mbicp_viz.readers.pair_match import PairMatch, parse_pair_match
     from mbicp_viz.readers.params_toml import read_params
@@ -224,10 +245,14 @@ def sequence(
     _sequence_notes(lg, rows, truth, guess, frame)
     if png or tum or tum_ref or kalman:
         _trajectories(lg, rows, png, tum, tum_ref, kalman)
+    loops = None
+    if close_loops:
+        p = LoopParams(min_path_m=loop_gap_m)
+        loops = _closed(lg, rows, p if keyframes is None else replace(p, keyframes=keyframes))
     if rrd:
         from mbicp_viz.views.rrd import record_sequence
 
-        record_sequence(lg, rows, str(rrd))
+        record_sequence(lg, rows, str(rrd), loops=loops)
         say(f"sequence recording written to {rrd}")
     _failures(log, out, rows)
     if serve:
@@ -590,9 +615,11 @@ def relations(
             "run's matcher and parameters, a pose graph on GTSAM) and score the optimised run too",
         ),
     ] = False,
+    loop_gap_m: LoopGapOpt = 10.0,
 ):
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors; or, with
     --run, score a whole run's trajectory on the relations."""
+    from mbicp_viz.evaluation.loops import LoopParams
     from mbicp_viz.evaluation.relations import (
         match_relations,
         relation_pairs,
@@ -605,7 +632,8 @@ def relations(
     reading = read_options(topic)
     lg = read_log_saying(log, reading)
     if run_rows is not None:
-        _score_run(lg, run_rows, relations_file, offset, tolerance, close_loops)
+        loops = LoopParams(min_path_m=loop_gap_m) if close_loops else None
+        _score_run(lg, run_rows, relations_file, offset, tolerance, loops)
         return
     if close_loops:
         raise InputError("--close-loops closes the loops of a run: give --run ROWS", field="--run")
@@ -642,7 +670,7 @@ def relations(
 
 
 def _score_run(
-    lg, rows_path: str, relations_file: str, offset: float, tolerance: float, loops: bool
+    lg, rows_path: str, relations_file: str, offset: float, tolerance: float, loops
 ) -> None:
     """``eval relations LOG RELATIONS --run ROWS [--close-loops]``: each trajectory of the run,
     scored."""
@@ -653,8 +681,8 @@ def _score_run(
     relations = read_relations(relations_file)
     rows = rows_of_log(rows_path, lg)
     tracks = run_tracks(lg, rows, rows_path, offset)
-    if loops:
-        tracks[LOOPS_CLOSED] = (tracks["matches chained"][0], _closed(lg, rows))
+    if loops is not None:  # LoopParams
+        tracks[LOOPS_CLOSED] = (tracks["matches chained"][0], _closed(lg, rows, loops).optimised)
     typer.echo(
         f"{rows_path}: {rows[0].matcher}, {len(rows)} pairs chained ({rows[0].frame} motions); "
         f"{len(relations)} relations of {relations_file}"
@@ -680,16 +708,16 @@ def _score_run(
 LOOPS_CLOSED = "pose graph (loops closed)"
 
 
-def _closed(lg, rows: list) -> list:
-    """The run with its loops closed (evaluation/loops.py), what it did said on stderr."""
-    from mbicp_viz.evaluation.loops import LoopParams, close_loops, plan
+def _closed(lg, rows: list, p):
+    """The run with its loops closed (evaluation/loops.py, ``p`` its ``LoopParams``: a
+    ``LoopRun``), what it did said on stderr."""
+    from mbicp_viz.evaluation.loops import close_loops, plan
 
-    p = LoopParams()
     with Progress(len(plan(rows, p)[1]) - 1, "closing loops") as bar:
         closed = close_loops(lg, rows, rows[0].params, p, on_key=lambda n, total: bar.update(1))
     for line in closed.summary():
         say(line)
-    return closed.optimised
+    return closed
 
 
 def basin(

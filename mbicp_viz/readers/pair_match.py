@@ -58,6 +58,17 @@ class Suspicion(StrEnum):
     DISAGREE = "matchers disagree"  # two configurations' runs (evaluation/versus.py)
 
 
+class Verdict(StrEnum):
+    """What became of a loop-closure candidate's match (evaluation/loops.py decides)."""
+
+    ACCEPTED = "accepted"
+    AMBIGUOUS = "response surface ambiguous"
+    LOW_OVERLAP = "low overlap"
+    WEAK = "weak direction"
+    NOT_CONVERGED = "match did not converge"
+    INCONSISTENT = "inconsistent with other closures"
+
+
 @dataclass(frozen=True, slots=True)
 class Score:
     """The laser's motion against the known answer (the frame the paper's criteria are in)."""

@@ -423,12 +423,22 @@ def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
 SEQUENCE_ROOT = "sequence"
 
 
-def sequence_blueprint() -> rrb.Blueprint:
-    """Trajectory and map beside the health plots and the per-pair log; time panel on ``scan``."""
+def sequence_blueprint(loops: bool = False) -> rrb.Blueprint:
+    """Trajectory and map beside the health plots and the per-pair log (with ``loops``, the run
+    with its loops closed beside the chained one); time panel on ``scan``."""
     root = SEQUENCE_ROOT
+    chained = y_up_view(f"/{root}/{scene.SEQUENCE}", "trajectory and map (first scan's frame, m)")
+    if loops:
+        chained = rrb.Vertical(
+            chained,
+            y_up_view(
+                f"/{root}/{scene.LOOPS}",
+                "loops closed: pose graph, key frames, candidates by verdict (same frame, m)",
+            ),
+        )
     return rrb.Blueprint(
         rrb.Horizontal(
-            y_up_view(f"/{root}/{scene.SEQUENCE}", "trajectory and map (first scan's frame, m)"),
+            chained,
             rrb.Vertical(
                 rrb.TimeSeriesView(
                     origin=f"/{root}/{scene.HEALTH}",
@@ -444,9 +454,10 @@ def sequence_blueprint() -> rrb.Blueprint:
     )
 
 
-def log_sequence(stream: rr.RecordingStream, log, rows: list[PairMatch]) -> None:
+def log_sequence(stream: rr.RecordingStream, log, rows: list[PairMatch], loops=None) -> None:
     """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, the
-    flagged pairs on it, each pair's health plotted, per-pair log."""
+    flagged pairs on it, each pair's health plotted, per-pair log; with ``loops`` (a
+    ``LoopRun``), the run with its loops closed and every candidate, a static layer of its own."""
     from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
 
     root = SEQUENCE_ROOT
@@ -464,16 +475,28 @@ def log_sequence(stream: rr.RecordingStream, log, rows: list[PairMatch]) -> None
             k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k), suspects
         ):
             log_layer(stream, root, layer)
+    if loops is not None:
+        log_y_up(stream, f"/{root}/{scene.LOOPS}")
+        ends = [(c.verdict, *loops.ends(c)) for c in loops.closures]
+        at = [loops.optimised[k] for k in loops.keys]
+        scans = log.scans_of([loops.scans[k] for k in loops.keys], odometry=False)
+        key_points = np.concatenate([q.apply(s.points()) for q, s in zip(at, scans)])
+        for layer in scene.loop_layers(loops.optimised, key_points, ends):
+            log_layer(stream, root, layer, static=True)
     stream.flush()
 
 
 def record_sequence(
-    log, rows: list[PairMatch], path: str, recording_id: str = "mbicp-viz/sequence"
+    log,
+    rows: list[PairMatch],
+    path: str,
+    recording_id: str = "mbicp-viz/sequence",
+    loops=None,
 ) -> None:
     """``log_sequence`` into ``path`` (.rrd, written whole) with ``sequence_blueprint``."""
     stream = new_stream(recording_id)
-    with saving(stream, path, sequence_blueprint()):
-        log_sequence(stream, log, rows)
+    with saving(stream, path, sequence_blueprint(loops is not None)):
+        log_sequence(stream, log, rows, loops)
 
 
 def record_basin(atlas, path: str) -> None:

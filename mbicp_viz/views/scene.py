@@ -19,7 +19,7 @@ import numpy as np
 
 from mbicp_viz.core import MATCHERS, IterationEvent, PairKind, PairStatus, Pose2, Scan, StartEvent
 from mbicp_viz.core.matchers import RGB
-from mbicp_viz.readers.pair_match import PairMatch
+from mbicp_viz.readers.pair_match import PairMatch, Verdict
 
 
 @dataclass(frozen=True)
@@ -625,6 +625,54 @@ def pair_health_layers(row: PairMatch) -> list[Layer]:
     if row.flags:
         words += f"; flagged: {flags_text(row)}"
     layers.append(Text(LOG, words, "WARN" if row.flags or not r.converged else "INFO"))
+    return layers
+
+
+# A run with its loops closed (evaluation/loops.py), a space of its own beside the chained run's:
+# the pose graph's trajectory, its key frames' scans, and each loop candidate between where the
+# optimised run puts its two key frames, coloured by its verdict.
+LOOPS = "loops"
+LOOP_TRAJECTORY = Style("trajectory with the loops closed (pose graph)", (30, 30, 30), 3.5)
+LOOP_MAP = Style("map: the key frames at their optimised poses", REFERENCE.color, 1.0)
+CLOSURE = {
+    Verdict.ACCEPTED: Style("loop closure accepted", (0, 200, 0), 4.0),
+    Verdict.AMBIGUOUS: Style("loop candidate: response surface ambiguous", (255, 0, 200), 3.6),
+    Verdict.LOW_OVERLAP: Style("loop candidate: low overlap", (170, 170, 170), 3.2),
+    Verdict.WEAK: Style("loop candidate: weak direction", (150, 60, 170), 3.4),
+    Verdict.NOT_CONVERGED: Style("loop candidate: match did not converge", (140, 90, 40), 3.3),
+    Verdict.INCONSISTENT: Style("loop closure inconsistent with the others", (255, 140, 0), 3.8),
+}
+
+
+def loop_layers(
+    optimised: list[Pose2],
+    key_points: np.ndarray,
+    closures: list[tuple[Verdict, Pose2, Pose2]],
+) -> list[Layer]:
+    """The run with its loops closed: its trajectory, the key frames' points (world frame) and
+    each candidate (verdict, old key frame, newer one) as a segment between the two, one layer
+    per verdict."""
+    layers: list[Layer] = [
+        Points(f"{LOOPS}/map", key_points, LOOP_MAP, 0.02),
+        Strips(
+            f"{LOOPS}/trajectory",
+            [np.array([[q.x, q.y] for q in optimised])],
+            LOOP_TRAJECTORY,
+            0.03,
+        ),
+    ]
+    for verdict, style in CLOSURE.items():
+        ends = [(a, b) for v, a, b in closures if v is verdict]
+        if ends:
+            layers.append(
+                Segments(
+                    f"{LOOPS}/{verdict.name.lower()}",
+                    np.array([[a.x, a.y] for a, _ in ends]),
+                    np.array([[b.x, b.y] for _, b in ends]),
+                    style,
+                    0.03,
+                )
+            )
     return layers
 
 
