@@ -243,3 +243,18 @@ def test_the_whole_run_recording_holds_the_run_with_its_loops_closed(tmp_path):
     assert len(green) > 5
     # the chained run's view above, the loops' below: accepted closures only in the lower one
     assert green.min() > img.shape[0] * 0.4
+
+
+@given(st.floats(0.0, 50.0), st.integers(1, 200_000))
+def test_a_candidates_search_stays_within_the_searchs_bounds(spread, points):
+    from mbicp_viz.core.search import MAX_WORK
+    from mbicp_viz.evaluation.loops import search_window
+
+    p = LoopParams()
+    w = search_window(spread, points, p)
+    half = round(w.window_xy / w.cell)
+    angles = 2 * round(w.window_theta / w.angle_step) + 1
+    assert angles * points * (2 * half + 1) ** 2 <= MAX_WORK or half <= 1
+    assert w.window_xy <= p.window_max_m and w.cell <= 1.0
+    if points <= 361:  # a 180- or 361-beam laser: the window the spread asks for, on the usual grid
+        assert w.window_xy == min(max(spread, 0.3), p.window_max_m) and w.cell == 0.1
