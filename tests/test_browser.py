@@ -3,6 +3,7 @@ and what the boxes really send."""
 
 import math
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -831,3 +832,52 @@ def test_the_debugger_opened_from_a_notebook_cell_shows_in_the_cell(browser, tmp
         client.execute_cell(nb.cells[1], 1)
         with pytest.raises(OSError):
             urllib.request.urlopen(url, timeout=5)
+
+
+def test_a_runs_loops_are_drawn_listed_and_open_in_the_run_view(browser, tmp_path):
+    """serve LOG --rows R --close-loops: the run view draws the trajectory with the loops closed
+    and every candidate in its verdict's colour, with legend entries; each candidate is listed
+    with its verdict and opens as it was matched (from the search's best peak)."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+    from mbicp_viz.evaluation.keyframes import KeyFrames
+    from mbicp_viz.evaluation.loops import LoopParams, close_loops
+    from mbicp_viz.readers.pair_match import Verdict
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.sources import files_source
+
+    from .conftest import HOKUYO_BAG
+
+    rows = tmp_path / "rows.jsonl"
+    args = ["eval", "sequence", str(HOKUYO_BAG), "--out", str(rows), "--limit", "300"]
+    res = CliRunner().invoke(cli, args + ["--keyframe-m", "0.05", "--keyframe-deg", "5"])
+    assert res.exit_code == 0, res.output
+    src = files_source(str(HOKUYO_BAG), None, rows=str(rows))
+    p = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
+    loops = close_loops(src.log, src.run, src.run[0].params, p)
+    verdicts = {c.verdict for c in loops.closures}
+    assert Verdict.ACCEPTED in verdicts and len(verdicts) > 1
+    application = App(replace(src, loops=loops), "127.0.0.1", 0)
+    try:
+        page, session = open_tab(browser, application)
+        legend = page.locator(".mbicp-legend")
+        legend.get_by_text(scene.LOOP_TRAJECTORY.label).wait_for(timeout=30000)
+        for v in verdicts:
+            assert scene.CLOSURE[v].label in legend.inner_text()
+        page.screenshot(path=str(tmp_path / "run-view-loops.png"))
+        page.get_by_role("combobox", name="open candidate").click()
+        options = page.get_by_role("option").all_inner_texts()
+        assert len(options) == len(loops.closures)
+        # the first is picked already: a rejected one after it
+        k = next(n for n, c in enumerate(loops.closures) if n and c.verdict is not Verdict.ACCEPTED)
+        c = loops.closures[k]
+        assert options[k] == f"{k + 1}. scans {c.old} -> {c.key}: {c.verdict.value}"
+        page.get_by_role("option").nth(k).click()
+        assert wait_for(lambda: session.state.pair == (c.old, c.key))
+        assert session.state.guess == c.match.guess  # from the search's peak, as it was matched
+        page.get_by_text(f"loop candidate ({c.verdict.value}").first.wait_for(timeout=30000)
+        page.screenshot(path=str(tmp_path / "loop-candidate.png"))
+        page.close()
+    finally:
+        application.stop()

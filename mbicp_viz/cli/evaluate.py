@@ -27,6 +27,7 @@ from .options import (
     FrameOpt,
     Guess,
     GuessOpt,
+    LoopGapOpt,
     MatcherOpt,
     MatchersOpt,
     MountOpt,
@@ -46,6 +47,7 @@ from .options import (
     WorkersOpt,
     cases_options,
     check_perturb,
+    closed_run,
     finite,
     number_list,
     params_for,
@@ -121,16 +123,6 @@ KeyframeDegOpt = Annotated[
         max=180.0,
         callback=finite,
         help="with --keyframe-m: the turn [deg] from the key frame that makes a new one",
-    ),
-]
-LoopGapOpt = Annotated[
-    float,
-    typer.Option(
-        "--loop-gap-m",
-        min=0.0,
-        callback=finite,
-        help="with --close-loops: a key frame this far back along the run [m] is old enough to "
-        "close a loop with",
     ),
 ]
 
@@ -248,7 +240,7 @@ def sequence(
     loops = None
     if close_loops:
         p = LoopParams(min_path_m=loop_gap_m)
-        loops = _closed(lg, rows, p if keyframes is None else replace(p, keyframes=keyframes))
+        loops = closed_run(lg, rows, p if keyframes is None else replace(p, keyframes=keyframes))
     if rrd:
         from mbicp_viz.views.rrd import record_sequence
 
@@ -682,7 +674,7 @@ def _score_run(
     rows = rows_of_log(rows_path, lg)
     tracks = run_tracks(lg, rows, rows_path, offset)
     if loops is not None:  # LoopParams
-        tracks[LOOPS_CLOSED] = (tracks["matches chained"][0], _closed(lg, rows, loops).optimised)
+        tracks[LOOPS_CLOSED] = (tracks["matches chained"][0], closed_run(lg, rows, loops).optimised)
     typer.echo(
         f"{rows_path}: {rows[0].matcher}, {len(rows)} pairs chained ({rows[0].frame} motions); "
         f"{len(relations)} relations of {relations_file}"
@@ -706,18 +698,6 @@ def _score_run(
 
 
 LOOPS_CLOSED = "pose graph (loops closed)"
-
-
-def _closed(lg, rows: list, p):
-    """The run with its loops closed (evaluation/loops.py, ``p`` its ``LoopParams``: a
-    ``LoopRun``), what it did said on stderr."""
-    from mbicp_viz.evaluation.loops import close_loops, plan
-
-    with Progress(len(plan(rows, p)[1]) - 1, "closing loops") as bar:
-        closed = close_loops(lg, rows, rows[0].params, p, on_key=lambda n, total: bar.update(1))
-    for line in closed.summary():
-        say(line)
-    return closed
 
 
 def basin(

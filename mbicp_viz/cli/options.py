@@ -492,3 +492,27 @@ def read_options(
         upside_down,
         None if deskew is None else deskew.value,
     )
+
+
+LoopGapOpt = Annotated[
+    float,
+    typer.Option(
+        "--loop-gap-m",
+        min=0.0,
+        callback=finite,
+        help="with --close-loops: a key frame this far back along the run [m] is old enough to "
+        "close a loop with",
+    ),
+]
+
+
+def closed_run(lg, rows: list, p):
+    """The run with its loops closed (evaluation/loops.py, ``p`` its ``LoopParams``: a
+    ``LoopRun``), what it did said on stderr."""
+    from mbicp_viz.evaluation.loops import close_loops, plan
+
+    with Progress(len(plan(rows, p)[1]) - 1, "closing loops") as bar:
+        closed = close_loops(lg, rows, rows[0].params, p, on_key=lambda n, total: bar.update(1))
+    for line in closed.summary():
+        say(line)
+    return closed

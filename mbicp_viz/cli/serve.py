@@ -17,12 +17,14 @@ from .options import (
     DeskewOpt,
     Guess,
     GuessOpt,
+    LoopGapOpt,
     MountOpt,
     OffsetOpt,
     PairOpt,
     TopicOpt,
     TypestoreOpt,
     UpsideDownOpt,
+    closed_run,
     read_options,
     user_errors,
 )
@@ -97,6 +99,16 @@ def serve(
     ] = None,
     offset: OffsetOpt = 0.0,
     budget_s: BudgetOpt = MATCH_BUDGET_S,
+    close_loops: Annotated[
+        bool,
+        typer.Option(
+            "--close-loops",
+            help="close the --rows run's loops first (as eval sequence --close-loops): the run "
+            "view draws the optimised trajectory and every candidate by verdict, and lists them "
+            "to open",
+        ),
+    ] = False,
+    loop_gap_m: LoopGapOpt = 10.0,
 ):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
     from mbicp_viz.views.debugger.sources import files_source, scenario_source
@@ -111,6 +123,14 @@ def serve(
         if scenario is not None
         else files_source(first, second, pair, guess, reading, rows, versus, relations, offset)
     )
+    if close_loops:
+        from mbicp_viz.evaluation.loops import LoopParams
+
+        if source.run is None:
+            raise InputError("--close-loops closes the loops of a run: give --rows", field="--rows")
+        source = replace(
+            source, loops=closed_run(source.log, source.run, LoopParams(min_path_m=loop_gap_m))
+        )
     open_debugger(
         replace(source, budget_s=budget_s), host, port, tuple(allow_origin or ()), for_seconds
     )

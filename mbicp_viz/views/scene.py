@@ -632,7 +632,7 @@ def pair_health_layers(row: PairMatch) -> list[Layer]:
 # the pose graph's trajectory, its key frames' scans, and each loop candidate between where the
 # optimised run puts its two key frames, coloured by its verdict.
 LOOPS = "loops"
-LOOP_TRAJECTORY = Style("trajectory with the loops closed (pose graph)", (30, 30, 30), 3.5)
+LOOP_TRAJECTORY = Style("trajectory with the loops closed (pose graph)", (0, 130, 110), 3.5)
 LOOP_MAP = Style("map: the key frames at their optimised poses", REFERENCE.color, 1.0)
 CLOSURE = {
     Verdict.ACCEPTED: Style("loop closure accepted", (0, 200, 0), 4.0),
@@ -700,6 +700,9 @@ class RunTracks:
     suspects: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     other: list[Pose2] | None = None  # a second configuration's run of the same pairs
     other_label: str = ""
+    loops: list[Pose2] | None = None  # the run with its loops closed (pose graph)
+    # each loop candidate: its verdict, where the run puts its old and its newer key frame
+    closures: list[tuple[Verdict, Pose2, Pose2]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -747,6 +750,13 @@ def run_track_layers(r: RunTracks, scale: float = 1.0) -> list[Layer]:
     if r.other is not None:
         style = replace(RUN_OTHER, label=f"{RUN_OTHER.label}: {r.other_label}")
         layers.append(Strips(f"{RUN}/other", [_drawn_track(r.other)], style, 0.01 * scale))
+    if r.loops is not None:
+        track = _drawn_track(r.loops)
+        layers.append(Strips(f"{RUN}/loops_closed", [track], LOOP_TRAJECTORY, 0.01 * scale))
+        layers += [
+            replace(layer, path=f"{RUN}/{layer.path}", width=0.008 * scale)
+            for layer in loop_layers(r.loops, np.zeros((0, 2)), r.closures)[2:]
+        ]
     return layers
 
 

@@ -61,11 +61,15 @@ def result_markdown(state: DebugState) -> str:
 
 def row_markdown(state: DebugState, row: PairMatch) -> str:
     """What the evaluation found for this pair, and whether this run reproduces it."""
-    lines = [
-        f"**evaluation** ({state.source.rows_label}, line {row.line}): {row.matcher} gave "
-        f"{row.result.pose} "
-        f"(motion of the {row.frame} frame)"
-    ]
+    loops = state.source.loops
+    loop = next((c for c in loops.closures if c.match is row), None) if loops else None
+    head = (
+        f"**loop candidate** ({loop.verdict.value}; matched from the correlative search's best "
+        "peak around the chain's prediction)"
+        if loop is not None
+        else f"**evaluation** ({state.source.rows_label}, line {row.line})"
+    )
+    lines = [f"{head}: {row.matcher} gave {row.result.pose} (motion of the {row.frame} frame)"]
     if (sc := row.score) is not None:
         lines.append(
             f"{sc.error_xy * 1000:.1f} mm, {math.degrees(sc.error_theta):.3f} deg from the "

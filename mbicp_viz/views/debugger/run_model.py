@@ -17,6 +17,7 @@ import numpy as np
 
 from mbicp_viz.core import Pose2
 from mbicp_viz.evaluation.health import flags_text
+from mbicp_viz.evaluation.loops import LoopRun
 from mbicp_viz.evaluation.run_score import RelationErrors, relation_errors
 from mbicp_viz.evaluation.trajectory import (
     accumulate,
@@ -49,6 +50,7 @@ class RunModel:
     versus: Versus | None = None  # a second configuration's run of the same pairs (run B)
     relations: list[Relation] | None = None  # Kümmerle et al.'s, on the log's clock + offset
     offset: float = 0.0
+    loops: LoopRun | None = None  # the run with its loops closed
 
     @cached_property
     def poses(self) -> list[Pose2]:
@@ -154,6 +156,7 @@ class RunModel:
 
     def tracks(self) -> scene.RunTracks:
         fp = np.array([[self.poses[f + 1].x, self.poses[f + 1].y] for f in self.flagged])
+        at = {k: n for n, k in enumerate(self.scans)}
         return scene.RunTracks(
             self.poses,
             self.stored,
@@ -161,6 +164,11 @@ class RunModel:
             fp.reshape(-1, 2),
             self.other,
             self.versus.name_b if self.versus is not None else "",
+            self.loops.optimised if self.loops is not None else None,
+            [
+                (c.verdict, self.poses[at[c.old]], self.poses[at[c.key]])
+                for c in (self.loops.closures if self.loops is not None else [])
+            ],
         )
 
     def pair_at(self, n: int, relation: int | None = None) -> scene.RunPair:

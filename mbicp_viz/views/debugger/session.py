@@ -68,6 +68,17 @@ class Session:
                 "flagged without truth, the most suspicious first",
             ),
         ]
+        if src.loops is not None:
+            lists.append(
+                (
+                    "Loop closures",
+                    [c.match for c in src.loops.closures],
+                    lambda k, m: f"{k}. scans {m.ref} -> {m.obj}: {verdicts[m.ref, m.obj]}",
+                    "loop candidates matched, in the run's order (the match opens from the "
+                    "correlative search's best peak)",
+                )
+            )
+            verdicts = {(c.old, c.key): c.verdict.value for c in src.loops.closures}
         if src.versus is not None:
             lists.append(
                 (
@@ -77,7 +88,8 @@ class Session:
                     "pairs end apart, the farthest first (run A's match opens)",
                 )
             )
-        picks = ("open", "open flagged", "open where they differ")
+        picks = ("open", "open flagged", *(["open candidate"] if src.loops else []))
+        picks += ("open where they differ",)
         for k, ((title, rows, label, order_text), pick) in enumerate(zip(lists, picks)):
             controls.PairList(self, gui, 5 + 0.5 * k, title, rows, label, order_text, pick)
 
@@ -140,7 +152,7 @@ class Session:
             from .run import RunPanel
             from .run_model import RunModel
 
-            model = RunModel(src.log, src.run, src.versus, src.relations, src.offset)
+            model = RunModel(src.log, src.run, src.versus, src.relations, src.offset, src.loops)
             self.run = RunPanel(self, gui, 4.5, model)
         if src.rows_label:
             self._pair_lists(gui, src)
