@@ -47,6 +47,7 @@ __all__ = [
     "ScanLog",
     "lesson_picture",
     "lesson_step",
+    "close_loops",
     "match",
     "match_scans",
     "matchers",
@@ -251,10 +252,20 @@ def run(
     frame: str = "base",
     workers: int | None = 1,
     budget_s: float | None = MATCH_BUDGET_S,
+    keyframe_m: float = 0.0,
+    keyframe_deg: float = 30.0,
 ) -> list[PairMatch]:
     """``eval sequence``: every consecutive pair of usable scans matched in order (the first
-    ``limit``), one record each, spread over ``workers`` processes (None: every core)."""
+    ``limit``), one record each, spread over ``workers`` processes (None: every core); with
+    ``keyframe_m`` > 0 (``--keyframe-m``), each scan against the last key frame, a new one after
+    ``keyframe_m`` metres or ``keyframe_deg`` degrees, on one process."""
+    from mbicp_viz.evaluation.keyframes import KeyFrames
     from mbicp_viz.evaluation.sequence import match_sequence
+
+    if not (math.isfinite(keyframe_m) and keyframe_m >= 0):
+        raise InputError(f"expected a distance >= 0 m, got {keyframe_m}", field="keyframe_m")
+    if not (math.isfinite(keyframe_deg) and 0 <= keyframe_deg <= 180):
+        raise InputError(f"expected 0 to 180 degrees, got {keyframe_deg}", field="keyframe_deg")
 
     if frame not in ("base", "laser"):
         raise InputError("expected 'base' or 'laser'", field="frame")
@@ -269,7 +280,23 @@ def run(
         workers=workers,
         base=frame == "base",
         budget_s=budget_s,
+        keyframes=KeyFrames(keyframe_m, math.radians(keyframe_deg)) if keyframe_m > 0 else None,
     )
+
+
+def close_loops(log: ScanLog, rows: list[PairMatch], *, loop_gap_m: float = 10.0):
+    """``eval sequence --close-loops``: the run's loops closed (evaluation/loops.py) with its own
+    matcher and parameters, key frames ``loop_gap_m`` metres apart along the run or more being
+    candidates. Returns a ``LoopRun``: ``.optimised`` (a pose per scan of the run), ``.closures``
+    (each candidate's match and verdict), ``.summary()``."""
+    from mbicp_viz.evaluation.loops import LoopParams
+    from mbicp_viz.evaluation.loops import close_loops as close
+
+    if not (math.isfinite(loop_gap_m) and loop_gap_m >= 0):
+        raise InputError(f"expected a distance >= 0 m, got {loop_gap_m}", field="loop_gap_m")
+    if not rows:
+        raise InputError("a run of at least one pair", field="rows")
+    return close(log, rows, rows[0].params, LoopParams(min_path_m=loop_gap_m))
 
 
 def write_rows(rows: list[PairMatch], path: str | Path) -> None:
@@ -295,16 +322,19 @@ def score_run(
     *,
     offset: float = 0.0,
     tolerance: float = 0.025,
+    loops=None,
 ) -> list[RunScore]:
     """``eval relations LOG RELATIONS --run ROWS``: the run's trajectories (matches chained, their
     Kalman fusion with the odometry, the raw odometry) scored on a relations file (Kümmerle et al.
     2009); ``offset`` [s] is added to the log's stamps, ``tolerance`` [s] finds a relation's
-    scans."""
-    from mbicp_viz.evaluation.run_score import run_tracks, score_track
+    scans; with ``loops`` (``close_loops``'s), the run with its loops closed too."""
+    from mbicp_viz.evaluation.run_score import LOOPS_CLOSED, run_tracks, score_track
     from mbicp_viz.readers.relations import read_relations
 
     rel = read_relations(str(relations))
     tracks = run_tracks(log, rows, "rows", offset)
+    if loops is not None:
+        tracks[LOOPS_CLOSED] = (tracks["matches chained"][0], loops.optimised)
     return [score_track(name, t, poses, rel, tolerance) for name, (t, poses) in tracks.items()]
 
 
@@ -314,15 +344,17 @@ def write_rrd(
     *,
     log: ScanLog | None = None,
     teaching: bool = False,
+    loops=None,
 ) -> None:
     """An ``.rrd`` for rerun's viewer, written whole: matches of a pair (``match --rrd``, each
     matcher under its own root; ``teaching``: iso-distance curves and pair-distance histograms),
-    or with ``log`` a run's rows (``eval sequence --rrd``)."""
+    or with ``log`` a run's rows (``eval sequence --rrd``; with ``loops``, ``close_loops``'s, the
+    run with its loops closed in a view of its own)."""
     from mbicp_viz.views import rrd
 
     matches = [matches] if isinstance(matches, PairMatch) else list(matches)
     if log is not None:
-        rrd.record_sequence(log, matches, str(path))
+        rrd.record_sequence(log, matches, str(path), loops=loops)
     else:
         rrd.record(matches, str(path), teaching=teaching)
 

@@ -56,8 +56,9 @@ def test_the_api_pages_examples_run_as_written(folder):
     assert "11 rows read back" in out
     assert "matches chained: translation" in out and "raw odometry: translation" in out
     assert "improved.mad_k:" in out  # the error, as the command line prints it
+    assert "no loop closed" in out and "pose graph (loops closed): translation" in out
     assert re.search(r"open http://127\.0\.0\.1:\d+", out)
-    for rrd in ("pair.rrd", "run.rrd"):
+    for rrd in ("pair.rrd", "run.rrd", "loops.rrd"):
         res = subprocess.run(
             [str(Path(sys.executable).parent / "rerun"), "rrd", "verify", str(folder / rrd)],
             capture_output=True,
@@ -141,6 +142,10 @@ def test_scans_from_arrays_match_a_known_turn():
         (lambda: mv.match(mv.read_log(BAG), 0, 100000), "100000"),
         (lambda: mv.match(mv.read_log(BAG), 0, 1, params=3), "params"),
         (lambda: mv.lesson_step(99), "number"),
+        (lambda: mv.run(mv.read_log(BAG), keyframe_m=float("nan")), "keyframe_m"),
+        (lambda: mv.run(mv.read_log(BAG), keyframe_m=0.5, keyframe_deg=200), "keyframe_deg"),
+        (lambda: mv.close_loops(mv.read_log(BAG), [], loop_gap_m=-1), "loop_gap_m"),
+        (lambda: mv.close_loops(mv.read_log(BAG), []), "rows"),
     ],
 )
 def test_every_bad_input_is_the_one_error_naming_what_is_wrong(call, where):

@@ -666,7 +666,12 @@ def _score_run(
 ) -> None:
     """``eval relations LOG RELATIONS --run ROWS [--close-loops]``: each trajectory of the run,
     scored."""
-    from mbicp_viz.evaluation.run_score import published_line, run_tracks, score_track
+    from mbicp_viz.evaluation.run_score import (
+        LOOPS_CLOSED,
+        published_line,
+        run_tracks,
+        score_track,
+    )
     from mbicp_viz.readers.relations import read_relations
     from mbicp_viz.readers.rows import rows_of_log
 
@@ -695,9 +700,6 @@ def _score_run(
                 f"  relation {k + 1} ({rel.t1:.3f} s -> {rel.t2:.3f} s): {et:.3f} m, "
                 f"{math.degrees(er):.2f} deg"
             )
-
-
-LOOPS_CLOSED = "pose graph (loops closed)"
 
 
 def basin(

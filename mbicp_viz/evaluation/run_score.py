@@ -35,6 +35,8 @@ from .trajectory import (
     stamps,
 )
 
+LOOPS_CLOSED = "pose graph (loops closed)"  # the track of a run with its loops closed
+
 # Kümmerle et al. 2009, Table I (translational error [m], mean ± sd over all relations): scan
 # matching, and the best graph mapping (GMapping) beside it; by the log the relations belong to.
 PUBLISHED = {
