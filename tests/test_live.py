@@ -5,6 +5,7 @@ server is reconnected, and a wrong server is one line."""
 
 from __future__ import annotations
 
+import math
 import re
 import signal
 import subprocess
@@ -61,10 +62,11 @@ def same(a, b) -> bool:
     )
 
 
-def lockstep_run(robot: FoxgloveRobot, path, topics=TOPICS) -> tuple[LiveRun, list]:
+def lockstep_run(robot: FoxgloveRobot, path, topics=TOPICS, keyframes=None) -> tuple[LiveRun, list]:
     """Each scan sent once the one before it is matched (a robot slow enough for the matcher):
-    every pair equals eval sequence's on the bag at ``path``; the run, still connected."""
-    run = LiveRun(robot.url, ImprovedParams())
+    every pair equals eval sequence's on the bag at ``path`` (with ``keyframes``, its key-frame
+    run's); the run, still connected."""
+    run = LiveRun(robot.url, ImprovedParams(), keyframes=keyframes)
 
     def before_scan(n: int) -> None:
         assert wait_for(lambda: caught_up(run, n), 60), run.snapshot()[0].line()
@@ -73,7 +75,7 @@ def lockstep_run(robot: FoxgloveRobot, path, topics=TOPICS) -> tuple[LiveRun, li
     assert wait_for(lambda: run.snapshot()[0].matched == SCANS - 1, 60)
     status, rows = run.snapshot()
     assert status.skipped == 0 and status.unusable == 0
-    expected = match_sequence(read_log(path), ImprovedParams(), workers=1)
+    expected = match_sequence(read_log(path), ImprovedParams(), workers=1, keyframes=keyframes)
     assert len(rows) == len(expected) == SCANS - 1
     for m, e in zip(rows, expected):
         assert same(m, e), (m.ref, m.obj)
@@ -119,6 +121,26 @@ def test_odometry_on_tf_is_the_guess_as_a_bags_is(intel, tmp_path):
         if run is not None:
             run.stop()
         server.stop()
+
+
+def test_a_key_frame_run_live_is_eval_sequences_key_frame_run(bag):
+    """live --keyframe-m: each scan against the last key frame, as eval sequence --keyframe-m
+    matches the bag; the live page's view of it is a run."""
+    from mbicp_viz.evaluation.keyframes import KeyFrames
+    from mbicp_viz.evaluation.trajectory import is_run
+
+    path, served = bag
+    robot = FoxgloveRobot(served)
+    run = None
+    try:
+        run, rows = lockstep_run(robot, path, keyframes=KeyFrames(1.5, math.radians(45.0)))
+        assert any(r.obj - r.ref > 1 for r in rows)  # some scans matched across a key frame
+        _, log, viewed, _ = run.view()
+        assert is_run(viewed) and len(viewed) == len(rows) and log.records == SCANS
+    finally:
+        if run is not None:
+            run.stop()
+        robot.stop()
 
 
 def test_a_matcher_behind_skips_to_the_newest_scan_and_says_how_many(bag):

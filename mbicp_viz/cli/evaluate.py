@@ -27,6 +27,8 @@ from .options import (
     FrameOpt,
     Guess,
     GuessOpt,
+    KeyframeDegOpt,
+    KeyframeOpt,
     LoopGapOpt,
     MatcherOpt,
     MatchersOpt,
@@ -101,28 +103,6 @@ KalmanOpt = Annotated[
         "--kalman",
         help="fuse the matches with the log's odometry (EKF, paper 003 §5.3); the TUM file and "
         "map then use the fused track",
-    ),
-]
-KeyframeOpt = Annotated[
-    float,
-    typer.Option(
-        "--keyframe-m",
-        min=0.0,
-        callback=finite,
-        help="a key-frame run: match each scan against the last key frame, a new one once the "
-        "robot has moved this far [m] or turned --keyframe-deg from it (or its match failed); "
-        "one process; 0.6 did best on the full Intel and ACES logs. 0: each scan against the one "
-        "before",
-    ),
-]
-KeyframeDegOpt = Annotated[
-    float,
-    typer.Option(
-        "--keyframe-deg",
-        min=0.0,
-        max=180.0,
-        callback=finite,
-        help="with --keyframe-m: the turn [deg] from the key frame that makes a new one",
     ),
 ]
 

@@ -16,6 +16,8 @@ from .options import (
     BudgetOpt,
     Guess,
     GuessOpt,
+    KeyframeDegOpt,
+    KeyframeOpt,
     MatcherOpt,
     ParamsOpt,
     RrdOpt,
@@ -67,19 +69,23 @@ def live(
     port: ServePortOpt = 8080,
     for_seconds: ForOpt = None,
     budget_s: BudgetOpt = MATCH_BUDGET_S,
+    keyframe_m: KeyframeOpt = 0.0,
+    keyframe_deg: KeyframeDegOpt = 30.0,
 ):
-    """Match a running robot's scans as they arrive (each against the previous one, guess as
-    `eval sequence` takes it): one line per pair on stdout, the status each second on stderr,
-    until Ctrl-C (or --for-seconds); the last --buffer-s seconds of messages are kept for
-    --save and --rrd."""
+    """Match a running robot's scans as they arrive (each against the previous one, or the last
+    key frame with --keyframe-m, guess as `eval sequence` takes it): one line per pair on stdout,
+    the status each second on stderr, until Ctrl-C (or --for-seconds); the last --buffer-s
+    seconds of messages are kept for --save and --rrd."""
     from mbicp_viz.core import tiers
+    from mbicp_viz.evaluation.keyframes import KeyFrames
     from mbicp_viz.evaluation.pool import stopping
     from mbicp_viz.live.run import LiveRun
     from mbicp_viz.readers.params_toml import read_params
 
     tiers.quick_start()
     p = read_params(params, [matcher.value]).matchers[matcher.value]
-    run = LiveRun(url, p, topic, buffer_s, typestore, guess, budget_s)
+    keyframes = KeyFrames(keyframe_m, math.radians(keyframe_deg)) if keyframe_m > 0 else None
+    run = LiveRun(url, p, topic, buffer_s, typestore, guess, budget_s, keyframes)
     saved = " and ".join(str(p) for p in (save, rrd) if p is not None)
     say(f"mbicp-viz: live from {url}; Ctrl-C stops" + (f" and saves to {saved}" if saved else ""))
     done, shown, notes, page = threading.Event(), 0, 0, None

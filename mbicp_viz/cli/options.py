@@ -516,3 +516,27 @@ def closed_run(lg, rows: list, p):
     for line in closed.summary():
         say(line)
     return closed
+
+
+KeyframeOpt = Annotated[
+    float,
+    typer.Option(
+        "--keyframe-m",
+        min=0.0,
+        callback=finite,
+        help="a key-frame run: match each scan against the last key frame, a new one once the "
+        "robot has moved this far [m] or turned --keyframe-deg from it (or its match failed); "
+        "one process; 0.6 did best on the full Intel and ACES logs. 0: each scan against the one "
+        "before",
+    ),
+]
+KeyframeDegOpt = Annotated[
+    float,
+    typer.Option(
+        "--keyframe-deg",
+        min=0.0,
+        max=180.0,
+        callback=finite,
+        help="with --keyframe-m: the turn [deg] from the key frame that makes a new one",
+    ),
+]

@@ -1,6 +1,7 @@
-"""A live run: a Foxglove server's scans matched against the previous one as they arrive, as
-``eval sequence`` matches a bag's (``evaluation/sequence.match_row``), with the last seconds of
-messages kept to be saved as a bag that every other command reads.
+"""A live run: a Foxglove server's scans matched against the previous one (or the last key frame,
+``keyframes``) as they arrive, as ``eval sequence`` matches a bag's
+(``evaluation/sequence.match_row``), with the last seconds of messages kept to be saved as a bag
+that every other command reads.
 
 Three threads: the receiver (reconnecting when the connection is lost), the matcher (always the
 newest scan: when it falls behind it skips, and counts, the scans in between) and the caller's.
@@ -23,6 +24,7 @@ import numpy as np
 from mbicp_viz.choices import MATCH_BUDGET_S, Guess
 from mbicp_viz.core import Params, Scan, ScanError, UnusableScan
 from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.keyframes import KeyFrames
 from mbicp_viz.evaluation.sequence import match_row
 from mbicp_viz.readers.log import Frames, ScanLog
 from mbicp_viz.readers.pair_match import PairMatch
@@ -94,9 +96,10 @@ class LiveRun:
         typestore: str = "ROS2_HUMBLE",
         guess: Guess = Guess.stored,
         budget_s: float | None = MATCH_BUDGET_S,
+        keyframes: KeyFrames | None = None,
     ):
         self.url, self.params, self.topic, self.buffer_s = url, params, topic, buffer_s
-        self.guess, self.budget_s = guess, budget_s
+        self.guess, self.budget_s, self.keyframes = guess, budget_s, keyframes
         self.decoder = Decoder(url, typestore)
         self.status = Status()
         self.lags: deque[float] = deque(maxlen=100_000)  # [s] each pair's, for bench live
@@ -111,6 +114,7 @@ class LiveRun:
         self._advertised: list[client.Channel] = []
         self._connected_at = time.monotonic()
         self._pending: tuple[int, object, float] | None = None  # the newest scan not yet matched
+        # the scan the next one is matched against: the one before it, or the last key frame
         self._previous: tuple[int, Scan] | None = None
         self._frame_id = ""  # the laser's, as its scans name it
         self._busy = False  # the matcher is matching a scan
@@ -321,17 +325,20 @@ class LiveRun:
             with self._lock:
                 self.status.unusable += 1
             return
-        previous, self._previous = self._previous, (k, scan)
+        previous = self._previous
         if previous is None:
+            self._previous = (k, scan)
             with self._lock:
                 self.scans.append((k, scan))
             return
         i, ref = previous
         job = (self.url, i, k, ref, scan, self.params, self.guess, None, None, frames, True)
         m = match_row(job, self.topic or self._scan_channel.topic, self.budget_s)
+        if self.keyframes is None or self.keyframes.due(m):
+            self._previous = (k, scan)
         with self._lock:
             lag = time.monotonic() - received
-            if self.scans and self.scans[-1][0] != i:  # the chain restarted (an unusable scan)
+            if self.scans and all(n != i for n, _ in self.scans):  # the buffer lost its start
                 self.scans.clear()
             self.scans.extend([previous] * (not self.scans) + [(k, scan)])
             self.rows.append((scan.stamp or 0.0, m, lag))
