@@ -838,24 +838,19 @@ def test_a_runs_loops_are_drawn_listed_and_open_in_the_run_view(browser, tmp_pat
     """serve LOG --rows R --close-loops: the run view draws the trajectory with the loops closed
     and every candidate in its verdict's colour, with legend entries; each candidate is listed
     with its verdict and opens as it was matched (from the search's best peak)."""
-    from typer.testing import CliRunner
-
-    from mbicp_viz.cli import app as cli
-    from mbicp_viz.evaluation.keyframes import KeyFrames
-    from mbicp_viz.evaluation.loops import LoopParams, close_loops
+    from mbicp_viz.evaluation.loops import close_loops
     from mbicp_viz.readers.pair_match import Verdict
     from mbicp_viz.views import scene
     from mbicp_viz.views.debugger.sources import files_source
 
     from .conftest import HOKUYO_BAG
+    from .test_loops import HAND_HELD_LOOPS, hand_held_run
 
     rows = tmp_path / "rows.jsonl"
-    args = ["eval", "sequence", str(HOKUYO_BAG), "--out", str(rows), "--limit", "300"]
-    res = CliRunner().invoke(cli, args + ["--keyframe-m", "0.05", "--keyframe-deg", "5"])
+    res = hand_held_run(rows)
     assert res.exit_code == 0, res.output
     src = files_source(str(HOKUYO_BAG), None, rows=str(rows))
-    p = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
-    loops = close_loops(src.log, src.run, src.run[0].params, p)
+    loops = close_loops(src.log, src.run, src.run[0].params, HAND_HELD_LOOPS)
     verdicts = {c.verdict for c in loops.closures}
     assert Verdict.ACCEPTED in verdicts and len(verdicts) > 1
     application = App(replace(src, loops=loops), "127.0.0.1", 0)

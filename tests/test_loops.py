@@ -5,6 +5,7 @@ closed on the command line."""
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
@@ -101,29 +102,31 @@ def test_graduated_non_convexity_turns_off_the_wrong_closure_of_a_square():
     assert math.hypot(ends.x - truth[-1].x, ends.y - truth[-1].y) > 2.0  # the chain alone
 
 
-def test_a_hand_held_run_closes_its_loops_with_real_matches(tmp_path):
-    """The hand-held Hokuyo sweeps the same room back and forth: key frames see old ones again."""
-    out = tmp_path / "rows.json"
-    res = runner.invoke(
-        app,
-        [
-            "eval",
-            "sequence",
-            str(HOKUYO_BAG),
-            "--out",
-            str(out),
-            "--limit",
-            "300",
-            "--keyframe-m",
-            "0.05",
-            "--keyframe-deg",
-            "5",
-        ],
-    )
+# the hand-held Hokuyo as a key-frame run a few centimetres apart, its loops looked for 0.3 m back
+HAND_HELD = ["--limit", "300", "--keyframe-m", "0.05", "--keyframe-deg", "5"]
+HAND_HELD_LOOPS = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
+
+
+def hand_held_run(out, *extra):
+    """``eval sequence`` of the hand-held bag into ``out`` with ``HAND_HELD`` (and ``extra``)."""
+    args = ["eval", "sequence", str(HOKUYO_BAG), "--out", str(out), *HAND_HELD, *map(str, extra)]
+    return runner.invoke(app, args)
+
+
+@pytest.fixture(scope="module")
+def hand_held(tmp_path_factory):
+    """The rows file of the hand-held key-frame run."""
+    out = tmp_path_factory.mktemp("hand-held") / "rows.json"
+    res = hand_held_run(out)
     assert res.exit_code == 0, res.output
+    return out
+
+
+def test_a_hand_held_run_closes_its_loops_with_real_matches(hand_held):
+    """The hand-held Hokuyo sweeps the same room back and forth: key frames see old ones again."""
     log = read_log(str(HOKUYO_BAG))
-    rows = rows_of_log(str(out), log)
-    p = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
+    rows = rows_of_log(str(hand_held), log)
+    p = HAND_HELD_LOOPS
     closed = close_loops(log, rows, ImprovedParams(), p)
     accepted = [c for c in closed.closures if c.verdict is Verdict.ACCEPTED]
     assert accepted and len(closed.optimised) == len(closed.chained) == len(rows) + 1
@@ -136,25 +139,10 @@ def test_a_hand_held_run_closes_its_loops_with_real_matches(tmp_path):
     assert closed.summary()[0].startswith(f"loops: {len(closed.keys)} key frames")
 
 
-def test_a_scan_from_elsewhere_is_not_taken_for_a_loop(tmp_path):
-    out = tmp_path / "rows.json"
-    args = [
-        "eval",
-        "sequence",
-        str(HOKUYO_BAG),
-        "--out",
-        str(out),
-        "--limit",
-        "300",
-        "--keyframe-m",
-        "0.05",
-        "--keyframe-deg",
-        "5",
-    ]
-    assert runner.invoke(app, args).exit_code == 0
+def test_a_scan_from_elsewhere_is_not_taken_for_a_loop(hand_held):
     log = read_log(str(HOKUYO_BAG))
-    rows = rows_of_log(str(out), log)
-    p = LoopParams(keyframes=KeyFrames(0.05, math.radians(5.0)), min_path_m=0.3)
+    rows = rows_of_log(str(hand_held), log)
+    p = HAND_HELD_LOOPS
     honest = close_loops(log, rows, ImprovedParams(), p)
     key = max(honest.closures, key=lambda c: c.verdict is Verdict.ACCEPTED).key
     elsewhere = read_log(str(DATA / "laserazosSM3-40.log")).scan(20)  # another robot's building
@@ -205,26 +193,8 @@ def test_the_whole_run_recording_holds_the_run_with_its_loops_closed(tmp_path):
     from .test_rrd import columns
 
     rrd, out = tmp_path / "run.rrd", tmp_path / "rows.json"
-    res = runner.invoke(
-        app,
-        [
-            "eval",
-            "sequence",
-            str(HOKUYO_BAG),
-            "--out",
-            str(out),
-            "--limit",
-            "300",
-            "--keyframe-m",
-            "0.05",
-            "--keyframe-deg",
-            "5",
-            "--close-loops",
-            "--loop-gap-m",
-            "0.3",
-            "--rrd",
-            str(rrd),
-        ],
+    res = hand_held_run(
+        out, "--close-loops", "--loop-gap-m", HAND_HELD_LOOPS.min_path_m, "--rrd", rrd
     )
     assert res.exit_code == 0, res.output
     summary = next(x for x in res.stderr.splitlines() if x.startswith("loops: "))

@@ -21,6 +21,7 @@ from .options import (
     BudgetOpt,
     CaseGuessOpt,
     CaseTruthOpt,
+    CloseLoopsOpt,
     DeskewOpt,
     FirstArg,
     Frame,
@@ -130,15 +131,7 @@ def sequence(
     budget_s: BudgetOpt = MATCH_BUDGET_S,
     keyframe_m: KeyframeOpt = 0.0,
     keyframe_deg: KeyframeDegOpt = 30.0,
-    close_loops: Annotated[
-        bool,
-        typer.Option(
-            "--close-loops",
-            help="then close the run's loops (evaluation/loops.py: key frames matched against old "
-            "ones with this matcher, a pose graph on GTSAM); with --rrd, the optimised run and "
-            "every candidate are a layer of the recording",
-        ),
-    ] = False,
+    close_loops: CloseLoopsOpt = False,
     loop_gap_m: LoopGapOpt = 10.0,
     serve: Annotated[
         bool,
@@ -154,7 +147,6 @@ def sequence(
     identity), or each scan against the last key frame (--keyframe-m)."""
     from mbicp_viz.core import Termination
     from mbicp_viz.evaluation.keyframes import KeyFrames
-    from mbicp_viz.evaluation.loops import LoopParams
     from mbicp_viz.evaluation.sequence import match_sequence
     from mbicp_viz.readers.pair_match import PairMatch, parse_pair_match
     from mbicp_viz.readers.params_toml import read_params
@@ -217,10 +209,7 @@ def sequence(
     _sequence_notes(lg, rows, truth, guess, frame)
     if png or tum or tum_ref or kalman:
         _trajectories(lg, rows, png, tum, tum_ref, kalman)
-    loops = None
-    if close_loops:
-        p = LoopParams(min_path_m=loop_gap_m)
-        loops = closed_run(lg, rows, p if keyframes is None else replace(p, keyframes=keyframes))
+    loops = closed_run(lg, rows, loop_gap_m, keyframes) if close_loops else None
     if rrd:
         from mbicp_viz.views.rrd import record_sequence
 
@@ -579,19 +568,11 @@ def relations(
             "odometry, beside the published figures",
         ),
     ] = None,
-    close_loops: Annotated[
-        bool,
-        typer.Option(
-            "--close-loops",
-            help="with --run: close the run's loops (key frames matched against old ones with the "
-            "run's matcher and parameters, a pose graph on GTSAM) and score the optimised run too",
-        ),
-    ] = False,
+    close_loops: CloseLoopsOpt = False,
     loop_gap_m: LoopGapOpt = 10.0,
 ):
     """Match the two scans of each relation (Kümmerle et al. 2009) and report the errors; or, with
     --run, score a whole run's trajectory on the relations."""
-    from mbicp_viz.evaluation.loops import LoopParams
     from mbicp_viz.evaluation.relations import (
         match_relations,
         relation_pairs,
@@ -604,8 +585,7 @@ def relations(
     reading = read_options(topic)
     lg = read_log_saying(log, reading)
     if run_rows is not None:
-        loops = LoopParams(min_path_m=loop_gap_m) if close_loops else None
-        _score_run(lg, run_rows, relations_file, offset, tolerance, loops)
+        _score_run(lg, run_rows, relations_file, offset, tolerance, close_loops, loop_gap_m)
         return
     if close_loops:
         raise InputError("--close-loops closes the loops of a run: give --run ROWS", field="--run")
@@ -642,7 +622,13 @@ def relations(
 
 
 def _score_run(
-    lg, rows_path: str, relations_file: str, offset: float, tolerance: float, loops
+    lg,
+    rows_path: str,
+    relations_file: str,
+    offset: float,
+    tolerance: float,
+    loops: bool,
+    gap_m: float,
 ) -> None:
     """``eval relations LOG RELATIONS --run ROWS [--close-loops]``: each trajectory of the run,
     scored."""
@@ -658,8 +644,8 @@ def _score_run(
     relations = read_relations(relations_file)
     rows = rows_of_log(rows_path, lg)
     tracks = run_tracks(lg, rows, rows_path, offset)
-    if loops is not None:  # LoopParams
-        tracks[LOOPS_CLOSED] = (tracks["matches chained"][0], closed_run(lg, rows, loops).optimised)
+    if loops:
+        tracks[LOOPS_CLOSED] = (tracks["matches chained"][0], closed_run(lg, rows, gap_m).optimised)
     typer.echo(
         f"{rows_path}: {rows[0].matcher}, {len(rows)} pairs chained ({rows[0].frame} motions); "
         f"{len(relations)} relations of {relations_file}"

@@ -7,6 +7,7 @@ import enum
 import functools
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -494,6 +495,16 @@ def read_options(
     )
 
 
+CloseLoopsOpt = Annotated[
+    bool,
+    typer.Option(
+        "--close-loops",
+        help="close the run's loops (evaluation/loops.py: key frames matched against old ones "
+        "with the run's matcher and parameters, a pose graph on GTSAM), what it did on stderr: "
+        "eval sequence records them in --rrd, eval relations --run scores the optimised run, "
+        "serve draws and lists every candidate in the run view",
+    ),
+]
 LoopGapOpt = Annotated[
     float,
     typer.Option(
@@ -506,13 +517,16 @@ LoopGapOpt = Annotated[
 ]
 
 
-def closed_run(lg, rows: list, p):
-    """The run with its loops closed (evaluation/loops.py, ``p`` its ``LoopParams``: a
-    ``LoopRun``), what it did said on stderr."""
-    from mbicp_viz.evaluation.loops import close_loops, plan
+def closed_run(lg, rows: list, gap_m: float, keyframes=None):
+    """The run with its loops closed (evaluation/loops.py: a ``LoopRun``), old key frames being
+    ``gap_m`` back along the run or more, its key frames ``keyframes`` (a ``KeyFrames``; None:
+    the default spacing); what it did said on stderr."""
+    from mbicp_viz.evaluation.loops import LoopParams, close_loops, plan
 
+    p = LoopParams(min_path_m=gap_m)
+    p = p if keyframes is None else replace(p, keyframes=keyframes)
     with Progress(len(plan(rows, p)[1]) - 1, "closing loops") as bar:
-        closed = close_loops(lg, rows, rows[0].params, p, on_key=lambda n, total: bar.update(1))
+        closed = close_loops(lg, rows, rows[0].params, p, on_key=lambda: bar.update(1))
     for line in closed.summary():
         say(line)
     return closed

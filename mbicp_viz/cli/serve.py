@@ -14,6 +14,7 @@ from mbicp_viz.errors import InputError
 
 from .options import (
     BudgetOpt,
+    CloseLoopsOpt,
     DeskewOpt,
     Guess,
     GuessOpt,
@@ -99,15 +100,7 @@ def serve(
     ] = None,
     offset: OffsetOpt = 0.0,
     budget_s: BudgetOpt = MATCH_BUDGET_S,
-    close_loops: Annotated[
-        bool,
-        typer.Option(
-            "--close-loops",
-            help="close the --rows run's loops first (as eval sequence --close-loops): the run "
-            "view draws the optimised trajectory and every candidate by verdict, and lists them "
-            "to open",
-        ),
-    ] = False,
+    close_loops: CloseLoopsOpt = False,
     loop_gap_m: LoopGapOpt = 10.0,
 ):
     """The interactive debugger in the browser: step, play, tune live, compare, export."""
@@ -124,13 +117,13 @@ def serve(
         else files_source(first, second, pair, guess, reading, rows, versus, relations, offset)
     )
     if close_loops:
-        from mbicp_viz.evaluation.loops import LoopParams
-
         if source.run is None:
-            raise InputError("--close-loops closes the loops of a run: give --rows", field="--rows")
-        source = replace(
-            source, loops=closed_run(source.log, source.run, LoopParams(min_path_m=loop_gap_m))
-        )
+            raise InputError(
+                "--close-loops closes the loops of a run: give the rows of `eval sequence` with "
+                "--rows",
+                field="--rows",
+            )
+        source = replace(source, loops=closed_run(source.log, source.run, loop_gap_m))
     open_debugger(
         replace(source, budget_s=budget_s), host, port, tuple(allow_origin or ()), for_seconds
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from mbicp_viz.core import Pose2
 from mbicp_viz.readers.pair_match import PairMatch
 
 
@@ -25,14 +26,13 @@ class KeyFrames:
     distance_m: float = 0.6
     angle: float = math.radians(30.0)
 
+    def moved(self, motion: Pose2) -> bool:
+        """Whether ``motion`` from the key frame is far enough for a new one."""
+        return motion.translation_norm() >= self.distance_m or abs(motion.theta) >= self.angle
+
     def due(self, row: PairMatch) -> bool:
         """Whether ``row``'s scan is the next key frame."""
-        m = row.result.pose
-        return (
-            not row.result.converged
-            or m.translation_norm() >= self.distance_m
-            or abs(m.theta) >= self.angle
-        )
+        return not row.result.converged or self.moved(row.result.pose)
 
     def key_after(self, rows: list[PairMatch]) -> int:
         """The key frame after a run's ``rows`` (its first scan when there are none)."""

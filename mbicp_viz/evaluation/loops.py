@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -47,8 +48,8 @@ class LoopParams:
     min_path_m: float = 10.0  # a key frame this far back along the run or more is "old"
     reach_m: float = 1.0  # two key frames this near see the same place, beside the uncertainty
     chi2: float = 9.21  # the gate on the chain's position uncertainty: chi-squared, 2 dof, 99 %
-    # candidates matched per key frame, the most likely first (one from each pass, 5 m apart
-    # along the run, closed fewer of Intel's loops: 0.044 m against 0.022 m, and ACES no better)
+    # candidates matched per key frame, the most likely first (tried instead: one from each pass,
+    # 5 m apart along the run; it closed fewer of Intel's loops, 0.044 m against 0.022 m)
     per_key: int = 2
     # the correlative search's half window, at most (x and y): ACES's chain comes back 6 m off
     window_max_m: float = 7.0
@@ -88,10 +89,22 @@ class LoopRun:
     optimised: list[Pose2]
     optimise_s: list[float]  # each optimisation's time, in the order they ran
 
-    def ends(self, c: Closure) -> tuple[Pose2, Pose2]:
-        """Where the optimised run puts a closure's old and newer key frame."""
-        at = {k: n for n, k in enumerate(self.scans)}
-        return self.optimised[at[c.old]], self.optimised[at[c.key]]
+    @cached_property
+    def _position(self) -> dict[int, int]:
+        """Each scan's position in the run, by its record number."""
+        return {k: n for n, k in enumerate(self.scans)}
+
+    def ends(self, c: Closure, poses: list[Pose2] | None = None) -> tuple[Pose2, Pose2]:
+        """Where ``poses`` (one per scan of the run; default: the optimised run) put a closure's
+        old and newer key frame."""
+        poses = self.optimised if poses is None else poses
+        return poses[self._position[c.old]], poses[self._position[c.key]]
+
+    def key_points(self, log: ScanLog) -> np.ndarray:
+        """The key frames' points at their optimised poses (the run's world frame)."""
+        scans = log.scans_of([self.scans[k] for k in self.keys], odometry=False)
+        at = [self.optimised[k] for k in self.keys]
+        return np.concatenate([q.apply(s.points()) for q, s in zip(at, scans)])
 
     def counts(self) -> dict[str, int]:
         return {r: sum(c.verdict is r for c in self.closures) for r in Verdict}
@@ -129,8 +142,7 @@ def key_frames(poses: list[Pose2], rule: KeyFrames) -> list[int]:
     or turned ``rule``'s distance from the last key frame."""
     keys = [0]
     for k in range(1, len(poses)):
-        m = relative(poses[keys[-1]], poses[k])
-        if m.translation_norm() >= rule.distance_m or abs(m.theta) >= rule.angle:
+        if rule.moved(relative(poses[keys[-1]], poses[k])):
             keys.append(k)
     if keys[-1] != len(poses) - 1:
         keys.append(len(poses) - 1)
@@ -256,7 +268,7 @@ def verify(
     the predicted motion (the run's frame), and judge it."""
     frames = log.frames
     ref, obj = log.scan(old), log.scan(key)
-    laser = frames.mount.inverse().conjugate(predicted) if frames.reports_base(base) else predicted
+    laser = frames.laser_motion(predicted, base)
     found = correlative_search(ref, obj, laser, search_window(spread_m, len(obj.points()), p))
     ratio = second_peak(found.best_per_angle, found.angles, p.peak_apart)
     m = match_pair(
@@ -360,7 +372,7 @@ def close_loops(
     """Close the loops of a run (the rows of ``eval sequence``): key frames along its chain, each
     matched against the old key frames it may see again, the graph optimised after each key frame
     that closed a loop (so the next predictions start from the corrected estimate) and once more at
-    the end over every closure. ``on_key(n, total)`` sees the progress."""
+    the end over every closure. ``on_key()`` is called after each key frame (progress)."""
     base = rows[0].frame != "laser"
     chained, keys = plan(rows, p)
     scans = scan_indices(rows)
@@ -403,7 +415,7 @@ def close_loops(
             times.append(time.perf_counter() - t0)
             estimate = [graph.pose(k) for k in range(n + 1)]
         if on_key is not None:
-            on_key(n, len(keys) - 1)
+            on_key()
     t0 = time.perf_counter()
     graph.optimise()  # once more over every closure: a later one may show an earlier one wrong
     dropped = {id(c) for c in graph.turned_off()}

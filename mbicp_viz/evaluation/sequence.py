@@ -56,11 +56,10 @@ def match_sequence(
     """One record per consecutive pair of usable scans, in order (with ``keyframes``, per scan
     against the last key frame, evaluation/keyframes.py, on one process): the match's motion (of
     the robot's base when ``base`` and the log knows the laser's mount), how well it lays the scans
-    on each
-    other, its distance from the log's odometry when the log has some, and with ``truth="pose"``
-    its error against the log's scan poses, and the signs that it went wrong (evaluation/health.py:
-    a pair's own, and whether its first scan is out of place). The pairs of ``done``
-    are left out (a run resumed from its rows). Each match stops after ``budget_s``
+    on each other, its distance from the log's odometry when the log has some, and with
+    ``truth="pose"`` its error against the log's scan poses, and the signs that it went wrong
+    (evaluation/health.py: a pair's own, and whether its first scan is out of place). The pairs of
+    ``done`` are left out (a run resumed from its rows). Each match stops after ``budget_s``
     (core/budget.py). Pairs are spread over ``workers`` processes (default: every core);
     ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
     guess = Guess(guess)

@@ -3,9 +3,9 @@ plots.
 
 A run's rows each place a new scan from one placed before: the scan before it (consecutive pairs)
 or the last key frame (a key-frame run, evaluation/keyframes.py). The world frame is the first
-scan's sensor frame. Paper 003 §5.3 builds its maps with a Kalman
-filter fusing the matcher with odometry; ``kalman`` does that on SE(2): odometry increments
-predict, the matcher's increments (composed on the previous estimate) correct.
+scan's sensor frame. Paper 003 §5.3 builds its maps with a Kalman filter fusing the matcher with
+odometry; ``kalman`` does that on SE(2): odometry increments predict, the matcher's increments
+(composed on the estimate of the scan they start from) correct.
 """
 
 from __future__ import annotations

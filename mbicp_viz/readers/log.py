@@ -72,6 +72,10 @@ class Frames:
         known."""
         return self.mount.conjugate(motion) if self.reports_base(base) else motion
 
+    def laser_motion(self, motion: Pose2, base: bool) -> Pose2:
+        """The laser's motion of a motion ``reported`` (its inverse)."""
+        return self.mount.inverse().conjugate(motion) if self.reports_base(base) else motion
+
 
 @dataclass
 class ScanLog:

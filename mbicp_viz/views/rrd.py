@@ -478,10 +478,7 @@ def log_sequence(stream: rr.RecordingStream, log, rows: list[PairMatch], loops=N
     if loops is not None:
         log_y_up(stream, f"/{root}/{scene.LOOPS}")
         ends = [(c.verdict, *loops.ends(c)) for c in loops.closures]
-        at = [loops.optimised[k] for k in loops.keys]
-        scans = log.scans_of([loops.scans[k] for k in loops.keys], odometry=False)
-        key_points = np.concatenate([q.apply(s.points()) for q, s in zip(at, scans)])
-        for layer in scene.loop_layers(loops.optimised, key_points, ends):
+        for layer in scene.loop_layers(loops.optimised, loops.key_points(log), ends):
             log_layer(stream, root, layer, static=True)
     stream.flush()
 

@@ -652,27 +652,25 @@ def loop_layers(
     """The run with its loops closed: its trajectory, the key frames' points (world frame) and
     each candidate (verdict, old key frame, newer one) as a segment between the two, one layer
     per verdict."""
-    layers: list[Layer] = [
+    return [
         Points(f"{LOOPS}/map", key_points, LOOP_MAP, 0.02),
-        Strips(
-            f"{LOOPS}/trajectory",
-            [np.array([[q.x, q.y] for q in optimised])],
-            LOOP_TRAJECTORY,
-            0.03,
-        ),
+        Strips(f"{LOOPS}/trajectory", [_track(optimised)], LOOP_TRAJECTORY, 0.03),
+        *closure_layers(LOOPS, closures, 0.03),
     ]
+
+
+def closure_layers(
+    under: str, closures: list[tuple[Verdict, Pose2, Pose2]], width: float
+) -> list[Layer]:
+    """Each loop candidate (verdict, old key frame, newer one) as a segment between the two, one
+    layer per verdict, under ``under``."""
+    layers: list[Layer] = []
     for verdict, style in CLOSURE.items():
         ends = [(a, b) for v, a, b in closures if v is verdict]
         if ends:
-            layers.append(
-                Segments(
-                    f"{LOOPS}/{verdict.name.lower()}",
-                    np.array([[a.x, a.y] for a, _ in ends]),
-                    np.array([[b.x, b.y] for _, b in ends]),
-                    style,
-                    0.03,
-                )
-            )
+            starts = np.array([[a.x, a.y] for a, _ in ends])
+            stops = np.array([[b.x, b.y] for _, b in ends])
+            layers.append(Segments(f"{under}/{verdict.name.lower()}", starts, stops, style, width))
     return layers
 
 
@@ -753,10 +751,7 @@ def run_track_layers(r: RunTracks, scale: float = 1.0) -> list[Layer]:
     if r.loops is not None:
         track = _drawn_track(r.loops)
         layers.append(Strips(f"{RUN}/loops_closed", [track], LOOP_TRAJECTORY, 0.01 * scale))
-        layers += [
-            replace(layer, path=f"{RUN}/{layer.path}", width=0.008 * scale)
-            for layer in loop_layers(r.loops, np.zeros((0, 2)), r.closures)[2:]
-        ]
+        layers += closure_layers(f"{RUN}/{LOOPS}", r.closures, 0.008 * scale)
     return layers
 
 

@@ -156,7 +156,6 @@ class RunModel:
 
     def tracks(self) -> scene.RunTracks:
         fp = np.array([[self.poses[f + 1].x, self.poses[f + 1].y] for f in self.flagged])
-        at = {k: n for n, k in enumerate(self.scans)}
         return scene.RunTracks(
             self.poses,
             self.stored,
@@ -166,7 +165,7 @@ class RunModel:
             self.versus.name_b if self.versus is not None else "",
             self.loops.optimised if self.loops is not None else None,
             [
-                (c.verdict, self.poses[at[c.old]], self.poses[at[c.key]])
+                (c.verdict, *self.loops.ends(c, self.poses))
                 for c in (self.loops.closures if self.loops is not None else [])
             ],
         )

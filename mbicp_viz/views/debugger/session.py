@@ -54,21 +54,29 @@ class Session:
             self.say(COMPILING)
 
     def _pair_lists(self, gui, src: Source) -> None:
-        """An evaluation's pairs to open: its failures, its suspicious pairs, and beside a run B
-        where the two differ."""
+        """An evaluation's pairs to open: its failures, its suspicious pairs, a run's loop
+        candidates, and beside a run B where the two differ."""
         from mbicp_viz.evaluation.failures import failure_label
         from mbicp_viz.evaluation.health import suspect_label
 
         lists = [
-            ("Failures", src.failures, failure_label, "failed, worst first (translation error)"),
+            (
+                "Failures",
+                src.failures,
+                failure_label,
+                "failed, worst first (translation error)",
+                "open",
+            ),
             (
                 "Suspicious pairs",
                 src.suspects,
                 suspect_label,
                 "flagged without truth, the most suspicious first",
+                "open flagged",
             ),
         ]
         if src.loops is not None:
+            verdicts = {(c.old, c.key): c.verdict.value for c in src.loops.closures}
             lists.append(
                 (
                     "Loop closures",
@@ -76,9 +84,9 @@ class Session:
                     lambda k, m: f"{k}. scans {m.ref} -> {m.obj}: {verdicts[m.ref, m.obj]}",
                     "loop candidates matched, in the run's order (the match opens from the "
                     "correlative search's best peak)",
+                    "open candidate",
                 )
             )
-            verdicts = {(c.old, c.key): c.verdict.value for c in src.loops.closures}
         if src.versus is not None:
             lists.append(
                 (
@@ -86,11 +94,10 @@ class Session:
                     src.versus.differing(),
                     suspect_label,
                     "pairs end apart, the farthest first (run A's match opens)",
+                    "open where they differ",
                 )
             )
-        picks = ("open", "open flagged", *(["open candidate"] if src.loops else []))
-        picks += ("open where they differ",)
-        for k, ((title, rows, label, order_text), pick) in enumerate(zip(lists, picks)):
+        for k, (title, rows, label, order_text, pick) in enumerate(lists):
             controls.PairList(self, gui, 5 + 0.5 * k, title, rows, label, order_text, pick)
 
     def show_notes(self) -> None:
