@@ -361,7 +361,10 @@ def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
         track = np.array([[p.x, p.y] for p in session.run.model.poses])
         apart = [np.sort(np.hypot(*(track - t).T))[1] for t in track]
         k = int(np.argmax(apart[2:])) + 2  # not the first pair: the slider starts there
+        # the tab's view once it has taken the run's framing (under load it reports it late)
         cam = session.client.camera
+        centre, _ = session.camera.framing(session.run.model.extent(), cam.fov, cam.aspect)
+        assert wait_for(lambda: np.allclose(cam.look_at[:2], centre, atol=0.01))
         canvas = page.locator("canvas").first.bounding_box()
         half_h = (cam.position[2] - 0.0) * np.tan(cam.fov / 2)
         u = 0.5 + (track[k, 0] - cam.look_at[0]) / (2 * half_h * cam.aspect)
