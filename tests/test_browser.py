@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import sync_playwright
 
-from mbicp_viz.core import Pose2
+from mbicp_viz.core import Pose2, relative
 from mbicp_viz.readers import read_log
 from mbicp_viz.views.debugger.app import App
 from mbicp_viz.views.debugger.state import Source
@@ -837,13 +837,20 @@ def test_the_debugger_opened_from_a_notebook_cell_shows_in_the_cell(browser, tmp
             urllib.request.urlopen(url, timeout=5)
 
 
-def test_a_runs_loops_are_drawn_listed_and_open_in_the_run_view(browser, tmp_path):
+def test_a_runs_loops_are_drawn_listed_opened_and_decided_by_hand(browser, tmp_path):
     """serve LOG --rows R --close-loops: the run view draws the trajectory with the loops closed
-    and every candidate in its verdict's colour, with legend entries; each candidate is listed
-    with its verdict and opens as it was matched (from the search's best peak)."""
+    and every candidate in its verdict's colour, with legend entries, and the map at either poses;
+    each candidate is listed with its verdict and opens as it was matched (from the search's best
+    peak) beside its response over rotation and what it does to the run's relation score; "reject
+    this closure" solves the graph again and the page shows it rejected by hand."""
     from mbicp_viz.evaluation.loops import close_loops
+    from mbicp_viz.evaluation.run_score import relation_errors
+    from mbicp_viz.evaluation.trajectory import accumulate, stamps
     from mbicp_viz.readers.pair_match import Verdict
+    from mbicp_viz.readers.relations import Relation
     from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.loops import NONE
+    from mbicp_viz.views.debugger.run_model import RELATION_TOLERANCE_S
     from mbicp_viz.views.debugger.sources import files_source
 
     from .conftest import HOKUYO_BAG
@@ -856,26 +863,73 @@ def test_a_runs_loops_are_drawn_listed_and_open_in_the_run_view(browser, tmp_pat
     loops = close_loops(src.log, src.run, src.run[0].params, HAND_HELD_LOOPS)
     verdicts = {c.verdict for c in loops.closures}
     assert Verdict.ACCEPTED in verdicts and len(verdicts) > 1
-    application = App(replace(src, loops=loops), "127.0.0.1", 0)
+    # relations between scans far apart along the run, as the chained run has them: the page's
+    # scores are checked against the scorer of `eval relations`
+    t, chained = stamps(src.log, src.run), accumulate(src.run)
+    relations = [
+        Relation(t[i], t[i + 150], relative(chained[i], chained[i + 150])) for i in range(0, 150, 5)
+    ]
+    application = App(replace(src, loops=loops, relations=relations), "127.0.0.1", 0)
+
+    def score(run):
+        return relation_errors(np.array(t), run.optimised, relations, RELATION_TOLERANCE_S).trans
+
     try:
         page, session = open_tab(browser, application)
         legend = page.locator(".mbicp-legend")
         legend.get_by_text(scene.LOOP_TRAJECTORY.label).wait_for(timeout=30000)
         for v in verdicts:
             assert scene.CLOSURE[v].label in legend.inner_text()
+        page.get_by_text(
+            f"with the loops closed: translation {score(loops).mean():.3f} m (chained: 0.000 m)"
+        ).wait_for(timeout=30000)
+        page.get_by_role("combobox", name="map at").click()
+        page.get_by_role("option", name="the poses with the loops closed").click()
+        legend.get_by_text(scene.RUN_LOOP_MAP.label).wait_for(timeout=30000)
         page.screenshot(path=str(tmp_path / "run-view-loops.png"))
-        page.get_by_role("combobox", name="open candidate").click()
-        options = page.get_by_role("option").all_inner_texts()
-        assert len(options) == len(loops.closures)
-        # the first is picked already: a rejected one after it
-        k = next(n for n, c in enumerate(loops.closures) if n and c.verdict is not Verdict.ACCEPTED)
+
+        def pick(k):
+            page.get_by_role("combobox", name="open candidate").click()
+            options = page.get_by_role("option").all_inner_texts()
+            assert options == [
+                NONE,
+                *(
+                    f"{n + 1}. scans {c.old} -> {c.key}: {c.says()}"
+                    for n, c in enumerate(session.state.source.loops.closures)
+                ),
+            ]
+            page.get_by_role("option").nth(k + 1).click()
+
+        k = next(n for n, c in enumerate(loops.closures) if c.verdict is not Verdict.ACCEPTED)
         c = loops.closures[k]
-        assert options[k] == f"{k + 1}. scans {c.old} -> {c.key}: {c.verdict.value}"
-        page.get_by_role("option").nth(k).click()
+        pick(k)
         assert wait_for(lambda: session.state.pair == (c.old, c.key))
         assert session.state.guess == c.match.guess  # from the search's peak, as it was matched
         page.get_by_text(f"loop candidate ({c.verdict.value}").first.wait_for(timeout=30000)
+        for label in (scene.RESPONSE.label, scene.CHOSEN_PEAK.label, scene.SECOND_PEAK.label):
+            page.get_by_text(label).first.wait_for(timeout=30000)
+        forced = loops.decided({k: True})
+        page.get_by_text(
+            f"relation score with it {score(forced).mean():.3f} m, without it "
+            f"{score(loops).mean():.3f} m"
+        ).wait_for(timeout=30000)
+        page.get_by_text(scene.SECOND_PEAK.label).first.scroll_into_view_if_needed()
         page.screenshot(path=str(tmp_path / "loop-candidate.png"))
+
+        a = next(n for n, c in enumerate(loops.closures) if c.verdict is Verdict.ACCEPTED)
+        pick(a)
+        page.get_by_text("taking it out moves the scans").wait_for(timeout=30000)
+        page.get_by_role("button", name="reject this closure").click()
+        page.get_by_text("rejected by hand (its match: accepted)").first.wait_for(timeout=30000)
+        rejected = session.state.source.loops
+        assert rejected.closures[a].verdict is Verdict.SET_ASIDE
+        assert np.allclose(score(rejected), score(loops.decided({a: False})))
+        page.get_by_role("button", name="show the run").click()
+        legend.get_by_text(scene.CLOSURE[Verdict.SET_ASIDE].label).wait_for(timeout=30000)
+        page.get_by_text(
+            f"with the loops closed: translation {score(rejected).mean():.3f} m"
+        ).wait_for(timeout=30000)
+        page.screenshot(path=str(tmp_path / "loop-rejected.png"))
         page.close()
     finally:
         application.stop()

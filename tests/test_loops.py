@@ -17,6 +17,7 @@ from mbicp_viz.evaluation.loops import (
     ChainUncertainty,
     Closure,
     LoopParams,
+    LoopRun,
     PoseGraph,
     close_loops,
 )
@@ -72,34 +73,71 @@ def test_the_chain_uncertainty_is_the_first_order_propagation_of_its_edges(edges
     assert np.allclose(got, expected, rtol=1e-3, atol=1e-9)
 
 
-def closure(old: int, key: int, motion: Pose2) -> Closure:
+def closure(old: int, key: int, motion: Pose2, judged: Verdict = Verdict.ACCEPTED) -> Closure:
     cov = np.diag(np.square([0.02, 0.02, math.radians(0.5)]))
     r = MatchResult("improved", motion, True, Termination.CONVERGED, 5, 0.0, 300, 0, cov, None)
-    return Closure(
-        old, key, PairMatch(old, key, ImprovedParams(), Pose2(), "", r, "laser"), "", 0.1
-    )
+    m = PairMatch(old, key, ImprovedParams(), Pose2(), "", r, "laser")
+    return Closure(old, key, m, judged, judged, 0.1, None)
+
+
+# A robot drives a 4 m square three times, its heading drifting 0.01 rad a step
+LAP = ([Pose2(0.5, 0.0, 0.0)] * 7 + [Pose2(0.5, 0.0, math.pi / 2)]) * 4  # 32 steps
+TRUTH = chain(LAP * 3)
+DRIFT = [Pose2(m.x, m.y, m.theta + 0.01) for m in LAP * 3]
+STEP_COV = np.diag(np.square([0.01, 0.01, math.radians(0.5)]))
+
+
+def square_closures(judged: Verdict = Verdict.ACCEPTED) -> tuple[list[Closure], Closure]:
+    """The square's right closures, lap to lap, and a wrong one (a place 3 m away taken for this
+    one), judged ``judged`` by its match."""
+    right = [closure(k, k + 32, relative(TRUTH[k], TRUTH[k + 32])) for k in range(2, 64, 5)]
+    return right, closure(10, 42, relative(TRUTH[10], TRUTH[42]) @ Pose2(3.0, 0.0, 0.0), judged)
+
+
+def off_at_home(poses: list[Pose2]) -> float:
+    return math.hypot(poses[-1].x - TRUTH[-1].x, poses[-1].y - TRUTH[-1].y)
 
 
 def test_graduated_non_convexity_turns_off_the_wrong_closure_of_a_square():
-    """A robot drives a 4 m square three times, its heading drifting 0.01 rad a step; the right
-    closures bring it home, a wrong one (a place 3 m away taken for this one) is turned off."""
-    lap = ([Pose2(0.5, 0.0, 0.0)] * 7 + [Pose2(0.5, 0.0, math.pi / 2)]) * 4  # 32 steps
-    truth = chain(lap * 3)
-    drift = [Pose2(m.x, m.y, m.theta + 0.01) for m in lap * 3]
-    cov = np.diag(np.square([0.01, 0.01, math.radians(0.5)]))
-    graph, estimate = PoseGraph(), chain(drift)
-    for n, m in enumerate(drift, start=1):
-        graph.add_step(m, cov, estimate[n])
-    right = [closure(k, k + 32, relative(truth[k], truth[k + 32])) for k in range(2, 64, 5)]
-    wrong = closure(10, 42, relative(truth[10], truth[42]) @ Pose2(3.0, 0.0, 0.0))
+    """The right closures bring the robot home, the wrong one is turned off."""
+    graph, estimate = PoseGraph(), chain(DRIFT)
+    for n, m in enumerate(DRIFT, start=1):
+        graph.add_step(m, STEP_COV, estimate[n])
+    right, wrong = square_closures()
     for c in [*right, wrong]:
         graph.add_closure(c.old, c.key, c)
     graph.optimise()
     assert graph.turned_off() == [wrong]
-    home = graph.pose(len(drift))
-    assert math.hypot(home.x - truth[-1].x, home.y - truth[-1].y) < 0.2
-    ends = chain(drift)[-1]
-    assert math.hypot(ends.x - truth[-1].x, ends.y - truth[-1].y) > 2.0  # the chain alone
+    assert off_at_home([graph.pose(len(DRIFT))]) < 0.2
+    assert off_at_home(chain(DRIFT)) > 2.0  # the chain alone
+
+
+@pytest.mark.parametrize("judged", [Verdict.ACCEPTED, Verdict.LOW_OVERLAP])
+def test_closures_decided_by_hand_solve_the_graph_again(judged):
+    """The square as a run: the wrong closure forced in by hand stays in and bends the map
+    (whether its match passed or not); the right ones rejected by hand leave the chain; no
+    decision gives the run back."""
+    right, wrong = square_closures(judged)
+    n = len(DRIFT) + 1
+    edges = [(m, STEP_COV) for m in DRIFT]
+    drifted = chain(DRIFT)
+    run = LoopRun(
+        list(range(n)), list(range(n)), edges, [*right, wrong], drifted, drifted, [0.0]
+    ).decided({})
+    expected = Verdict.INCONSISTENT if judged is Verdict.ACCEPTED else judged
+    assert [c.verdict for c in run.closures] == [Verdict.ACCEPTED] * len(right) + [expected]
+    assert off_at_home(run.optimised) < 0.2
+    assert run.moved(run.decided({})).max() < 1e-6
+
+    forced = run.decided({len(right): True})
+    c = forced.closures[-1]
+    assert c.accepted and c.by_hand and c.says() == f"accepted by hand (its match: {judged})"
+    assert off_at_home(forced.optimised) > 0.5 and run.moved(forced).max() > 0.5
+
+    none = run.decided({k: False for k in range(len(right) + 1)})
+    assert all(c.verdict is Verdict.SET_ASIDE and c.by_hand for c in none.closures)
+    assert none.closures[0].says() == "rejected by hand (its match: accepted)"
+    assert max(np.hypot(a.x - b.x, a.y - b.y) for a, b in zip(none.optimised, drifted)) < 1e-6
 
 
 # the hand-held Hokuyo as a key-frame run a few centimetres apart, its loops looked for 0.3 m back

@@ -13,6 +13,10 @@ which closures are right and tolerates most being wrong; a robust kernel (Cauchy
 the starting estimate, and on a chain whose heading drifts steadily it let the right closures go
 (a three-lap square in tests/test_loops.py: 2.2 m off at home with it, 0.24 m with least squares).
 The closures GNC turns off at the end are rejected as "inconsistent with other closures".
+
+A person may overrule any verdict (the run view's "accept / reject this closure"):
+``LoopRun.decided`` solves the graph again in one batch, a closure accepted by hand a known inlier,
+one rejected by hand left out.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from functools import cached_property
 import numpy as np
 
 from mbicp_viz.core import Params, Pose2, SearchParams, relative
-from mbicp_viz.core.search import MAX_WORK, correlative_search
+from mbicp_viz.core.search import MAX_WORK, SearchResult, correlative_search
 from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion, Verdict
 
@@ -64,17 +68,30 @@ class LoopParams:
 @dataclass(frozen=True)
 class Closure:
     """One candidate: the old key frame ``old`` and the newer ``key`` (record numbers), the match
-    (old -> key, the run's frame) and the verdict, with what it was judged on."""
+    (old -> key, the run's frame), what its match was judged (``judged``) and what became of it
+    in the graph (``verdict``: judged, turned off as inconsistent, or set by hand), with what it
+    was judged on."""
 
     old: int
     key: int
     match: PairMatch
     verdict: Verdict
+    judged: Verdict  # the match's own verdict, before the graph and any hand
     peak_ratio: float  # the best second peak's score over the best's (1: two equal peaks)
+    search: SearchResult | None  # the correlative search's response the match started from
+    guess: Pose2 = Pose2()  # where the search was centred: the chain's prediction (laser frame)
+    by_hand: bool = False  # the verdict was set by a person
 
     @property
     def accepted(self) -> bool:
         return self.verdict is Verdict.ACCEPTED
+
+    def says(self) -> str:
+        """The verdict in words, and the match's own where a hand overruled it."""
+        if self.by_hand:
+            hand = "accepted by hand" if self.accepted else "rejected by hand"
+            return f"{hand} (its match: {self.judged.value})"
+        return self.verdict.value
 
 
 @dataclass(frozen=True)
@@ -84,10 +101,12 @@ class LoopRun:
 
     scans: list[int]  # record numbers of the run's scans, in its order
     keys: list[int]
+    edges: list[tuple[Pose2, np.ndarray]]  # the chain's step from key frame n-1 to n, covariance
     closures: list[Closure]
     chained: list[Pose2]
     optimised: list[Pose2]
     optimise_s: list[float]  # each optimisation's time, in the order they ran
+    params: LoopParams = LoopParams()  # what the candidates were proposed and judged with
 
     @cached_property
     def _position(self) -> dict[int, int]:
@@ -99,6 +118,40 @@ class LoopRun:
         old and newer key frame."""
         poses = self.optimised if poses is None else poses
         return poses[self._position[c.old]], poses[self._position[c.key]]
+
+    def decided(self, by_hand: dict[int, bool]) -> LoopRun:
+        """The run solved again with closures accepted (True) or rejected (False) by hand
+        (``by_hand``: positions in ``closures``), the others as their match was judged; graduated
+        non-convexity judges again which of those agree, from this run's optimised poses."""
+        if unknown := sorted(set(by_hand) - set(range(len(self.closures)))):
+            raise ValueError(f"by_hand: no closure {unknown[0]} (the run has {len(self.closures)})")
+        key_of = {self.scans[k]: n for n, k in enumerate(self.keys)}
+        graph = PoseGraph()
+        for n, (motion, cov) in enumerate(self.edges, start=1):
+            graph.add_step(motion, cov, self.optimised[self.keys[n]])
+        for k, c in enumerate(self.closures):
+            if by_hand.get(k, c.judged is Verdict.ACCEPTED):
+                graph.add_closure(key_of[c.old], key_of[c.key], c, certain=k in by_hand)
+        t0 = time.perf_counter()
+        graph.optimise()
+        took = time.perf_counter() - t0
+        dropped = {id(c) for c in graph.turned_off()}
+        closures = [
+            _settled(c, by_hand.get(k), id(c) in dropped) for k, c in enumerate(self.closures)
+        ]
+        key_poses = [graph.pose(n) for n in range(len(self.keys))]
+        return replace(
+            self,
+            closures=closures,
+            optimised=place_scans(self.chained, self.keys, key_poses),
+            optimise_s=[*self.optimise_s[:-1], took],
+        )
+
+    def moved(self, other: LoopRun) -> np.ndarray:
+        """How far each scan lies from where ``other`` puts it [m]."""
+        a = np.array([[q.x, q.y] for q in self.optimised])
+        b = np.array([[q.x, q.y] for q in other.optimised])
+        return np.hypot(*(a - b).T)
 
     def key_points(self, log: ScanLog) -> np.ndarray:
         """The key frames' points at their optimised poses (the run's world frame)."""
@@ -291,7 +344,16 @@ def verify(
         verdict = Verdict.WEAK
     else:
         verdict = Verdict.ACCEPTED
-    return Closure(old, key, m, verdict, ratio)
+    return Closure(old, key, m, verdict, verdict, ratio, found, laser)
+
+
+def _settled(c: Closure, hand: bool | None, dropped: bool) -> Closure:
+    """A closure's verdict after an optimisation: set by ``hand`` (None: not), or its match's, the
+    graph turning off (``dropped``) an accepted one as inconsistent with the others."""
+    if hand is not None:
+        return replace(c, verdict=Verdict.ACCEPTED if hand else Verdict.SET_ASIDE, by_hand=True)
+    verdict = Verdict.INCONSISTENT if dropped and c.judged is Verdict.ACCEPTED else c.judged
+    return replace(c, verdict=verdict, by_hand=False)
 
 
 class PoseGraph:
@@ -304,6 +366,7 @@ class PoseGraph:
         self.gtsam = gtsam
         self.steps: list[tuple[Pose2, np.ndarray]] = []  # key frame n-1 -> n
         self.closures: list[tuple[int, int, Closure, np.ndarray]] = []
+        self.certain: set[int] = set()  # positions in ``closures`` known right (set by hand)
         self.dropped: set[int] = set()  # positions in ``closures`` that GNC turned off
         self.values = gtsam.Values()
         self.values.insert(0, gtsam.Pose2())
@@ -331,9 +394,12 @@ class PoseGraph:
         self.steps.append((motion, cov))
         self.values.insert(len(self.steps), self._pose(at))
 
-    def add_closure(self, a: int, b: int, c: Closure) -> None:
+    def add_closure(self, a: int, b: int, c: Closure, certain: bool = False) -> None:
+        """A closure between key frames a and b; ``certain``: a known inlier, never turned off."""
         cov = c.match.result.covariance
         cov = (cov if cov is not None else np.zeros((3, 3))) + np.diag(np.square(CLOSURE_FLOOR))
+        if certain:
+            self.certain.add(len(self.closures))
         self.closures.append((a, b, c, cov))
 
     def optimise(self) -> None:
@@ -341,11 +407,11 @@ class PoseGraph:
         least squares on the closures it keeps (``dropped``: those it turned off)."""
         g = self.gtsam
         self.dropped = set()
-        if self.closures:
+        if len(self.certain) < len(self.closures):
             plain = self._graph()
             first = 1 + len(self.steps)  # the prior and the steps come before the closures
             params = g.GncLMParams()
-            params.setKnownInliers(list(range(first)))
+            params.setKnownInliers([*range(first), *(first + k for k in sorted(self.certain))])
             gnc = g.GncLMOptimizer(plain, self.values, params)
             # a closure is an inlier while its residual is within chi-squared (3 dof) at 99 %:
             # GTSAM's default (whitened cost 1) would take a right closure a little off for wrong
@@ -416,15 +482,10 @@ def close_loops(
             estimate = [graph.pose(k) for k in range(n + 1)]
         if on_key is not None:
             on_key()
-    t0 = time.perf_counter()
-    graph.optimise()  # once more over every closure: a later one may show an earlier one wrong
-    dropped = {id(c) for c in graph.turned_off()}
-    times.append(time.perf_counter() - t0)
-    closures = [
-        replace(c, verdict=Verdict.INCONSISTENT) if id(c) in dropped else c for c in closures
-    ]
-    key_poses = [graph.pose(n) for n in range(len(keys))]
-    return LoopRun(scans, keys, closures, chained, place_scans(chained, keys, key_poses), times)
+    # once more over every closure, in one batch: a later one may show an earlier one wrong
+    placed = place_scans(chained, keys, estimate)
+    edges = list(zip(steps, covs))
+    return LoopRun(scans, keys, edges, closures, chained, placed, [*times, 0.0], p).decided({})
 
 
 def place_scans(chained: list[Pose2], keys: list[int], key_poses: list[Pose2]) -> list[Pose2]:

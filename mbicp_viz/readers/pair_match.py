@@ -67,6 +67,7 @@ class Verdict(StrEnum):
     WEAK = "weak direction"
     NOT_CONVERGED = "match did not converge"
     INCONSISTENT = "inconsistent with other closures"
+    SET_ASIDE = "rejected by hand"
 
 
 @dataclass(frozen=True, slots=True)

@@ -641,7 +641,16 @@ CLOSURE = {
     Verdict.WEAK: Style("loop candidate: weak direction", (150, 60, 170), 3.4),
     Verdict.NOT_CONVERGED: Style("loop candidate: match did not converge", (140, 90, 40), 3.3),
     Verdict.INCONSISTENT: Style("loop closure inconsistent with the others", (255, 140, 0), 3.8),
+    Verdict.SET_ASIDE: Style("loop closure rejected by hand", (220, 30, 30), 3.7),
 }
+
+
+# A candidate's correlative response over rotation (the debugger's loop panel): the best score of
+# each rotation over the best, the peak its match started from, the highest one far from it.
+RESPONSE = Style("best score at each rotation / the best", (30, 30, 30), 1.0)
+CHOSEN_PEAK = Style("the best peak: the match starts here", CLOSURE[Verdict.ACCEPTED].color, 1.0)
+SECOND_PEAK = Style("the second peak", CLOSURE[Verdict.AMBIGUOUS].color, 1.0)
+AMBIGUOUS_FROM = Style("ambiguous from here", (130, 130, 130), 1.0)
 
 
 def loop_layers(
@@ -676,6 +685,7 @@ def closure_layers(
 
 # The debugger's run view: the whole run in the world frame (its first scan's), one pair in view.
 RUN_MAP = Style("map: the scans up to this pair at the chained poses", (150, 150, 150), 0.5)
+RUN_LOOP_MAP = Style("map: the scans up to this pair with the loops closed", (80, 165, 155), 0.5)
 RUN_TRAJECTORY = Style("trajectory from the chained matches", (30, 30, 30), 3.0)
 RUN_REFERENCE = Style("this pair: its reference scan", REFERENCE.color, 2.0)
 RUN_OBJECT = Style("this pair: its object scan", OBJECT.color, 2.5)
@@ -714,6 +724,7 @@ class RunPair:
     pose: Pose2
     # a relation (Kümmerle et al.): the earlier end's pose and where it puts the later one
     relation: tuple[Pose2, Pose2] | None = None
+    map_style: Style = RUN_MAP  # the poses the map is drawn at, in its legend entry
 
 
 def _track(poses: list[Pose2]) -> np.ndarray:
@@ -755,16 +766,18 @@ def run_track_layers(r: RunTracks, scale: float = 1.0) -> list[Layer]:
     return layers
 
 
-def run_map_layers(chunks: list[np.ndarray], scale: float = 1.0) -> list[Layer]:
+def run_map_layers(
+    chunks: list[np.ndarray], scale: float = 1.0, style: Style = RUN_MAP
+) -> list[Layer]:
     """The map in chunks of consecutive scans, each shown once the pair in view has passed it."""
-    return [Points(f"{RUN}/map/{c:05d}", xy, RUN_MAP, 0.01 * scale) for c, xy in enumerate(chunks)]
+    return [Points(f"{RUN}/map/{c:05d}", xy, style, 0.01 * scale) for c, xy in enumerate(chunks)]
 
 
 def run_pair_layers(r: RunPair, scale: float = 1.0) -> list[Layer]:
     """The pair in view: the map's part since the last whole chunk, its two scans highlighted,
     the pose it reached and a chosen relation."""
     layers: list[Layer] = [
-        Points(f"{RUN}/map_last", r.map_xy, RUN_MAP, 0.01 * scale),
+        Points(f"{RUN}/map_last", r.map_xy, r.map_style, 0.01 * scale),
         Points(f"{RUN}/reference", r.ref_xy, RUN_REFERENCE, 0.015 * scale),
         Points(f"{RUN}/object", r.obj_xy, RUN_OBJECT, 0.015 * scale),
         Frame(f"{RUN}/robot", r.pose, ROBOT, 0.15 * scale),

@@ -378,20 +378,27 @@ def histogram_series(state: DebugState, run) -> tuple[np.ndarray, ...]:
         return np.array([0.0, 1.0]), z, nan, nan, nan
     h = scene.histogram(ev.pairs.distance, ev.threshold)
     cut = scene.hard_cut(run.start.params)
-    nan = float("nan")
     bx, by = np.repeat(h.edges, 2)[1:-1], np.repeat(h.counts.astype(float), 2)
-    rows = [(x, b, nan, nan, nan) for x, b in zip(bx, by)]
-    for column, value in ((2, h.median), (3, h.threshold), (4, cut[1] if cut else None)):
+    return with_marks(bx, by, [h.median, h.threshold, cut[1] if cut else None])
+
+
+def with_marks(x: np.ndarray, y: np.ndarray, marks: list[float | None]) -> tuple[np.ndarray, ...]:
+    """A curve and, for each mark, a vertical line at its x (0 to 1 on the plot's full height;
+    None: no line); uPlot joins consecutive points, so two points at one x make a vertical line.
+    The curve's height is interpolated where a line's points are inserted (0 past its end)."""
+    nan, width = float("nan"), 2 + len(marks)
+    rows = [(a, b, *[nan] * len(marks)) for a, b in zip(x, y)]
+    for column, value in enumerate(marks, start=2):
         if value is not None:
             rows += [
-                tuple(value if c == 0 else (y if c == column else nan) for c in range(5))
-                for y in (0.0, 1.0)
+                tuple(value if c == 0 else (h if c == column else nan) for c in range(width))
+                for h in (0.0, 1.0)
             ]
     rows.sort(key=lambda r: r[0])  # stable: a line's two points stay in order
-    x, bars, *lines = np.array(rows).T
-    gaps = np.isnan(bars)
-    bars[gaps] = np.interp(x[gaps], bx, by, right=0.0)  # the bars' height where a line is inserted
-    return (x, bars, *lines)
+    xs, curve, *lines = np.array(rows).T
+    gaps = np.isnan(curve)
+    curve[gaps] = np.interp(xs[gaps], x, y, right=0.0)
+    return (xs, curve, *lines)
 
 
 def cost_series(state: DebugState) -> tuple[np.ndarray, ...] | None:

@@ -14,6 +14,8 @@ from . import panels
 from .camera import on_scan_plane
 from .run_model import RunModel
 
+MAP_AT = {"the chained poses": False, "the poses with the loops closed": True}
+
 
 class RunPanel:
     """The run view's controls; in the scene it replaces the pair's layers while it is shown."""
@@ -40,6 +42,13 @@ class RunPanel:
             self.relation = None  # the relation drawn (a position in model.relation_errors)
             if model.relation_errors is not None:
                 self._relations(gui)
+            self.loop_score = gui.add_markdown("")
+            if model.loops is not None:
+                self.map_at = gui.add_dropdown(
+                    "map at", tuple(MAP_AT), hint="the map before or after the pose graph"
+                )
+                self.map_at.on_update(lambda _: session.guarded(self.map_switched))
+                self.show_loop_score()
             if model.versus is not None:
                 gui.add_markdown("  \n".join(model.versus.verdict()))
                 self.open_b = gui.add_button("open run B's match of this pair")
@@ -97,6 +106,27 @@ class RunPanel:
             self.draw()
         self.slider.value = max(j, 1)
 
+    def show_loop_score(self) -> None:
+        """The relation score of the run with its loops closed, beside the chained one's."""
+        closed = self.model.mean_error(self.model.loops.optimised)
+        if closed is not None:
+            self.loop_score.content = (
+                f"with the loops closed: translation {closed:.3f} m "
+                f"(chained: {self.model.mean_error(self.model.poses):.3f} m)"
+            )
+
+    def map_switched(self) -> None:
+        self.model.on_loops = MAP_AT[self.map_at.value]
+        if self.active:
+            self.draw_whole()
+
+    def set_loops(self, loops) -> None:
+        """The closures decided again (the loop panel): the run with its loops closed anew."""
+        self.model.loops = loops
+        self.show_loop_score()
+        if self.active:
+            self.draw_whole()
+
     @property
     def n(self) -> int:
         return int(self.slider.value) - 1
@@ -119,14 +149,23 @@ class RunPanel:
         self.scale = scene.scene_scale(pts)
         self.s.camera.fit(pts)
         self.s.grid_m = viser_draw.metric_grid(self.s.client.scene, pts)
+        self.draw_whole()
+
+    def draw_whole(self) -> None:
+        """The run's trajectories, closures and the map's chunks (hidden) drawn anew, then the
+        slider's pair."""
         api = self.s.client.scene
         with self.s.client.atomic():
+            for handle in [*self.nodes.values(), *self.chunk_nodes]:
+                handle.remove()
             self.still = scene.run_track_layers(self.model.tracks(), self.scale)
-            for layer in self.still:
-                self.nodes[f"/{layer.path}"] = viser_draw.draw(api, f"/{layer.path}", layer)
+            self.nodes = {
+                f"/{layer.path}": viser_draw.draw(api, f"/{layer.path}", layer)
+                for layer in self.still
+            }
+            chunks = scene.run_map_layers(self.model.chunks(), self.scale, self.model.map_style)
             self.chunk_nodes = [
-                viser_draw.draw(api, f"/{layer.path}", layer, visible=False)
-                for layer in scene.run_map_layers([xy for _, xy in self.model.chunks], self.scale)
+                viser_draw.draw(api, f"/{layer.path}", layer, visible=False) for layer in chunks
             ]
         self.chunks_shown = 0
         self.draw()
@@ -165,7 +204,7 @@ class RunPanel:
             if scene.has_content(layer)
         }
         if whole:
-            shown.setdefault(scene.RUN_MAP.label, scene.RUN_MAP)
+            shown.setdefault(self.model.map_style.label, self.model.map_style)
         self.s.h_legend.content = panels.legend_html(
             list(shown.values()), self.s.grid_m, "the world frame: the run's first scan"
         )

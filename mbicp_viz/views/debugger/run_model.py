@@ -4,13 +4,14 @@ the log's own poses and odometry, the flagged pairs, a second run beside it, the
 scored on. No viser here.
 
 The world frame is the first scan's (the robot base's when the rows report its motion, else the
-laser's), as ``eval sequence --png`` and ``--rrd`` draw it.
+laser's), as ``eval sequence --png`` and ``--rrd`` draw it. With its loops closed, the map and the
+pair are drawn at the chained poses or at the pose graph's (``on_loops``), the one or the other.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -51,10 +52,21 @@ class RunModel:
     relations: list[Relation] | None = None  # Kümmerle et al.'s, on the log's clock + offset
     offset: float = 0.0
     loops: LoopRun | None = None  # the run with its loops closed
+    on_loops: bool = False  # the map drawn at the loops-closed poses (else the chained ones)
+    _map_of: tuple | None = field(default=None, init=False, repr=False)  # (drawn, the map)
 
     @cached_property
     def poses(self) -> list[Pose2]:
         return accumulate(self.rows)
+
+    @property
+    def drawn(self) -> list[Pose2]:
+        """The poses the map and the pair are drawn at."""
+        return self.loops.optimised if self.on_loops and self.loops is not None else self.poses
+
+    @property
+    def map_style(self) -> scene.Style:
+        return scene.RUN_LOOP_MAP if self.drawn is not self.poses else scene.RUN_MAP
 
     @cached_property
     def other(self) -> list[Pose2] | None:
@@ -95,31 +107,48 @@ class RunModel:
 
     def world_points(self, k: int) -> np.ndarray:
         """The points of the run's k-th scan in the world frame."""
-        return (self.poses[k] @ self.mount).apply(self.log.scan(self.scans[k]).points())
+        return (self.drawn[k] @ self.mount).apply(self.log.scan(self.scans[k]).points())
 
     @cached_property
-    def _map(self) -> tuple[np.ndarray, np.ndarray]:
-        """Every ``step``-th scan's points (world frame) and the scan each belongs to."""
+    def _sampled(self) -> list[tuple[int, np.ndarray]]:
+        """Every ``step``-th scan of the run and its points (in its own frame), read once."""
         n = len(self.poses)
         sample = np.unique(np.linspace(0, n - 1, min(n, MAP_SAMPLE)).astype(int))
         per_scan = np.median([self.log.scan(self.scans[k]).n_valid for k in sample])
         step = max(1, math.ceil(n * per_scan / MAP_POINTS))
         kept = list(range(0, n, step))
-        parts = [
-            (k, (self.poses[k] @ self.mount).apply(s.points()))
-            for k, s in zip(kept, self.log.scans_of([self.scans[k] for k in kept], False))
-        ]
-        xy = np.concatenate([p for _, p in parts]) if parts else np.zeros((0, 2))
-        owner = np.concatenate([np.full(len(p), k) for k, p in parts]) if parts else np.zeros(0)
-        return xy, owner
+        scans = self.log.scans_of([self.scans[k] for k in kept], False)
+        return [(k, self.mount.apply(s.points())) for k, s in zip(kept, scans)]
+
+    @property
+    def _map(self) -> tuple[np.ndarray, np.ndarray]:
+        """The sampled scans' points at the drawn poses (world frame) and the scan each belongs
+        to; kept until the drawn poses change."""
+        drawn = self.drawn
+        if self._map_of is None or self._map_of[0] is not drawn:
+            parts = [(k, drawn[k].apply(p)) for k, p in self._sampled]
+            xy = np.concatenate([p for _, p in parts]) if parts else np.zeros((0, 2))
+            owner = np.concatenate([np.full(len(p), k) for k, p in parts]) if parts else []
+            self._map_of = (drawn, (xy, np.asarray(owner)))
+        return self._map_of[1]
 
     @cached_property
     def relation_errors(self) -> RelationErrors | None:
         """The relations the run covers, scored on its chained poses."""
+        return self.errors_on(self.poses)
+
+    def errors_on(self, poses: list[Pose2]) -> RelationErrors | None:
+        """The relations the run covers, scored on ``poses`` (one per scan of the run)."""
         if self.relations is None:
             return None
         t = np.array([s + self.offset for s in stamps(self.log, self.rows)])
-        return relation_errors(t, self.poses, self.relations, RELATION_TOLERANCE_S)
+        return relation_errors(t, poses, self.relations, RELATION_TOLERANCE_S)
+
+    def mean_error(self, poses: list[Pose2]) -> float | None:
+        """The mean translational error of ``poses`` on the relations [m] (None: no relations,
+        or none with a scan of the run at both ends)."""
+        e = self.errors_on(poses)
+        return float(e.trans.mean()) if e is not None and len(e.index) else None
 
     def costliest(self, most: int = 100) -> list[int]:
         """Positions in ``relation_errors`` of the relations the run misses most, worst first."""
@@ -140,19 +169,23 @@ class RunModel:
         """A relation's earlier end where the run put it, and where the relation puts the later
         one from there (base frame: the relations are the robot's)."""
         e = self.relation_errors
-        start = self.poses[e.ends[k][0]]
+        start = self.drawn[e.ends[k][0]]
         return start, start @ self.relations[e.index[k]].pose
 
     @cached_property
-    def chunks(self) -> list[tuple[int, np.ndarray]]:
-        """The map in ``MAP_CHUNKS`` chunks of consecutive scans: (its last scan, its points)."""
-        xy, owner = self._map
+    def _cuts(self) -> list[np.ndarray]:
+        """The run's scans in ``MAP_CHUNKS`` chunks of consecutive ones."""
         cuts = np.array_split(np.arange(len(self.poses)), min(MAP_CHUNKS, len(self.poses)))
-        return [(int(c[-1]), xy[(owner >= c[0]) & (owner <= c[-1])]) for c in cuts if len(c)]
+        return [c for c in cuts if len(c)]
+
+    def chunks(self) -> list[np.ndarray]:
+        """The map's points in its chunks."""
+        xy, owner = self._map
+        return [xy[(owner >= c[0]) & (owner <= c[-1])] for c in self._cuts]
 
     def whole_chunks(self, n: int) -> int:
         """How many chunks the pair n has passed whole (their scans all up to its second)."""
-        return sum(last <= n + 1 for last, _ in self.chunks)
+        return sum(int(c[-1]) <= n + 1 for c in self._cuts)
 
     def tracks(self) -> scene.RunTracks:
         fp = np.array([[self.poses[f + 1].x, self.poses[f + 1].y] for f in self.flagged])
@@ -175,18 +208,19 @@ class RunModel:
         and pose, and a chosen relation (a position in ``relation_errors``)."""
         xy, owner = self._map
         shown = self.whole_chunks(n)
-        first = self.chunks[shown - 1][0] + 1 if shown else 0
+        first = int(self._cuts[shown - 1][-1]) + 1 if shown else 0
         return scene.RunPair(
             xy[(owner >= first) & (owner <= n + 1)],
             self.world_points(n),
             self.world_points(n + 1),
-            self.poses[n + 1],
+            self.drawn[n + 1],
             self.relation_ends(relation) if relation is not None else None,
+            self.map_style,
         )
 
     def extent(self) -> np.ndarray:
         xy, _ = self._map
-        track = np.array([[p.x, p.y] for p in self.poses])
+        track = np.array([[p.x, p.y] for p in self.drawn])
         return np.concatenate([xy, track]) if len(xy) else track
 
     def health(self, n: int) -> str:

@@ -10,6 +10,7 @@ import threading
 import time
 import traceback
 from contextlib import contextmanager
+from dataclasses import replace
 
 import numpy as np
 import viser
@@ -54,8 +55,8 @@ class Session:
             self.say(COMPILING)
 
     def _pair_lists(self, gui, src: Source) -> None:
-        """An evaluation's pairs to open: its failures, its suspicious pairs, a run's loop
-        candidates, and beside a run B where the two differ."""
+        """An evaluation's pairs to open: its failures, its suspicious pairs, beside a run B where
+        the two differ, and a run's loop candidates (with the buttons that decide them)."""
         from mbicp_viz.evaluation.failures import failure_label
         from mbicp_viz.evaluation.health import suspect_label
 
@@ -75,18 +76,6 @@ class Session:
                 "open flagged",
             ),
         ]
-        if src.loops is not None:
-            verdicts = {(c.old, c.key): c.verdict.value for c in src.loops.closures}
-            lists.append(
-                (
-                    "Loop closures",
-                    [c.match for c in src.loops.closures],
-                    lambda k, m: f"{k}. scans {m.ref} -> {m.obj}: {verdicts[m.ref, m.obj]}",
-                    "loop candidates matched, in the run's order (the match opens from the "
-                    "correlative search's best peak)",
-                    "open candidate",
-                )
-            )
         if src.versus is not None:
             lists.append(
                 (
@@ -99,6 +88,10 @@ class Session:
             )
         for k, (title, rows, label, order_text, pick) in enumerate(lists):
             controls.PairList(self, gui, 5 + 0.5 * k, title, rows, label, order_text, pick)
+        if src.loops is not None:
+            from .loops import LoopPanel
+
+            LoopPanel(self, gui, 5 + 0.5 * len(lists), src.loops)
 
     def show_notes(self) -> None:
         """What to look at, and how the log on screen was read (a scan stream picked is read
@@ -201,6 +194,19 @@ class Session:
         self.h_result.content = report.result_markdown(self.state)
         self.plots.show_runs(self.state)
         self.guess.show()
+
+    def set_loops(self, loops) -> None:
+        """The run's closures decided again (the loop panel): the run view and the result's words
+        follow this tab's decisions."""
+        self.state.source = replace(self.state.source, loops=loops)
+        if self.run is not None:
+            self.run.set_loops(loops)
+        self.h_result.content = report.result_markdown(self.state)
+
+    def loop_score(self, loops) -> float | None:
+        """The mean translational error of the run with its loops closed on the log's relations
+        (None: no relations, or none with a scan of the run at both ends)."""
+        return self.run.model.mean_error(loops.optimised) if self.run is not None else None
 
     def open_row(self, row) -> None:
         """Reopen an evaluated pair as it ran (out of the run view); the controls then show its
