@@ -266,3 +266,46 @@ def test_a_candidates_search_stays_within_the_searchs_bounds(spread, points):
     assert w.window_xy <= p.window_max_m and w.cell <= 1.0
     if points <= 361:  # a 180- or 361-beam laser: the window the spread asks for, on the usual grid
         assert w.window_xy == min(max(spread, 0.3), p.window_max_m) and w.cell == 0.1
+
+
+def test_loops_found_once_are_read_from_the_cache_the_next_time(
+    hand_held, tmp_path, monkeypatch, capsys
+):
+    """The same run's loops come back from the cache as they were found, and are solved again;
+    a different run, or an entry that cannot be read, is looked for again."""
+    from dataclasses import replace
+
+    from mbicp_viz.cli.options import closed_run
+    from mbicp_viz.evaluation.loop_cache import FOUND, entry
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    log = read_log(str(HOKUYO_BAG))
+    rows = rows_of_log(str(hand_held), log)
+    p = HAND_HELD_LOOPS
+
+    def closed(rows):
+        run = closed_run(log, rows, p.min_path_m, p.keyframes)
+        return run, "read from the cache" in capsys.readouterr().err
+
+    found, cached = closed(rows)
+    assert not cached and found.closures
+    again, cached = closed(rows)
+    assert cached
+    assert [(c.old, c.key, c.verdict, c.peak_ratio) for c in again.closures] == [
+        (c.old, c.key, c.verdict, c.peak_ratio) for c in found.closures
+    ]
+    for a, b in zip(again.closures, found.closures):
+        assert a.match.result.pose == b.match.result.pose and a.guess == b.guess
+        assert np.array_equal(a.search.best_per_angle, b.search.best_per_angle)
+    assert found.moved(again).max() < 1e-9
+
+    other = list(rows)
+    r = other[40]
+    other[40] = replace(r, result=replace(r.result, pose=r.result.pose @ Pose2(0.01, 0.0, 0.0)))
+    assert not closed(other)[1]
+
+    kept = entry(log, rows, p) / FOUND
+    kept.write_text(kept.read_text()[:1000])  # cut short
+    damaged, cached = closed(rows)
+    assert not cached and found.moved(damaged).max() < 1e-9
+    assert closed(rows)[1]  # kept anew

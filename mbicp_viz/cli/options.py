@@ -520,13 +520,23 @@ LoopGapOpt = Annotated[
 def closed_run(lg, rows: list, gap_m: float, keyframes=None):
     """The run with its loops closed (evaluation/loops.py: a ``LoopRun``), old key frames being
     ``gap_m`` back along the run or more, its key frames ``keyframes`` (a ``KeyFrames``; None:
-    the default spacing); what it did said on stderr."""
-    from mbicp_viz.evaluation.loops import LoopParams, close_loops, plan
+    the default spacing); what an earlier command found for the same run is read from the cache
+    (evaluation/loop_cache.py); what it did said on stderr."""
+    from mbicp_viz.evaluation import loop_cache
+    from mbicp_viz.evaluation.loops import LoopParams, find_closures, plan, solved
 
     p = LoopParams(min_path_m=gap_m)
     p = p if keyframes is None else replace(p, keyframes=keyframes)
-    with Progress(len(plan(rows, p)[1]) - 1, "closing loops") as bar:
-        closed = close_loops(lg, rows, rows[0].params, p, on_key=lambda: bar.update(1))
+    folder = loop_cache.entry(lg, rows, p)
+    found = loop_cache.load(folder) if folder is not None else None
+    if found is not None:
+        say(f"loops: what an earlier command found, read from the cache {folder}")
+    else:
+        with Progress(len(plan(rows, p)[1]) - 1, "closing loops") as bar:
+            found = find_closures(lg, rows, rows[0].params, p, on_key=lambda: bar.update(1))
+        if folder is not None:
+            loop_cache.save(folder, found, lg)
+    closed = solved(rows, p, found)
     for line in closed.summary():
         say(line)
     return closed

@@ -432,27 +432,51 @@ class PoseGraph:
         return Pose2(q.x(), q.y(), q.theta())
 
 
+@dataclass(frozen=True)
+class Found:
+    """What looking for a run's loops found: every candidate as its match judged it, the key
+    frames' poses as the last optimisation during the run left them, each optimisation's time."""
+
+    closures: list[Closure]
+    estimate: list[Pose2]
+    optimise_s: list[float]
+
+
+def chain_edges(rows: list[PairMatch], p: LoopParams):
+    """A run's chained poses, its key frames and the chain's edges between them (motion from
+    key frame n-1 to n, its covariance)."""
+    chained, keys = plan(rows, p)
+    steps = [relative(chained[a], chained[b]) for a, b in zip(keys, keys[1:])]
+    return chained, keys, list(zip(steps, edge_covariances(rows, keys)))
+
+
 def close_loops(
     log: ScanLog, rows: list[PairMatch], params: Params, p: LoopParams = LoopParams(), on_key=None
 ) -> LoopRun:
-    """Close the loops of a run (the rows of ``eval sequence``): key frames along its chain, each
-    matched against the old key frames it may see again, the graph optimised after each key frame
-    that closed a loop (so the next predictions start from the corrected estimate) and once more at
-    the end over every closure. ``on_key()`` is called after each key frame (progress)."""
+    """Close the loops of a run (the rows of ``eval sequence``). ``on_key()`` is called after each
+    key frame (progress)."""
+    return solved(rows, p, find_closures(log, rows, params, p, on_key))
+
+
+def find_closures(
+    log: ScanLog, rows: list[PairMatch], params: Params, p: LoopParams, on_key=None
+) -> Found:
+    """Key frames along the run's chain, each matched against the old key frames it may see
+    again, the graph optimised after each key frame that closed a loop (so the next predictions
+    start from the corrected estimate)."""
     base = rows[0].frame != "laser"
-    chained, keys = plan(rows, p)
+    chained, keys, edges = chain_edges(rows, p)
     scans = scan_indices(rows)
-    covs = edge_covariances(rows, keys)
-    steps = [relative(chained[a], chained[b]) for a, b in zip(keys, keys[1:])]
-    path = np.concatenate([[0.0], np.cumsum([s.translation_norm() for s in steps])])
+    path = np.concatenate([[0.0], np.cumsum([m.translation_norm() for m, _ in edges])])
     graph, estimate = PoseGraph(), [Pose2()]
-    chain = ChainUncertainty([chained[k] for k in keys], covs)
+    chain = ChainUncertainty([chained[k] for k in keys], [cov for _, cov in edges])
     closures: list[Closure] = []
     times: list[float] = []
     anchor = 0  # the last key frame that closed a loop: the estimate is held there since
     for n in range(1, len(keys)):
-        estimate.append(estimate[-1] @ steps[n - 1])
-        graph.add_step(steps[n - 1], covs[n - 1], estimate[-1])
+        step, cov = edges[n - 1]
+        estimate.append(estimate[-1] @ step)
+        graph.add_step(step, cov, estimate[-1])
         closed = False
         spreads = chain.position_covariances(n)
         for j in candidates(estimate, n, path, chain, p):
@@ -482,10 +506,18 @@ def close_loops(
             estimate = [graph.pose(k) for k in range(n + 1)]
         if on_key is not None:
             on_key()
-    # once more over every closure, in one batch: a later one may show an earlier one wrong
-    placed = place_scans(chained, keys, estimate)
-    edges = list(zip(steps, covs))
-    return LoopRun(scans, keys, edges, closures, chained, placed, [*times, 0.0], p).decided({})
+    return Found(closures, estimate, times)
+
+
+def solved(rows: list[PairMatch], p: LoopParams, found: Found) -> LoopRun:
+    """The run with the closures found, its graph solved once more over all of them in one batch
+    (a later closure may show an earlier one wrong)."""
+    chained, keys, edges = chain_edges(rows, p)
+    placed = place_scans(chained, keys, found.estimate)
+    times = [*found.optimise_s, 0.0]
+    return LoopRun(
+        scan_indices(rows), keys, edges, found.closures, chained, placed, times, p
+    ).decided({})
 
 
 def place_scans(chained: list[Pose2], keys: list[int], key_poses: list[Pose2]) -> list[Pose2]:
