@@ -709,7 +709,8 @@ class RunTracks:
     other: list[Pose2] | None = None  # a second configuration's run of the same pairs
     other_label: str = ""
     loops: list[Pose2] | None = None  # the run with its loops closed (pose graph)
-    # each loop candidate: its verdict, where the run puts its old and its newer key frame
+    # each loop candidate: its verdict, where the drawn poses (chained, or with the loops closed)
+    # put its old and its newer key frame
     closures: list[tuple[Verdict, Pose2, Pose2]] = field(default_factory=list)
 
 

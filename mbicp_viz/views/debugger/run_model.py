@@ -198,7 +198,7 @@ class RunModel:
             self.versus.name_b if self.versus is not None else "",
             self.loops.optimised if self.loops is not None else None,
             [
-                (c.verdict, *self.loops.ends(c, self.poses))
+                (c.verdict, *self.loops.ends(c, self.drawn))
                 for c in (self.loops.closures if self.loops is not None else [])
             ],
         )
