@@ -211,11 +211,19 @@ def test_the_runs_recording_marks_the_flagged_pair_and_plots_health(hokuyo, tmp_
     flagged = [n for n, r in enumerate(rows) if r.flags]
     assert k in flagged  # the pair that starts at the displaced scan
     where = accumulate(rows)
-    last = data["/sequence/sequence/suspects Points2D:positions"][-1]
-    assert np.allclose(last, [[where[n + 1].x, where[n + 1].y] for n in flagged], atol=1e-4)
+    marks = data["/sequence/sequence/suspects Points2D:positions"]
+    assert np.allclose(
+        [p for m in marks for p in m],
+        [[where[n + 1].x, where[n + 1].y] for n in flagged],
+        atol=1e-4,
+    )
     texts = data["/sequence/log TextLog:text"]
     levels = data["/sequence/log TextLog:level"]
     assert "flagged: scan out of place" in texts[k][0] and levels[k] == ["WARN"]
     assert len(data["/sequence/health/overlap Scalars:scalars"]) == len(rows)
+    # every iteration of each flagged pair (pair k is the (k+1)-th), under an entity of its own
+    for n in flagged:
+        objects = data[f"/sequence/flagged/pair_{n + 1:05d}/scene/object Points2D:positions"]
+        assert len(objects) == rows[n].result.iterations + 1  # the initial guess, then each
     img = viewer_screenshot(path, tmp_path / "run.png", "1400x900")
     assert img.std() > 10  # the viewer drew the run, not a blank window

@@ -16,13 +16,14 @@ from .conftest import RERUN, free_port, viewer_screenshot, wait_for
 ROOT = "improved"
 
 
-def columns(path):
-    """{entity path: {column: [(iteration, value), ...]}} of a recording, data columns only."""
+def columns(path, timeline: str = "iteration"):
+    """{entity path: {column: [(time on ``timeline``, value), ...]}} of a recording, data columns
+    only."""
     out = defaultdict(lambda: defaultdict(list))
     for chunk in RrdReader(str(path)).stream().to_chunks():
         rb = chunk.to_record_batch()
         names = rb.schema.names
-        its = rb.column("iteration").to_pylist() if "iteration" in names else [None] * rb.num_rows
+        its = rb.column(timeline).to_pylist() if timeline in names else [None] * rb.num_rows
         for name in names:
             if ":" in name:
                 for it, v in zip(its, rb.column(name).to_pylist()):
@@ -118,34 +119,47 @@ def test_two_generations_compare_equal(tmp_path, intel):
     assert {"/mbicp/scene/reference", "/improved/scene/reference"} <= set(columns(paths[0]))
 
 
-def test_eval_sequence_records_the_scan_timeline(tmp_path):
+def test_eval_sequence_records_the_run_on_a_pair_timeline(tmp_path):
+    """Each pair adds its step of the trajectory and the scan it placed (the run's view shows all
+    up to the time cursor), and its match up close: the correspondences its last iteration kept,
+    as many as its record says."""
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app
+    from mbicp_viz.evaluation.trajectory import accumulate
+    from mbicp_viz.readers.rows import read_rows
 
     from .conftest import LASERAZOS
 
-    rrd = tmp_path / "seq.rrd"
-    res = CliRunner().invoke(
-        app,
-        [
-            "eval",
-            "sequence",
-            str(LASERAZOS),
-            "--out",
-            str(tmp_path / "s.json"),
-            "--limit",
-            "6",
-            "--rrd",
-            str(rrd),
-        ],
-    )
+    rrd, out = tmp_path / "seq.rrd", tmp_path / "s.json"
+    args = [
+        "eval",
+        "sequence",
+        str(LASERAZOS),
+        "--out",
+        str(out),
+        "--limit",
+        "6",
+        "--rrd",
+        str(rrd),
+    ]
+    res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
-    cols = columns(rrd)
-    maps = [p for p in cols if p.startswith("/sequence/sequence/map/scan_")]
-    assert len(maps) == 7  # scans 0..6, each placed once at its accumulated pose
-    traj = cols["/sequence/sequence/trajectory"]["LineStrips2D:strips"]
-    assert [len(v[0]) for _, v in sorted(traj)] == list(range(1, 8))  # grows one pose per scan
+    rows = read_rows(out)
+    poses = accumulate(rows)
+    cols = columns(rrd, "pair")
+    maps = cols["/sequence/sequence/map"]["Points2D:positions"]
+    assert sorted(t for t, _ in maps) == list(range(7))  # scans 0..6, each placed once
+    steps = sorted(cols["/sequence/sequence/trajectory"]["LineStrips2D:strips"])
+    assert [t for t, _ in steps] == list(range(7))
+    for (n, strips), before in zip(steps[1:], poses):
+        (a, b), after = strips[0], poses[n]
+        assert np.allclose([a, b], [[before.x, before.y], [after.x, after.y]], atol=1e-5)
+    kept = defaultdict(int)
+    for kind in ("point", "interpolated"):
+        for n, strips in cols[f"/sequence/pair/scene/pairs/{kind}"]["LineStrips2D:strips"]:
+            kept[n] += len(strips)
+    assert [kept[n] for n in range(1, 7)] == [r.result.pairs_kept for r in rows]
     assert len(cols["/sequence/log"]["TextLog:text"]) == 6
     assert RrdReader(str(rrd)).blueprints()
 

@@ -213,7 +213,9 @@ def sequence(
     if rrd:
         from mbicp_viz.views.rrd import record_sequence
 
-        record_sequence(lg, rows, str(rrd), loops=loops)
+        # each pair is matched again to record its correspondences
+        with Progress(len(rows), "recording") as bar:
+            record_sequence(lg, rows, str(rrd), loops=loops, on_pair=lambda: bar.update(1))
         say(f"sequence recording written to {rrd}")
     _failures(log, out, rows)
     if serve:

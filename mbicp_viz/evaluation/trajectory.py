@@ -102,6 +102,15 @@ def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str
     return out
 
 
+def map_step(log: ScanLog, records: list[int], budget: int, sample: int = 50) -> int:
+    """Every how many of a run's scans (``records``) a map of at most ``budget`` points takes:
+    the valid readings of ``sample`` scans spread over the run say how many a scan holds."""
+    n = len(records)
+    picked = np.unique(np.linspace(0, n - 1, min(n, sample)).astype(int))
+    per_scan = np.median([s.n_valid for s in log.scans_of([records[k] for k in picked], False)])
+    return max(1, math.ceil(n * per_scan / budget))
+
+
 def stamps(log: ScanLog, rows: list[PairMatch]) -> list[float]:
     """Each visited scan's time stamp (its record number when it has none)."""
     records = scan_indices(rows)

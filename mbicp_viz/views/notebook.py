@@ -46,6 +46,6 @@ def run_viewer(
 ):
     """A widget showing a run (``eval sequence``'s rows) as ``rrd.record_sequence`` writes it."""
     stream = rrd.new_stream(recording_id)
-    viewer = _viewer(stream, rrd.sequence_blueprint(), width, height)
+    viewer = _viewer(stream, rrd.sequence_blueprint(rows), width, height)
     rrd.log_sequence(stream, log, rows)
     return viewer

@@ -62,12 +62,17 @@ def saving(stream: rr.RecordingStream, path: str, blueprint) -> Iterator[None]:
 BACKGROUND = (250, 250, 250)
 
 
-def y_up_view(space: str, name: str) -> rrb.Spatial2DView:
+def y_up_view(space: str, name: str, time_ranges=None) -> rrb.Spatial2DView:
     """A 2-D view of the entity ``space`` (logged under ``log_y_up``), y pointing up, on the
-    debugger's light background."""
+    debugger's light background; ``time_ranges``: what it shows besides the latest at the
+    cursor."""
     parent = space.rsplit("/", 1)[0] or "/"
     return rrb.Spatial2DView(
-        origin=parent, contents=f"{space}/**", name=name, background=BACKGROUND
+        origin=parent,
+        contents=f"{space}/**",
+        name=name,
+        background=BACKGROUND,
+        time_ranges=time_ranges,
     )
 
 
@@ -423,58 +428,125 @@ def serve(path: str, port: int, host: str = "127.0.0.1") -> int:
 SEQUENCE_ROOT = "sequence"
 
 
-def sequence_blueprint(loops: bool = False) -> rrb.Blueprint:
-    """Trajectory and map beside the health plots and the per-pair log (with ``loops``, the run
-    with its loops closed beside the chained one); time panel on ``scan``."""
+MAP_POINTS = 1_000_000  # the most map points a run's recording holds: its scans thinned evenly
+FLAGGED_VIEWS = 10  # the flagged pairs whose iterations get a view (the most suspicious first)
+
+
+def sequence_blueprint(rows: list[PairMatch], loops: bool = False) -> rrb.Blueprint:
+    """The run up to the time cursor (trajectory and map) beside the pair up close (and a tab per
+    flagged pair showing its iterations, the most suspicious first), the health plots and the
+    per-pair log; with ``loops``, the run with its loops closed under the run. Time panel on
+    ``pair``."""
+    from mbicp_viz.evaluation.health import ranked
+
+    number = {id(r): n for n, r in enumerate(rows, start=1)}
+    flagged = [number[id(r)] for r in ranked(rows)]
     root = SEQUENCE_ROOT
-    chained = y_up_view(f"/{root}/{scene.SEQUENCE}", "trajectory and map (first scan's frame, m)")
+    so_far = rrb.VisibleTimeRange(
+        "pair", start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.cursor_relative()
+    )
+    run = y_up_view(
+        f"/{root}/{scene.SEQUENCE}",
+        "the run up to this pair: trajectory and map (first scan's frame, m)",
+        time_ranges=so_far,
+    )
     if loops:
-        chained = rrb.Vertical(
-            chained,
+        run = rrb.Vertical(
+            run,
             y_up_view(
                 f"/{root}/{scene.LOOPS}",
                 "loops closed: pose graph, key frames, candidates by verdict (same frame, m)",
             ),
         )
+    closeups = [
+        y_up_view(
+            f"/{root}/{scene.PAIR}/{scene.SCANS}",
+            "this pair where its match ended: correspondences (its reference scan's frame, m)",
+        ),
+        *(
+            y_up_view(
+                f"/{root}/{scene.FLAGGED}/pair_{n:05d}/{scene.SCANS}",
+                f"flagged pair {n}: its iterations (timeline 'iteration')",
+            )
+            for n in flagged[:FLAGGED_VIEWS]
+        ),
+    ]
     return rrb.Blueprint(
         rrb.Horizontal(
-            chained,
+            run,
             rrb.Vertical(
+                rrb.Tabs(*closeups),
                 rrb.TimeSeriesView(
                     origin=f"/{root}/{scene.HEALTH}",
                     name="health: overlap [%], condition number, from odometry [mm]",
                 ),
                 rrb.TimeSeriesView(origin=f"/{root}/{scene.PLOTS}", name="iterations, time [ms]"),
                 rrb.TextLogView(origin=f"/{root}/{scene.LOG}", name="pairs (flagged: WARN)"),
+                row_shares=[3, 1, 1, 1],
             ),
             column_shares=[3, 2],
         ),
-        rrb.TimePanel(timeline="scan", expanded=True),
+        rrb.TimePanel(timeline="pair", expanded=True),
         collapse_panels=True,
     )
 
 
-def log_sequence(stream: rr.RecordingStream, log, rows: list[PairMatch], loops=None) -> None:
-    """The matches of ``eval sequence`` on a ``scan`` timeline: trajectory, accumulated map, the
-    flagged pairs on it, each pair's health plotted, per-pair log; with ``loops`` (a
-    ``LoopRun``), the run with its loops closed and every candidate, a static layer of its own."""
-    from mbicp_viz.evaluation.trajectory import accumulate, log_poses, scan_indices
+def log_sequence(
+    stream: rr.RecordingStream, log, rows: list[PairMatch], loops=None, on_pair=None
+) -> None:
+    """A run (``eval sequence``'s rows) on a ``pair`` timeline (and ``scan``: the record each pair
+    placed). Each pair adds its step of the trajectory, the scan it placed (the map thinned to
+    ``MAP_POINTS``), the log's own step, its health and log line, and its match up close where it
+    ended (matched again from its own guess and parameters to record its correspondences); the
+    flagged pairs' every iteration (timeline ``iteration``) under ``flagged/pair_N``. With
+    ``loops`` (a ``LoopRun``), the run with its loops closed and every candidate, a static layer
+    of its own. ``on_pair()`` is called after each pair (progress)."""
+    from mbicp_viz.choices import MATCH_BUDGET_S
+    from mbicp_viz.core import match
+    from mbicp_viz.core.budget import limited
+    from mbicp_viz.core.events import Recorder
+    from mbicp_viz.evaluation.trajectory import accumulate, log_poses, map_step, scan_indices
 
     root = SEQUENCE_ROOT
-    log_y_up(stream, f"/{root}/{scene.SEQUENCE}")
-    poses, stored = accumulate(rows), log_poses(log, rows)
-    by_obj = {row.obj: row for row in rows}
-    # a flagged pair is marked where it placed its second scan
-    flagged = [n + 1 for n, row in enumerate(rows) if row.flags]
-    for n, k in enumerate(scan_indices(rows)):
-        stream.set_time("scan", sequence=k)
-        traj = np.array([[p.x, p.y] for p in poses[: n + 1]])
-        stored_traj = None if stored is None else np.array([[p.x, p.y] for p in stored[: n + 1]])
-        suspects = np.array([[poses[f].x, poses[f].y] for f in flagged if f <= n]).reshape(-1, 2)
-        for layer in scene.sequence_layers(
-            k, poses[n], log.scan(k).points(), traj, stored_traj, by_obj.get(k), suspects
-        ):
+    for space in (scene.SEQUENCE, f"{scene.PAIR}/{scene.SCANS}"):
+        log_y_up(stream, f"/{root}/{space}")
+    poses, stored, records = accumulate(rows), log_poses(log, rows), scan_indices(rows)
+    mount = log.frames.mount if rows[0].frame != "laser" else Pose2()
+    every = map_step(log, records, MAP_POINTS)
+    scans = log.scans_of(records, odometry=False)
+    stream.set_time("pair", sequence=0)
+    stream.set_time("scan", sequence=records[0])
+    first = (poses[0] @ mount).apply(next(scans).points())
+    for layer in scene.run_step_layers(poses[0], poses[0], first, None, False):
+        log_layer(stream, root, layer)
+    shown: set[str] = set()  # the close-up's entities, as the last pair drew them
+    for n, (row, obj) in enumerate(zip(rows, scans), start=1):
+        stream.set_time("pair", sequence=n)
+        stream.set_time("scan", sequence=row.obj)
+        placed = (poses[n] @ mount).apply(obj.points()) if n % every == 0 else None
+        step = (stored[n - 1], stored[n]) if stored is not None else None
+        for layer in [
+            *scene.run_step_layers(poses[n - 1], poses[n], placed, step, bool(row.flags)),
+            *scene.pair_health_layers(row),
+        ]:
             log_layer(stream, root, layer)
+        rec = Recorder()
+        with limited(MATCH_BUDGET_S):
+            match(log.scan(row.ref), obj, row.guess, row.params, rec)
+        closeup = scene.closeup_layers(rec.start, rec.iterations)
+        for layer in closeup:
+            log_layer(stream, f"{root}/{scene.PAIR}", layer)
+        now = {f"/{root}/{scene.PAIR}/{layer.path}" for layer in closeup}
+        for gone in shown - now:  # a layer the last pair had and this one has not
+            stream.log(gone, rr.Clear(recursive=True))
+        shown = now
+        if row.flags:
+            observer = RerunObserver(stream, f"{root}/{scene.FLAGGED}/pair_{n:05d}")
+            for ev in rec.events:
+                observer(ev)
+            stream.disable_timeline("iteration")
+        if on_pair is not None:
+            on_pair()
     if loops is not None:
         log_y_up(stream, f"/{root}/{scene.LOOPS}")
         ends = [(c.verdict, *loops.ends(c)) for c in loops.closures]
@@ -489,11 +561,12 @@ def record_sequence(
     path: str,
     recording_id: str = "mbicp-viz/sequence",
     loops=None,
+    on_pair=None,
 ) -> None:
     """``log_sequence`` into ``path`` (.rrd, written whole) with ``sequence_blueprint``."""
     stream = new_stream(recording_id)
-    with saving(stream, path, sequence_blueprint(loops is not None)):
-        log_sequence(stream, log, rows, loops)
+    with saving(stream, path, sequence_blueprint(rows, loops is not None)):
+        log_sequence(stream, log, rows, loops, on_pair)
 
 
 def record_basin(atlas, path: str) -> None:

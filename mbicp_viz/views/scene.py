@@ -561,9 +561,10 @@ def histogram_layers(h: Histogram, threshold: Style = THRESHOLD) -> list[Layer]:
     return out
 
 
-# Sequence view: one step per scan of a log (``eval sequence --rrd``).
+# A run in rerun (``eval sequence --rrd``), one step per pair on a ``pair`` timeline: the run up to
+# the pair, in a view that shows everything logged up to the time cursor, so each step logs only
+# what it adds (the data grows with the run, not with its square); beside it, the pair up close.
 MAP = Style("map: scans at the matched poses", REFERENCE.color, 1.0)
-CURRENT = Style("current scan", OBJECT.color, 2.0)
 TRAJECTORY = Style("trajectory from the matches", (40, 90, 220), 3.0)
 LOG_TRAJECTORY = Style("trajectory of the log's poses", (0, 190, 190), 2.5)
 ITERATIONS = Style("iterations", (90, 90, 90))
@@ -574,32 +575,46 @@ SURFACE = Style("overlap: object points on the reference's surface [%]", (30, 15
 CONDITION = Style("condition number", (150, 60, 170))
 FROM_ODOMETRY = Style("difference from odometry [mm]", (120, 120, 0))
 RESIDUAL = Style("residual: RMS of the kept pairs' distances [mm]", (90, 90, 90))
+PAIR = "pair"  # the pair up close: its scans and final correspondences (its reference's frame)
+FLAGGED = "flagged"  # every iteration of each flagged pair, one entity per pair
 
 
-def sequence_layers(
-    k: int,
+def run_step_layers(
+    before: Pose2,
     pose: Pose2,
-    points: np.ndarray,
-    trajectory: np.ndarray,
-    log_trajectory: np.ndarray | None,
-    row: PairMatch | None,
-    suspects: np.ndarray,
+    points: np.ndarray | None,
+    log_step: tuple[Pose2, Pose2] | None,
+    flagged: bool,
 ) -> list[Layer]:
-    """Scan ``k`` placed at the pose accumulated from the matches (world = first scan's frame), the
-    pair that placed it (``row``) with its health, and where the flagged pairs so far end
-    (``suspects``)."""
+    """What one pair adds to the run (world frame: the first scan's): the trajectory's step from
+    ``before`` to ``pose``, the scan it placed (its points already in the world frame; None: not
+    in the thinned map), the log's own step, and a mark where a flagged pair ends."""
     layers: list[Layer] = [
-        Points(f"{SEQUENCE}/map/scan_{k:05d}", pose.apply(points), MAP, 0.02),
-        Points(f"{SEQUENCE}/current", pose.apply(points), CURRENT, 0.03),
-        Strips(f"{SEQUENCE}/trajectory", [trajectory], TRAJECTORY, 0.02),
-        Frame(f"{SEQUENCE}/robot", pose),
-        Points(f"{SEQUENCE}/suspects", suspects, SUSPECT, 0.08),
+        Strips(f"{SEQUENCE}/trajectory", [_track([before, pose])], TRAJECTORY, 0.02)
     ]
-    if log_trajectory is not None:
-        layers.append(Strips(f"{SEQUENCE}/log_trajectory", [log_trajectory], LOG_TRAJECTORY, 0.015))
-    if row is not None:
-        layers += pair_health_layers(row)
+    if points is not None:
+        layers.append(Points(f"{SEQUENCE}/map", points, MAP, 0.02))
+    if log_step is not None:
+        layers.append(
+            Strips(f"{SEQUENCE}/log_trajectory", [_track(list(log_step))], LOG_TRAJECTORY, 0.015)
+        )
+    if flagged:
+        layers.append(Points(f"{SEQUENCE}/suspects", _track([pose]), SUSPECT, 0.08))
     return layers
+
+
+# what a pair up close keeps of the debugger's layers (a recording holds one per pair)
+CLOSEUP = {f"{SCANS}/{name}" for name in ("reference", "object", "estimate")} | {
+    f"{SCANS}/pairs/{kind}" for kind in ("point", "interpolated", "rejected")
+}
+
+
+def closeup_layers(start: StartEvent, iterations: list[IterationEvent]) -> list[Layer]:
+    """A pair of a run up close, where its match ended, in its reference scan's frame: the two
+    scans and the correspondences the last iteration made, interpolated and rejected."""
+    return [
+        layer for layer in layers_at(start, iterations, len(iterations)) if layer.path in CLOSEUP
+    ]
 
 
 def pair_health_layers(row: PairMatch) -> list[Layer]:

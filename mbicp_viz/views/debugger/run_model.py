@@ -23,6 +23,7 @@ from mbicp_viz.evaluation.run_score import RelationErrors, relation_errors
 from mbicp_viz.evaluation.trajectory import (
     accumulate,
     log_poses,
+    map_step,
     odometry_chain,
     scan_indices,
     stamps,
@@ -39,7 +40,6 @@ MAP_POINTS = 150_000  # the most map points sent to the page: the scans are thin
 # The map goes to the page once, in chunks whose visibility follows the slider (a step sends the
 # pair's own scans and a few flags, not the map: 4.6 s a step on the full Intel run before)
 MAP_CHUNKS = 100
-MAP_SAMPLE = 50  # scans whose valid readings say how many a run's scans hold (the map's step)
 
 
 @dataclass
@@ -112,11 +112,7 @@ class RunModel:
     @cached_property
     def _sampled(self) -> list[tuple[int, np.ndarray]]:
         """Every ``step``-th scan of the run and its points (in its own frame), read once."""
-        n = len(self.poses)
-        sample = np.unique(np.linspace(0, n - 1, min(n, MAP_SAMPLE)).astype(int))
-        per_scan = np.median([self.log.scan(self.scans[k]).n_valid for k in sample])
-        step = max(1, math.ceil(n * per_scan / MAP_POINTS))
-        kept = list(range(0, n, step))
+        kept = list(range(0, len(self.poses), map_step(self.log, self.scans, MAP_POINTS)))
         scans = self.log.scans_of([self.scans[k] for k in kept], False)
         return [(k, self.mount.apply(s.points())) for k, s in zip(kept, scans)]
 
