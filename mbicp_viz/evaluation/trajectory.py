@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from mbicp_viz.core import Pose2, relative
+from mbicp_viz.core import Pose2, relative, wrap_angle
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.pair_match import PairMatch
@@ -74,12 +74,15 @@ def scan_indices(rows: list[PairMatch]) -> list[int]:
 
 def log_poses(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
     """The log's own scan poses for the same scans, in the first scan's frame (None if missing)."""
-    poses = []
-    for s in log.scans_of(scan_indices(rows), odometry=False):
-        if s.pose is None:  # a bag stores none: known at its first scan
-            return None
-        poses.append(s.pose)
-    return [relative(poses[0], p) for p in poses]
+    xyt = log.poses_of(scan_indices(rows))
+    if np.isnan(xyt).any():  # a bag stores none
+        return None
+    # each pose relative to the first (``relative``, for all at once)
+    c, s = math.cos(xyt[0, 2]), math.sin(xyt[0, 2])
+    d = xyt - xyt[0]
+    x, y = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    theta = wrap_angle(d[:, 2])
+    return [Pose2(*p) for p in np.column_stack([x, y, theta]).tolist()]
 
 
 def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str, list[Pose2]]:

@@ -47,6 +47,8 @@ class BagScans:
     """The scans of one LaserScan topic of an indexed bag. It pickles as its recipe (a worker
     process opens the bag again); one open reader is shared by the threads of a process."""
 
+    random_access = False  # a scan is read by seeking in the bag: the next one reads faster
+
     def __init__(
         self,
         path: str,

@@ -161,12 +161,24 @@ class ScanLog:
         k = bisect.bisect_left(records, record)
         yield from zip(records[k:], self.scans[k:])
 
+    def poses_of(self, records: list[int]) -> np.ndarray:
+        """(n, 3) the stored poses of ``records``' scans (NaN where one has none); a cached log's
+        are read at once, without making its scans."""
+        if self.store is not None and self.store.random_access:  # log_cache.CachedScans
+            return self.store.poses(records)
+        none = (math.nan,) * 3
+        scans = self.scans_of(records, odometry=False)
+        return np.array([none if s.pose is None else s.pose.as_array() for s in scans]).reshape(
+            -1, 3
+        )
+
     def scans_of(self, records: list[int], odometry: bool = True) -> Iterator[Scan]:
         """The scans of ``records`` in their order, each read once: a lazily read log is read front
         to back once when they increase and lie close (a run's scans), else one by one (a map's
         every 1000th scan; without ``odometry``, its scans' odometry may be left unread)."""
         sparse = not records or len(records) * SPARSE_READ < records[-1] - records[0]
-        if self.store is None or sparse or any(b <= a for a, b in zip(records, records[1:])):
+        one_by_one = self.store is None or self.store.random_access or sparse
+        if one_by_one or any(b <= a for a, b in zip(records, records[1:])):
             yield from (self.scan(r) for r in records)
             return
         wanted = iter(records)

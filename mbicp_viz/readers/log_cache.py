@@ -111,6 +111,8 @@ def mapped(folder: Path) -> dict[str, np.ndarray]:
 class CachedScans:
     """A cached log's scans, mapped from disk (``ScanLog.store``). It pickles as its folder."""
 
+    random_access = True  # any scan is read as fast as the next one
+
     def __init__(self, folder: Path, path: str, records: int, unusable: dict, upside_down=False):
         self.folder, self.path, self.upside_down = folder, path, upside_down
         self._records, self._unusable = records, unusable
@@ -160,6 +162,12 @@ class CachedScans:
             stamp=None if np.isnan(stamp) else stamp,
             source=ScanSource(self.path, record, None if line < 0 else line),
         )
+
+    def poses(self, records: list[int]) -> np.ndarray:
+        """(n, 3) the stored poses of ``records`` (NaN where one has none), read at once: no scan
+        is made."""
+        a = self._mapped()
+        return np.asarray(a["poses"][[self._index[r] for r in records]], dtype=float)
 
     def stream(
         self, start: int = 0, odometry: bool = True

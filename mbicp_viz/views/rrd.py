@@ -430,6 +430,7 @@ SEQUENCE_ROOT = "sequence"
 
 MAP_POINTS = 1_000_000  # the most map points a run's recording holds: its scans thinned evenly
 FLAGGED_VIEWS = 10  # the flagged pairs whose iterations get a view (the most suspicious first)
+FLUSH_PAIRS = 200  # a run's recording is written out every this many pairs
 
 
 def sequence_blueprint(rows: list[PairMatch], loops: bool = False) -> rrb.Blueprint:
@@ -545,6 +546,8 @@ def log_sequence(
             for ev in rec.events:
                 observer(ev)
             stream.disable_timeline("iteration")
+        if n % FLUSH_PAIRS == 0:  # to the file: memory stays bounded, the chunks deterministic
+            stream.flush()
         if on_pair is not None:
             on_pair()
     if loops is not None:
