@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import sync_playwright
 
-from mbicp_viz.core import Pose2, relative
+from mbicp_viz.core import ImprovedParams, Pose2, relative
 from mbicp_viz.readers import read_log
 from mbicp_viz.views.debugger.app import App
 from mbicp_viz.views.debugger.state import Source
@@ -835,6 +835,39 @@ def test_the_debugger_opened_from_a_notebook_cell_shows_in_the_cell(browser, tmp
         client.execute_cell(nb.cells[1], 1)
         with pytest.raises(OSError):
             urllib.request.urlopen(url, timeout=5)
+
+
+def test_a_run_matched_in_the_background_shows_its_progress_then_opens(browser, tmp_path):
+    """eval sequence --serve: the log's pairs open at once while the run is matched; the page
+    follows the run's progress (bar and words) and opens the run view when it is done."""
+    from mbicp_viz.evaluation.sequence import match_sequence
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.background import Background
+    from mbicp_viz.views.debugger.sources import log_source
+
+    log = read_log(str(INTEL))
+    rows = match_sequence(log, ImprovedParams(), guess="odometry", workers=1)
+    background = Background(len(rows))
+    application = App(replace(log_source("intel", log), background=background), "127.0.0.1", 0)
+    try:
+        page, session = open_tab(browser, application)  # a pair's result is on the page already
+        page.get_by_text(f"0 of {len(rows)} pairs").wait_for(timeout=30000)
+        background.update(20, "40/s, 1 s left")
+        page.get_by_text(f"20 of {len(rows)} pairs (40/s, 1 s left)").wait_for(timeout=30000)
+        bar = page.get_by_role("progressbar")
+        assert wait_for(lambda: float(bar.get_attribute("aria-valuenow")) == 2000 / len(rows))
+        page.screenshot(path=str(tmp_path / "matching.png"))
+        background.finish(log_source("intel", log, run=rows, rows_label="rows"))
+        page.locator(".mbicp-legend").get_by_text(scene.RUN_TRAJECTORY.label).wait_for(
+            timeout=30000
+        )
+        page.get_by_role("button", name="back to the pair").wait_for(timeout=30000)
+        assert page.get_by_role("progressbar").count() == 0
+        assert session.run is not None and len(session.run.model.rows) == len(rows)
+        page.screenshot(path=str(tmp_path / "matched.png"))
+        page.close()
+    finally:
+        application.stop()
 
 
 def test_a_runs_loops_are_drawn_listed_opened_and_decided_by_hand(browser, tmp_path):

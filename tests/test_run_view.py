@@ -73,7 +73,7 @@ def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses(chunks, monkey
     assert at.map_style is scene.RUN_LOOP_MAP
 
 
-def test_eval_sequence_serve_opens_the_run_and_stops_on_ctrl_c(tmp_path):
+def test_eval_sequence_serve_opens_the_log_at_once_then_its_run_and_stops_on_ctrl_c(tmp_path):
     cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(INTEL)]
     cmd += ["--out", str(tmp_path / "rows.jsonl"), "--serve", "--port", "0", "--workers", "1"]
     proc = subprocess.Popen(
@@ -88,9 +88,13 @@ def test_eval_sequence_serve_opens_the_run_and_stops_on_ctrl_c(tmp_path):
             m = re.search(r"open (http://127\.0\.0\.1:\d+) in a browser", line)
             url = m.group(1) if m else None
         assert url, "the debugger did not say where it listens"
-        assert (tmp_path / "rows.jsonl").exists()  # the run is written before it is served
-        with urllib.request.urlopen(url, timeout=30) as page:
+        with urllib.request.urlopen(url, timeout=30) as page:  # while the run is matched
             assert page.status == 200
+        said = []
+        while not any("the run view is open" in x for x in said) and time.monotonic() < deadline:
+            said.append(proc.stdout.readline())
+        assert (tmp_path / "rows.jsonl").exists()  # the run is written before its view opens
+        assert any("pairs matched with improved" in x for x in said)
         os.killpg(proc.pid, signal.SIGINT)
         # ended (as the server stops, or as any interrupted command: 130), without a traceback
         assert proc.wait(timeout=30) in (0, 130)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
@@ -61,7 +62,7 @@ from .options import (
     user_errors,
 )
 from .resume import log_identity, matched_rows, settings_of
-from .serve import ServePortOpt, open_debugger
+from .serve import ServePortOpt, started_debugger
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the first N pairs")]
@@ -193,36 +194,66 @@ def sequence(
 
     # a key-frame run's references are decided as it goes: a resumed run is checked on its scans
     plan = pairs if keyframes is None else [pairs[0], *((None, j) for _, j in pairs[1:])]
-    rows = matched_rows(out, run, plan, match, PairMatch.to_json, parse_pair_match)
-    say(_pace(lg, rows[resumed[0] :], time.perf_counter() - t0))
-    halted = sum(r.result.reason is Termination.HALTED for r in rows)
-    typer.echo(
-        f"{len(rows)} pairs matched with {matcher.value}: "
-        f"{sum(r.result.converged for r in rows)} converged"
-        + (
-            f", {halted} stopped by the time budget of {budget_s:g} s (--budget-s)"
-            if halted
-            else ""
+    with ExitStack() as stack:
+        background = follow = None
+        if serve:  # the log opens at once, the run view once the run is matched
+            background, application = _serving_meanwhile(
+                stack, log, lg, guess, reading, budget_s, len(plan), port
+            )
+
+            def follow(bar) -> None:
+                background.update(bar.done, bar.rate_text())
+
+        rows = matched_rows(out, run, plan, match, PairMatch.to_json, parse_pair_match, follow)
+        say(_pace(lg, rows[resumed[0] :], time.perf_counter() - t0))
+        halted = sum(r.result.reason is Termination.HALTED for r in rows)
+        typer.echo(
+            f"{len(rows)} pairs matched with {matcher.value}: "
+            f"{sum(r.result.converged for r in rows)} converged"
+            + (
+                f", {halted} stopped by the time budget of {budget_s:g} s (--budget-s)"
+                if halted
+                else ""
+            )
+            + f"; written to {out}"
         )
-        + f"; written to {out}"
+        _sequence_notes(lg, rows, truth, guess, frame)
+        if png or tum or tum_ref or kalman:
+            _trajectories(lg, rows, png, tum, tum_ref, kalman)
+        loops = closed_run(lg, rows, loop_gap_m, keyframes) if close_loops else None
+        if rrd:
+            from mbicp_viz.views.rrd import record_sequence
+
+            # each pair is matched again to record its correspondences
+            with Progress(len(rows), "recording") as bar:
+                record_sequence(lg, rows, str(rrd), loops=loops, on_pair=lambda: bar.update(1))
+            say(f"sequence recording written to {rrd}")
+        _failures(log, out, rows)
+        if background is not None:
+            from mbicp_viz.views.debugger.sources import log_source
+
+            label = f"{out}: {len(rows)} rows"
+            done = log_source(log, lg, guess=guess, options=reading, run=rows, rows_label=label)
+            background.finish(replace(done, budget_s=budget_s, loops=loops))
+            say("the run view is open in the debugger (Ctrl-C stops)")
+            try:
+                application.server.sleep_forever()
+            except KeyboardInterrupt:
+                pass
+
+
+def _serving_meanwhile(stack, log, lg, guess, reading, budget_s, pairs: int, port: int):
+    """The debugger on the log while its run is matched (``stack`` stops it): any pair opens at
+    once, each tab follows the run's progress (the ``Background`` returned) and opens its run view
+    when it is done."""
+    from mbicp_viz.views.debugger.background import Background
+    from mbicp_viz.views.debugger.sources import log_source
+
+    background = Background(pairs)
+    pending = replace(
+        log_source(log, lg, guess=guess, options=reading), budget_s=budget_s, background=background
     )
-    _sequence_notes(lg, rows, truth, guess, frame)
-    if png or tum or tum_ref or kalman:
-        _trajectories(lg, rows, png, tum, tum_ref, kalman)
-    loops = closed_run(lg, rows, loop_gap_m, keyframes) if close_loops else None
-    if rrd:
-        from mbicp_viz.views.rrd import record_sequence
-
-        # each pair is matched again to record its correspondences
-        with Progress(len(rows), "recording") as bar:
-            record_sequence(lg, rows, str(rrd), loops=loops, on_pair=lambda: bar.update(1))
-        say(f"sequence recording written to {rrd}")
-    _failures(log, out, rows)
-    if serve:
-        from mbicp_viz.views.debugger.sources import files_source
-
-        source = files_source(log, None, None, guess, reading, str(out))
-        open_debugger(replace(source, budget_s=budget_s), "127.0.0.1", port, (), None)
+    return background, stack.enter_context(started_debugger(pending, "127.0.0.1", port))
 
 
 def _pace(lg, rows: list, seconds: float) -> str:

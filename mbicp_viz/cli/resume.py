@@ -66,12 +66,14 @@ def matched_rows(
     match: Callable[..., object],
     encode: Callable[[object], dict] = lambda row: row,
     decode: Callable[[dict, str, int], object] = lambda row, path, line: row,
+    on_progress: Callable[[Progress], None] | None = None,
 ) -> list:
     """Every pair's row, ``match(on_row, done)`` running the pairs after the rows ``done``. With
     ``out``, each row is on disk as it is finished (``OUT.partial``, ``encode``-d to JSON), a
     stopped run ends here with its rows kept and the same command resumes from them (``decode``-d
     from the file, path and line), and ``out`` is written whole at the end; without, the rows stay
-    in memory (a Ctrl-C still ends the command, ``user_errors``)."""
+    in memory (a Ctrl-C still ends the command, ``user_errors``). ``on_progress(bar)`` follows
+    the progress bar after each row (a page showing it too)."""
     kept = resumable_rows(out, run, pairs, decode) if out is not None else None
     rows = kept.rows if kept is not None else []
     with Progress(len(pairs)) as bar:
@@ -82,6 +84,8 @@ def matched_rows(
             if kept is not None:
                 kept.add(encode(row))
             bar.update(1)
+            if on_progress is not None:
+                on_progress(bar)
 
         if kept is None:
             match(take, [])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
@@ -141,6 +142,20 @@ def open_debugger(
     source, host: str, port: int, origins: tuple[str, ...], for_seconds: float | None
 ) -> None:
     """The debugger on ``source`` until Ctrl-C (or ``for_seconds``)."""
+    with started_debugger(source, host, port, origins) as application:
+        try:
+            if for_seconds is not None:
+                time.sleep(for_seconds)
+            else:
+                application.server.sleep_forever()
+        except KeyboardInterrupt:
+            pass
+
+
+@contextmanager
+def started_debugger(source, host: str, port: int, origins: tuple[str, ...] = ()):
+    """The debugger on ``source``, serving while the block runs (its address said), stopped at
+    its end whatever ends it."""
     from mbicp_viz.views.debugger.app import App
 
     if host != "127.0.0.1":
@@ -151,9 +166,7 @@ def open_debugger(
     shown = "127.0.0.1" if host in ("127.0.0.1", "0.0.0.0") else host
     typer.echo(f"mbicp-viz: open http://{shown}:{application.port} in a browser (Ctrl-C stops)")
     try:
-        time.sleep(for_seconds) if for_seconds is not None else application.server.sleep_forever()
-    except KeyboardInterrupt:
-        pass
+        yield application
     finally:
         application.stop()
 

@@ -48,6 +48,7 @@ class Session:
         self.nodes: dict[str, object] = {}  # scene node name -> viser handle, as last drawn
         self.grid_m = 1.0  # the metric grid's cell [m]
         self.shown: list[scene.Style] = []  # the styles of what is drawn, for the legend
+        self.closed = threading.Event()  # the tab has gone
         self._build(client.gui, source)
         if ready is None:
             self.first_match()
@@ -148,14 +149,11 @@ class Session:
             lambda _: self.fit_view()
         )
         self.run = None
-        if src.run is not None:
-            from .run import RunPanel
-            from .run_model import RunModel
+        self._run_panels(gui, src)
+        if src.background is not None:
+            from .background import BackgroundPanel
 
-            model = RunModel(src.log, src.run, src.versus, src.relations, src.offset, src.loops)
-            self.run = RunPanel(self, gui, 4.5, model)
-        if src.rows_label:
-            self._pair_lists(gui, src)
+            BackgroundPanel(self, gui, 4.5, src.background)
         self.playback = controls.Playback(self, gui, order=10)
         with gui.add_folder("Result", order=20):
             self.h_result = gui.add_markdown("")
@@ -194,6 +192,25 @@ class Session:
         self.h_result.content = report.result_markdown(self.state)
         self.plots.show_runs(self.state)
         self.guess.show()
+
+    def _run_panels(self, gui, src: Source) -> None:
+        """A run's view and an evaluation's lists of pairs to open."""
+        if src.run is not None:
+            from .run import RunPanel
+            from .run_model import RunModel
+
+            model = RunModel(src.log, src.run, src.versus, src.relations, src.offset, src.loops)
+            self.run = RunPanel(self, gui, 4.5, model)
+        if src.rows_label:
+            self._pair_lists(gui, src)
+
+    def open_run(self, source: Source) -> None:
+        """A run matched in the background (views/debugger/background.py): its view and lists
+        added to the tab, and the run shown."""
+        self.state.source = source
+        self._run_panels(self.client.gui, source)
+        if self.run is not None:
+            self.run.enter()
 
     def set_loops(self, loops) -> None:
         """The run's closures decided again (the loop panel): the run view and the result's words
@@ -324,6 +341,7 @@ class Session:
     def close(self) -> None:
         """Stop the player; returns once a frame it was drawing has been sent (nothing is queued
         for a client that has gone, or on a stopped server)."""
+        self.closed.set()
         self.playback.closed.set()
         self.camera.stop()
         with self.lock:

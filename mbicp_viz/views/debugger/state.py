@@ -67,6 +67,8 @@ class Source:
     relations: list | None = None  # Kümmerle et al.'s relations to score the run on (run view)
     offset: float = 0.0  # added to the log's stamps to meet the relations'
     loops: object | None = None  # evaluation/loops.LoopRun: the run with its loops closed
+    # views/debugger/background.Background: a run being matched, its view opened once it is
+    background: object | None = None
     rows_label: str = ""  # the rows file they come from, and how many rows it holds
     opened: PairMatch | None = None  # the row the first match reopens
     options: ReadOptions | None = None  # how the log was read (to read another of its scan streams)
