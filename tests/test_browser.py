@@ -913,6 +913,7 @@ def test_a_runs_loops_are_drawn_listed_opened_and_decided_by_hand(browser, tmp_p
         legend.get_by_text(scene.LOOP_TRAJECTORY.label).wait_for(timeout=30000)
         for v in verdicts:
             assert scene.CLOSURE[v].label in legend.inner_text()
+        page.get_by_text(f"loops: {loops.around(1)}").wait_for(timeout=30000)  # at pair 1
         page.get_by_text(
             f"with the loops closed: translation {score(loops).mean():.3f} m (chained: 0.000 m)"
         ).wait_for(timeout=30000)

@@ -128,6 +128,17 @@ def test_closures_decided_by_hand_solve_the_graph_again(judged):
     assert [c.verdict for c in run.closures] == [Verdict.ACCEPTED] * len(right) + [expected]
     assert off_at_home(run.optimised) < 0.2
     assert run.moved(run.decided({})).max() < 1e-6
+    # a key frame a lap on without a candidate says where the nearest old one lies (10 m or more
+    # back along the run: key frames 0 to 13 for key frame 33, 16.5 m along)
+    here = run.optimised[33]
+    near = min(
+        range(14), key=lambda j: math.dist(run.optimised[j].as_array()[:2], [here.x, here.y])
+    )
+    said = run.around(33)
+    old = "no loop candidate; the nearest old key frame (10 m or more back along the run)"
+    assert f"{old} is scan {near}," in said
+    a, b = run.optimised[33], run.optimised[near]
+    assert f"{math.hypot(a.x - b.x, a.y - b.y):.2f} m away" in said
 
     forced = run.decided({len(right): True})
     c = forced.closures[-1]
@@ -175,6 +186,11 @@ def test_a_hand_held_run_closes_its_loops_with_real_matches(hand_held):
         math.hypot(a.x - b.x, a.y - b.y) > 1e-3 for a, b in zip(closed.chained, closed.optimised)
     )
     assert closed.summary()[0].startswith(f"loops: {len(closed.keys)} key frames")
+    # what happened at a key frame, in words: its candidates, or why none
+    position = {k: n for n, k in enumerate(closed.scans)}
+    c = accepted[0]
+    assert f"candidate scan {c.old}: accepted" in closed.around(position[c.key])
+    assert "no key frame 0.3 m or more back" in closed.around(0)
 
 
 def test_a_scan_from_elsewhere_is_not_taken_for_a_loop(hand_held):

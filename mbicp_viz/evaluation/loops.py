@@ -21,6 +21,7 @@ one rejected by hand left out.
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -152,6 +153,37 @@ class LoopRun:
         a = np.array([[q.x, q.y] for q in self.optimised])
         b = np.array([[q.x, q.y] for q in other.optimised])
         return np.hypot(*(a - b).T)
+
+    @cached_property
+    def _path(self) -> np.ndarray:
+        """Each key frame's distance along the run from the first [m]."""
+        return np.concatenate([[0.0], np.cumsum([m.translation_norm() for m, _ in self.edges])])
+
+    def around(self, n: int) -> str:
+        """What closing loops did at the key frame at or before the run's scan ``n`` (a position
+        in the run), in words: its candidates and their verdicts, or that it had none and where the
+        nearest old key frame lies with the loops closed (why a loop did not close there)."""
+        k = bisect.bisect_right(self.keys, n) - 1
+        key, gap = self.scans[self.keys[k]], self.params.min_path_m
+        mine = [c for c in self.closures if c.key == key]
+        head = f"key frame scan {key}"
+        if mine:
+            return f"{head}: " + "; ".join(f"candidate scan {c.old}: {c.says()}" for c in mine)
+        old = np.flatnonzero(self._path[k] - self._path[:k] >= gap)
+        if not len(old):
+            return f"{head}: no loop candidate (no key frame {gap:g} m or more back along the run)"
+        here = self.optimised[self.keys[k]]
+        apart = [
+            math.hypot(q.x - here.x, q.y - here.y)
+            for q in (self.optimised[self.keys[j]] for j in old)
+        ]
+        j = int(np.argmin(apart))
+        return (
+            f"{head}: no loop candidate; the nearest old key frame ({gap:g} m or more back along "
+            f"the run) is scan {self.scans[self.keys[old[j]]]}, {apart[j]:.2f} m away with the "
+            f"loops closed (candidates are looked for within the chain's 99 % uncertainty of "
+            f"where it predicts them, plus {self.params.reach_m:g} m)"
+        )
 
     def key_points(self, log: ScanLog) -> np.ndarray:
         """The key frames' points at their optimised poses (the run's world frame)."""

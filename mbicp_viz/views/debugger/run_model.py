@@ -239,6 +239,8 @@ class RunModel:
                 "from the odometry"
             )
         parts.append(f"**flagged**: {flags_text(row)}" if row.flags else "not flagged")
+        if self.loops is not None:
+            parts.append(f"loops: {self.loops.around(n + 1)}")
         return "  \n".join(parts)
 
     def series(self) -> tuple[np.ndarray, ...]:
