@@ -90,15 +90,17 @@ def test_live_poses_are_eval_sequences_and_the_buffer_saves_as_a_bag(bag, tmp_pa
     try:
         run, _ = lockstep_run(robot, path)
         log = read_log(path)
-        # the buffer, saved, is the bag again
-        out = tmp_path / ("saved.bag" if path.suffix == ".bag" else "saved")
-        assert run.save(out) >= len(robot.messages)
-        again = read_log(out)
-        assert again.records == SCANS and again.frames.mount == log.frames.mount
-        for k in (0, SCANS // 2, SCANS - 1):
-            a, b = again.scan(k), log.scan(k)
-            assert np.array_equal(a.ranges, b.ranges) and a.stamp == b.stamp
-            assert a.odometry == b.odometry
+        # the buffer, saved, is the bag again; a ROS 1 robot's saves as MCAP too (converted)
+        outs = [tmp_path / ("saved.bag" if path.suffix == ".bag" else "saved")]
+        outs += [tmp_path / "saved-mcap"] if path.suffix == ".bag" else []
+        for out in outs:
+            assert run.save(out) >= len(robot.messages)
+            again = read_log(out)
+            assert again.records == SCANS and again.frames.mount == log.frames.mount
+            for k in (0, SCANS // 2, SCANS - 1):
+                a, b = again.scan(k), log.scan(k)
+                assert np.array_equal(a.ranges, b.ranges) and a.stamp == b.stamp
+                assert a.odometry == b.odometry
     finally:
         if run is not None:
             run.stop()

@@ -53,8 +53,9 @@ def live(
         Path | None,
         typer.Option(
             "--save",
-            help="when stopped, save the buffer as a bag every command reads: NAME.bag (ROS 1 "
-            "messages) or a ROS 2 bag folder in MCAP storage (CDR messages)",
+            help="when stopped, save the buffer as a bag every command reads: a ROS 2 bag folder "
+            "in MCAP storage (a ROS 1 robot's messages converted), or NAME.bag for a ROS 1 "
+            "robot's own messages",
         ),
     ] = None,
     rrd: RrdOpt = None,

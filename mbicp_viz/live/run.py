@@ -427,18 +427,17 @@ def _warm_up(params: Params) -> None:
 
 def save_bag(messages: list[Raw], path: Path) -> int:
     """``messages`` as a ROS 1 bag (``path`` ending ``.bag``: ROS 1 messages) or else a ROS 2 bag
-    folder in MCAP storage (CDR messages), written whole; how many."""
+    folder in MCAP storage (CDR messages; a ROS 1 robot's converted), written whole; how many."""
     from rosbags.typesys import Stores, get_typestore
 
     from mbicp_viz.outputs import written, written_folder
-    from mbicp_viz.writers.bag import ros1_typestore
+    from mbicp_viz.writers.bag import ros1_as_cdr, ros1_typestore
 
     ros1 = path.suffix == ".bag"
-    wrong = {m.encoding for m in messages} - {"ros1" if ros1 else "cdr"}
-    if wrong:
+    if ros1 and (wrong := {m.encoding for m in messages} - {"ros1"}):
         raise InputError(
-            f"the robot sends {', '.join(sorted(wrong))} messages: save them "
-            + ("as a ROS 2 bag (a name without .bag)" if ros1 else "as a ROS 1 bag (NAME.bag)"),
+            f"the robot sends {', '.join(sorted(wrong))} messages: save them as a ROS 2 bag (a "
+            "name without .bag)",
             str(path),
             field="--save",
         )
@@ -455,10 +454,22 @@ def save_bag(messages: list[Raw], path: Path) -> int:
         def open_writer(p):
             return Writer(p, version=8, storage_plugin=StoragePlugin.MCAP)
 
+    noetic = ros1_typestore()
+
+    def payload(m: Raw) -> bytes:
+        if ros1 or m.encoding == "cdr":
+            return m.payload
+        try:
+            return ros1_as_cdr(m.payload, m.msgtype, noetic, ts)
+        except InputError as e:
+            raise InputError(
+                f"{e.message}: save it as a ROS 1 bag (NAME.bag)", str(path), field="--save"
+            ) from None
+
     with output(path) as tmp, open_writer(tmp) as w:
         conns = {}
         for m in messages:
             if m.topic not in conns:
                 conns[m.topic] = w.add_connection(m.topic, m.msgtype, typestore=ts)
-            w.write(conns[m.topic], m.log_time_ns, m.payload)
+            w.write(conns[m.topic], m.log_time_ns, payload(m))
     return len(messages)

@@ -9,16 +9,17 @@ the base at ``mount`` (T_base_laser, possibly upside down).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import sqlite3
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from mbicp_viz.core import Pose2, Scan
+from mbicp_viz.errors import InputError
 
 KINDS = ("ros1", "humble", "mcap")
 SCAN = "sensor_msgs/msg/LaserScan"
@@ -26,7 +27,7 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
 
 
-@dataclass
+@dataclasses.dataclass
 class Topic:
     name: str
     frame_id: str
@@ -36,7 +37,7 @@ class Topic:
     time_increment: float = 0.0  # [s] between two beams (0: the driver does not say)
 
 
-@dataclass
+@dataclasses.dataclass
 class Robot:
     topics: list[Topic]
     stamps: Sequence[float]  # [s], increasing
@@ -78,6 +79,26 @@ def ros1_typestore():
         get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage")
     )
     return ts
+
+
+def ros1_as_cdr(payload: bytes, msgtype: str, ros1, ros2) -> bytes:
+    """A ROS 1 message (``ros1``'s types) as the same ROS 2 message in CDR (``ros2``'s), field by
+    field by name: ROS 1's header ``seq`` has no ROS 2 field and is left out. A type ROS 2 does not
+    know is an ``InputError``."""
+    try:
+        msg = _as_ros2(ros1.deserialize_ros1(payload, msgtype), ros2)
+    except KeyError as e:
+        raise InputError(f"a ROS 1 {msgtype} has no ROS 2 type to be saved as ({e})") from None
+    return bytes(ros2.serialize_cdr(msg, msgtype))
+
+
+def _as_ros2(value, ros2):
+    if isinstance(value, list):
+        return [_as_ros2(v, ros2) for v in value]
+    if not dataclasses.is_dataclass(value):  # a number, a string, an array of numbers
+        return value
+    cls = ros2.get_msgdef(value.__msgtype__).cls
+    return cls(**{f.name: _as_ros2(getattr(value, f.name), ros2) for f in dataclasses.fields(cls)})
 
 
 def _quat(yaw: float, roll: float = 0.0):
