@@ -883,7 +883,7 @@ def test_a_runs_loops_are_drawn_listed_opened_and_decided_by_hand(browser, tmp_p
     from mbicp_viz.readers.relations import Relation
     from mbicp_viz.views import scene
     from mbicp_viz.views.debugger.loops import NONE
-    from mbicp_viz.views.debugger.run_model import RELATION_TOLERANCE_S
+    from mbicp_viz.views.debugger.run_model import RELATION_TOLERANCE_S, MapAt
     from mbicp_viz.views.debugger.sources import files_source
 
     from .conftest import HOKUYO_BAG
@@ -918,8 +918,9 @@ def test_a_runs_loops_are_drawn_listed_opened_and_decided_by_hand(browser, tmp_p
             f"with the loops closed: translation {score(loops).mean():.3f} m (chained: 0.000 m)"
         ).wait_for(timeout=30000)
         page.get_by_role("combobox", name="map at").click()
-        page.get_by_role("option", name="the poses with the loops closed").click()
+        page.get_by_role("option", name=MapAt.BOTH.value).click()
         legend.get_by_text(scene.RUN_LOOP_MAP.label).wait_for(timeout=30000)
+        assert scene.RUN_MAP.label in legend.inner_text()  # the map before, under the one after
         page.screenshot(path=str(tmp_path / "run-view-loops.png"))
 
         def pick(k):

@@ -22,7 +22,7 @@ from mbicp_viz.evaluation.sequence import match_sequence
 from mbicp_viz.evaluation.trajectory import is_run
 from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene
-from mbicp_viz.views.debugger.run_model import RunModel
+from mbicp_viz.views.debugger.run_model import MapAt, RunModel
 
 from .conftest import INTEL
 
@@ -44,7 +44,8 @@ def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses(chunks, monkey
         pose = model.poses[n + 1] @ mount
         assert np.allclose(at.obj_xy, pose.apply(log.scan(rows[n].obj).points()))
         # the map up to it: the whole chunks it has passed and the part since, every scan once
-        shown = model.chunks()[: model.whole_chunks(n)] + [at.map_xy]
+        ((_, last, _),) = at.maps
+        shown = model.chunks(model.poses)[: model.whole_chunks(n)] + [last]
         expected = [
             (p @ mount).apply(log.scan(i).points()) for p, i in zip(model.poses, model.scans)
         ]
@@ -60,17 +61,22 @@ def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses(chunks, monkey
     first = model.stored[0]
     assert np.allclose([first.x, first.y, first.theta], 0.0, atol=1e-12)
     assert len(model.stored) == len(model.poses) == len(rows) + 1
-    # asked to, the map and the pair are drawn at the poses with the loops closed
-    chained_map = np.concatenate(model.chunks())
+    # asked to, the map and the pair are drawn at the poses with the loops closed, or both maps
+    chained_map = np.concatenate(model.chunks(model.poses))
     moved = Pose2(1.0, -2.0, 0.3)
     loops = close_loops(log, rows, rows[0].params)
     model.loops = replace(loops, optimised=[moved @ p for p in model.poses])
-    model.on_loops = True
-    assert model.map_style is scene.RUN_LOOP_MAP
-    assert np.allclose(np.concatenate(model.chunks()), moved.apply(chained_map))
-    at = model.pair_at(17)
-    assert np.allclose(at.obj_xy, (moved @ model.poses[18] @ mount).apply(log.scan(18).points()))
-    assert at.map_style is scene.RUN_LOOP_MAP
+    for at_, styles in (
+        (MapAt.LOOPS, [scene.RUN_LOOP_MAP]),
+        (MapAt.BOTH, [scene.RUN_LOOP_MAP, scene.RUN_MAP]),
+    ):
+        model.map_at = at_
+        assert [style for _, _, style in model.maps()] == styles
+        assert np.allclose(np.concatenate(model.chunks(model.drawn)), moved.apply(chained_map))
+        at = model.pair_at(17)
+        obj = (moved @ model.poses[18] @ mount).apply(log.scan(18).points())
+        assert np.allclose(at.obj_xy, obj)
+        assert [style for _, _, style in at.maps] == styles
 
 
 def test_eval_sequence_serve_opens_the_log_at_once_then_its_run_and_stops_on_ctrl_c(tmp_path):

@@ -734,13 +734,13 @@ class RunPair:
     """What the run view draws at one pair: the map's last part up to it (the rest are whole
     chunks, ``run_map_layers``), its two scans, the pose it reached, a chosen relation."""
 
-    map_xy: np.ndarray  # (M, 2)
+    # each map's last part (its name, its (M, 2) points, its legend entry: the poses it is at)
+    maps: list[tuple[str, np.ndarray, Style]]
     ref_xy: np.ndarray
     obj_xy: np.ndarray
     pose: Pose2
     # a relation (Kümmerle et al.): the earlier end's pose and where it puts the later one
     relation: tuple[Pose2, Pose2] | None = None
-    map_style: Style = RUN_MAP  # the poses the map is drawn at, in its legend entry
 
 
 def _track(poses: list[Pose2]) -> np.ndarray:
@@ -783,17 +783,17 @@ def run_track_layers(r: RunTracks, scale: float = 1.0) -> list[Layer]:
 
 
 def run_map_layers(
-    chunks: list[np.ndarray], scale: float = 1.0, style: Style = RUN_MAP
+    chunks: list[np.ndarray], scale: float = 1.0, style: Style = RUN_MAP, name: str = "map"
 ) -> list[Layer]:
-    """The map in chunks of consecutive scans, each shown once the pair in view has passed it."""
-    return [Points(f"{RUN}/map/{c:05d}", xy, style, 0.01 * scale) for c, xy in enumerate(chunks)]
+    """A map in chunks of consecutive scans, each shown once the pair in view has passed it."""
+    return [Points(f"{RUN}/{name}/{c:05d}", xy, style, 0.01 * scale) for c, xy in enumerate(chunks)]
 
 
 def run_pair_layers(r: RunPair, scale: float = 1.0) -> list[Layer]:
     """The pair in view: the map's part since the last whole chunk, its two scans highlighted,
     the pose it reached and a chosen relation."""
     layers: list[Layer] = [
-        Points(f"{RUN}/map_last", r.map_xy, r.map_style, 0.01 * scale),
+        *(Points(f"{RUN}/{name}_last", xy, style, 0.01 * scale) for name, xy, style in r.maps),
         Points(f"{RUN}/reference", r.ref_xy, RUN_REFERENCE, 0.015 * scale),
         Points(f"{RUN}/object", r.obj_xy, RUN_OBJECT, 0.015 * scale),
         Frame(f"{RUN}/robot", r.pose, ROBOT, 0.15 * scale),

@@ -139,7 +139,7 @@ class LiveTab:
         n = len(model.rows) - 1
         layers = [
             *scene.run_track_layers(model.tracks(), scale),
-            *scene.run_map_layers([np.concatenate(model.chunks())], scale),
+            *scene.run_map_layers([np.concatenate(model.chunks(model.poses))], scale),
             *scene.run_pair_layers(model.pair_at(n), scale),
         ]
         lo, hi = pts.min(axis=0), pts.max(axis=0)

@@ -12,9 +12,7 @@ import numpy as np
 from .. import scene, viser_draw
 from . import panels
 from .camera import on_scan_plane
-from .run_model import RunModel
-
-MAP_AT = {"the chained poses": False, "the poses with the loops closed": True}
+from .run_model import MapAt, RunModel
 
 
 class RunPanel:
@@ -24,7 +22,7 @@ class RunPanel:
         self.s, self.model, self.active, self.scale = session, model, False, 1.0
         self.nodes: dict[str, object] = {}  # drawn once per showing of the run
         self.pair_nodes: dict[str, object] = {}  # drawn at each pair
-        self.chunk_nodes: list = []  # the map's chunks, shown as the pair passes them
+        self.chunk_nodes: list[list] = []  # each map's chunks, shown as the pair passes them
         self.still: list = []
         self.chunks_shown = 0
         rows = model.rows
@@ -45,7 +43,7 @@ class RunPanel:
             self.loop_score = gui.add_markdown("")
             if model.loops is not None:
                 self.map_at = gui.add_dropdown(
-                    "map at", tuple(MAP_AT), hint="the map before or after the pose graph"
+                    "map at", tuple(MapAt), hint="the map before or after the pose graph, or both"
                 )
                 self.map_at.on_update(lambda _: session.guarded(self.map_switched))
                 self.show_loop_score()
@@ -116,7 +114,7 @@ class RunPanel:
             )
 
     def map_switched(self) -> None:
-        self.model.on_loops = MAP_AT[self.map_at.value]
+        self.model.map_at = MapAt(self.map_at.value)
         if self.active:
             self.draw_whole()
 
@@ -156,16 +154,21 @@ class RunPanel:
         slider's pair."""
         api = self.s.client.scene
         with self.s.client.atomic():
-            for handle in [*self.nodes.values(), *self.chunk_nodes]:
+            for handle in [*self.nodes.values(), *(h for m in self.chunk_nodes for h in m)]:
                 handle.remove()
             self.still = scene.run_track_layers(self.model.tracks(), self.scale)
             self.nodes = {
                 f"/{layer.path}": viser_draw.draw(api, f"/{layer.path}", layer)
                 for layer in self.still
             }
-            chunks = scene.run_map_layers(self.model.chunks(), self.scale, self.model.map_style)
             self.chunk_nodes = [
-                viser_draw.draw(api, f"/{layer.path}", layer, visible=False) for layer in chunks
+                [
+                    viser_draw.draw(api, f"/{layer.path}", layer, visible=False)
+                    for layer in scene.run_map_layers(
+                        self.model.chunks(poses), self.scale, style, name
+                    )
+                ]
+                for name, poses, style in self.model.maps()
             ]
         self.chunks_shown = 0
         self.draw()
@@ -173,7 +176,8 @@ class RunPanel:
     def leave(self) -> None:
         self.active = False
         self.toggle.label = "show the run"
-        for handle in [*self.nodes.values(), *self.pair_nodes.values(), *self.chunk_nodes]:
+        chunks = [h for m in self.chunk_nodes for h in m]
+        for handle in [*self.nodes.values(), *self.pair_nodes.values(), *chunks]:
             handle.remove()
         self.nodes, self.pair_nodes, self.chunk_nodes = {}, {}, []
         self.s.fit_view()
@@ -189,7 +193,8 @@ class RunPanel:
         whole = self.model.whole_chunks(self.n)
         with self.s.client.atomic():
             for c in range(min(whole, self.chunks_shown), max(whole, self.chunks_shown)):
-                self.chunk_nodes[c].visible = c < whole
+                for nodes in self.chunk_nodes:
+                    nodes[c].visible = c < whole
             self.chunks_shown = whole
             drawn = {}
             for layer in layers:
@@ -204,7 +209,8 @@ class RunPanel:
             if scene.has_content(layer)
         }
         if whole:
-            shown.setdefault(self.model.map_style.label, self.model.map_style)
+            for _, _, style in self.model.maps():
+                shown.setdefault(style.label, style)
         self.s.h_legend.content = panels.legend_html(
             list(shown.values()), self.s.grid_m, "the world frame: the run's first scan"
         )

@@ -5,13 +5,15 @@ scored on. No viser here.
 
 The world frame is the first scan's (the robot base's when the rows report its motion, else the
 laser's), as ``eval sequence --png`` and ``--rrd`` draw it. With its loops closed, the map and the
-pair are drawn at the chained poses or at the pose graph's (``on_loops``), the one or the other.
+pair are drawn at the chained poses, at the pose graph's, or at both, one map over the other
+(``map_at``).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from functools import cached_property
 
 import numpy as np
@@ -35,6 +37,15 @@ from mbicp_viz.readers.relations import Relation
 
 from .. import scene
 
+
+class MapAt(StrEnum):
+    """The poses the run view's map is drawn at (its "map at" list)."""
+
+    CHAINED = "the chained poses"
+    LOOPS = "the poses with the loops closed"
+    BOTH = "both, the loops closed over the chained"
+
+
 RELATION_TOLERANCE_S = 0.025  # a relation's stamp meets a scan within this (eval relations')
 MAP_POINTS = 150_000  # the most map points sent to the page: the scans are thinned evenly to it
 # The map goes to the page once, in chunks whose visibility follows the slider (a step sends the
@@ -52,8 +63,9 @@ class RunModel:
     relations: list[Relation] | None = None  # Kümmerle et al.'s, on the log's clock + offset
     offset: float = 0.0
     loops: LoopRun | None = None  # the run with its loops closed
-    on_loops: bool = False  # the map drawn at the loops-closed poses (else the chained ones)
-    _map_of: tuple | None = field(default=None, init=False, repr=False)  # (drawn, the map)
+    map_at: MapAt = MapAt.CHAINED  # the poses the map is drawn at
+    # the map at each set of poses it was drawn at: id(poses) -> (poses, (points, their scans))
+    _maps: dict = field(default_factory=dict, init=False, repr=False)
 
     @cached_property
     def poses(self) -> list[Pose2]:
@@ -61,12 +73,19 @@ class RunModel:
 
     @property
     def drawn(self) -> list[Pose2]:
-        """The poses the map and the pair are drawn at."""
-        return self.loops.optimised if self.on_loops and self.loops is not None else self.poses
+        """The poses the pair, the closures and the map on top are drawn at."""
+        chained = self.map_at is MapAt.CHAINED or self.loops is None
+        return self.poses if chained else self.loops.optimised
 
-    @property
-    def map_style(self) -> scene.Style:
-        return scene.RUN_LOOP_MAP if self.drawn is not self.poses else scene.RUN_MAP
+    def maps(self) -> list[tuple[str, list[Pose2], scene.Style]]:
+        """Each map drawn (its name, its poses, its legend entry), the one on top first: the
+        chained run's, the loops-closed one's, or that over the chained one's."""
+        if self.drawn is self.poses:
+            return [("map", self.poses, scene.RUN_MAP)]
+        loops = [("map", self.drawn, scene.RUN_LOOP_MAP)]
+        return loops + (
+            [("map_before", self.poses, scene.RUN_MAP)] if self.map_at is MapAt.BOTH else []
+        )
 
     @cached_property
     def other(self) -> list[Pose2] | None:
@@ -116,17 +135,17 @@ class RunModel:
         scans = self.log.scans_of([self.scans[k] for k in kept], False)
         return [(k, self.mount.apply(s.points())) for k, s in zip(kept, scans)]
 
-    @property
-    def _map(self) -> tuple[np.ndarray, np.ndarray]:
-        """The sampled scans' points at the drawn poses (world frame) and the scan each belongs
-        to; kept until the drawn poses change."""
-        drawn = self.drawn
-        if self._map_of is None or self._map_of[0] is not drawn:
-            parts = [(k, drawn[k].apply(p)) for k, p in self._sampled]
+    def _map(self, poses: list[Pose2]) -> tuple[np.ndarray, np.ndarray]:
+        """The sampled scans' points at ``poses`` (world frame) and the scan each belongs to;
+        kept while those poses are (closures decided again make new ones)."""
+        if id(poses) not in self._maps:
+            parts = [(k, poses[k].apply(p)) for k, p in self._sampled]
             xy = np.concatenate([p for _, p in parts]) if parts else np.zeros((0, 2))
             owner = np.concatenate([np.full(len(p), k) for k, p in parts]) if parts else []
-            self._map_of = (drawn, (xy, np.asarray(owner)))
-        return self._map_of[1]
+            self._maps = {
+                i: m for i, m in self._maps.items() if m[0] in (self.poses, self.drawn)
+            } | {id(poses): (poses, (xy, np.asarray(owner)))}
+        return self._maps[id(poses)][1]
 
     @cached_property
     def relation_errors(self) -> RelationErrors | None:
@@ -174,9 +193,9 @@ class RunModel:
         cuts = np.array_split(np.arange(len(self.poses)), min(MAP_CHUNKS, len(self.poses)))
         return [c for c in cuts if len(c)]
 
-    def chunks(self) -> list[np.ndarray]:
-        """The map's points in its chunks."""
-        xy, owner = self._map
+    def chunks(self, poses: list[Pose2]) -> list[np.ndarray]:
+        """The map at ``poses``, its points in its chunks."""
+        xy, owner = self._map(poses)
         return [xy[(owner >= c[0]) & (owner <= c[-1])] for c in self._cuts]
 
     def whole_chunks(self, n: int) -> int:
@@ -202,20 +221,22 @@ class RunModel:
     def pair_at(self, n: int, relation: int | None = None) -> scene.RunPair:
         """Pair n: the map's scans since the last whole chunk, up to its second scan, its scans
         and pose, and a chosen relation (a position in ``relation_errors``)."""
-        xy, owner = self._map
         shown = self.whole_chunks(n)
         first = int(self._cuts[shown - 1][-1]) + 1 if shown else 0
+        last = []
+        for name, poses, style in self.maps():
+            xy, owner = self._map(poses)
+            last.append((name, xy[(owner >= first) & (owner <= n + 1)], style))
         return scene.RunPair(
-            xy[(owner >= first) & (owner <= n + 1)],
+            last,
             self.world_points(n),
             self.world_points(n + 1),
             self.drawn[n + 1],
             self.relation_ends(relation) if relation is not None else None,
-            self.map_style,
         )
 
     def extent(self) -> np.ndarray:
-        xy, _ = self._map
+        xy, _ = self._map(self.drawn)
         track = np.array([[p.x, p.y] for p in self.drawn])
         return np.concatenate([xy, track]) if len(xy) else track
 
