@@ -70,17 +70,13 @@ def entry(log: ScanLog, rows: list[PairMatch], p: LoopParams) -> Path | None:
     return cache_root() / "loops" / digest.hexdigest()[:32]
 
 
-def _xyt(q: Pose2) -> list[float]:
-    return [q.x, q.y, q.theta]
-
-
 def _closure_json(c: Closure) -> dict:
     s = c.search
     search = None
     if s is not None:
         search = {
-            "pose": _xyt(s.pose),
-            "coarse": _xyt(s.coarse),
+            "pose": s.pose.as_array().tolist(),
+            "coarse": s.coarse.as_array().tolist(),
             "score": s.score,
             "best_per_angle": s.best_per_angle.tolist(),
             "angles": s.angles.tolist(),
@@ -90,7 +86,7 @@ def _closure_json(c: Closure) -> dict:
         "key": c.key,
         "judged": c.judged.value,
         "peak_ratio": c.peak_ratio,
-        "guess": _xyt(c.guess),
+        "guess": c.guess.as_array().tolist(),
         "match": c.match.to_json(),
         "search": search,
     }
@@ -130,7 +126,7 @@ def save(folder: Path, found: Found, log: ScanLog) -> None:
     folder.parent.mkdir(parents=True, exist_ok=True)
     body = {
         "closures": [_closure_json(c) for c in found.closures],
-        "estimate": [_xyt(q) for q in found.estimate],
+        "estimate": [q.as_array().tolist() for q in found.estimate],
         "optimise_s": found.optimise_s,
     }
     with written_folder(folder) as tmp:
