@@ -328,10 +328,24 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
     page.close()
 
 
+# the health timeline's plotting area (left, right) and the track of the slider right under it
+# (left, right, its middle's height), in page pixels
+TIMELINE_AND_TRACK = """() => {
+  const title = [...document.querySelectorAll('.u-title')]
+    .find(e => e.textContent === 'health of every pair');
+  const over = title.closest('.uplot').querySelector('.u-over').getBoundingClientRect();
+  const below = [...document.querySelectorAll('.mantine-Slider-track')]
+    .map(e => e.getBoundingClientRect()).filter(b => b.top > over.bottom)
+    .sort((a, b) => a.top - b.top)[0];
+  return [[over.left, over.right], [below.left, below.right, below.top + below.height / 2]];
+}"""
+
+
 def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
     """serve LOG --rows on a whole run: "show the run" draws the trajectory and the map in the
     world frame with their legend; "next flagged" moves to the first flagged pair, whose signs the
-    panel names; a click on the trajectory brings the pair that ends there; "open this pair"
+    panel names; a click on the trajectory brings the pair that ends there, and one on the
+    timeline's track the pair under it; "open this pair"
     opens it in the pair debugger as the run matched it."""
     from typer.testing import CliRunner
 
@@ -373,8 +387,16 @@ def test_the_run_view_finds_the_flagged_pair_and_opens_it(browser, tmp_path):
         assert wait_for(lambda: session.run.n == k - 1)
         row = src.run[k - 1]
         page.get_by_text(f"scans {row.ref} → {row.obj}").first.wait_for(timeout=30000)
+        # the health timeline's area is over the pair slider's track: a click on the track under
+        # a flagged pair's spike picks that pair
+        plot, track = page.evaluate(TIMELINE_AND_TRACK)
+        assert abs(plot[0] - track[0]) < 1.5 and abs(plot[1] - track[1]) < 1.5, (plot, track)
+        spike = max(n for n, r in enumerate(src.run) if r.flags and n != k - 1)
+        x = plot[0] + spike / (len(src.run) - 1) * (plot[1] - plot[0])
+        page.mouse.click(x, track[2])
+        assert wait_for(lambda: session.run.n == spike)
         page.get_by_role("button", name="previous flagged").click()
-        first = max(n for n, r in enumerate(src.run) if r.flags and n < k - 1)
+        first = max(n for n, r in enumerate(src.run) if r.flags and n < spike)
         assert wait_for(lambda: session.run.n == first)
         page.get_by_role("button", name="next flagged").click()
         first = min(n for n, r in enumerate(src.run) if r.flags and n > first)

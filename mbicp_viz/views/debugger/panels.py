@@ -156,8 +156,43 @@ def health_legend(x_label: str) -> list[uplot.Series]:
 
 
 def health_axes(x_label: str, top_mm: float) -> dict:
-    """The health timeline's axes: overlap [%] on the right, millimetres up to ``top_mm``."""
+    """The health timeline's axes: overlap [%] on the left, millimetres up to ``top_mm`` on the
+    right."""
     return _numeric(x_label, ("pct", "overlap [%]", 3, 105.0), ("mm", "[mm]", 1, top_mm))
+
+
+# viser's slider row below a plot: its label column (7.25em less 0.6375em a folder level, at the
+# panel's 14.8 px font) and its number box (3rem and a margin) around the track, measured in
+# Chromium (tests/test_browser.py checks the plot's area stays over the track)
+SLIDER_LEFT_PX, SLIDER_RIGHT_PX = 100.5, 58.3
+LABEL_PX = 16  # the right axis's label, narrowed to fit the number box's width
+
+
+def timeline_over_slider(x_label: str, top_mm: float, last: int) -> dict:
+    """The health timeline's options (``health_axes``) with its area exactly over the slider row
+    below it, x from 1 to ``last`` at the track's ends: a click on the track under a spike picks
+    its pair (viser's plots send no clicks). uPlot's axis size leaves out its label; the x range
+    is fixed (no drag zoom), so the alignment holds."""
+    options = health_axes(x_label, top_mm)
+    x, overlap, mm = options["axes"]
+    return options | dict(
+        scales=options["scales"]
+        | {"x": uplot.Scale(time=False, auto=False, range=(1, max(last, 2)))},
+        axes=(
+            x,
+            overlap | uplot.Axis(size=SLIDER_LEFT_PX - 30),  # uPlot's label is 30 px
+            mm
+            | uplot.Axis(
+                size=SLIDER_RIGHT_PX - LABEL_PX,
+                labelSize=LABEL_PX,
+                font="10px system-ui",
+                gap=2,
+                ticks=uplot.Axis_Ticks(size=4),
+            ),
+        ),
+        padding=(10, 0, 0, 0),
+        cursor=uplot.Cursor(drag=uplot.Cursor_Drag(x=False, y=False)),
+    )
 
 
 def _line(label: str, scale: str, style: scene.Style, dash: bool = False) -> uplot.Series:

@@ -32,6 +32,22 @@ class RunPanel:
                 f"without truth. World frame: the first scan's ({rows[0].frame})."
             )
             self.toggle = gui.add_button("show the run", hint="the whole run, or back to the pair")
+            data = model.series()
+            top = max(
+                (float(np.nanmax(v)) for v in (data[2], *data[4:]) if np.any(np.isfinite(v))),
+                default=1.0,
+            )
+            series = panels.health_legend("pair")
+            if model.versus is not None:
+                series.append(panels._line("A and B apart [mm]", "mm", scene.RUN_OTHER))
+            self.plot = gui.add_uplot(
+                data=data,
+                series=tuple(series),
+                aspect=1.6,
+                title="health of every pair",
+                **panels.timeline_over_slider("pair", top * 1.08, len(rows)),
+            )
+            # the timeline's own scrubber, right under it: a click under a spike picks its pair
             self.slider = gui.add_slider("pair", 1, len(rows), 1, 1)
             self.prev_flagged = gui.add_button("previous flagged")
             self.next_flagged = gui.add_button("next flagged")
@@ -51,21 +67,6 @@ class RunPanel:
                 gui.add_markdown("  \n".join(model.versus.verdict()))
                 self.open_b = gui.add_button("open run B's match of this pair")
                 self.open_b.on_click(lambda _: session.guarded(self.open_pair_b))
-            data = model.series()
-            top = max(
-                (float(np.nanmax(v)) for v in (data[2], *data[4:]) if np.any(np.isfinite(v))),
-                default=1.0,
-            )
-            series = panels.health_legend("pair")
-            if model.versus is not None:
-                series.append(panels._line("A and B apart [mm]", "mm", scene.RUN_OTHER))
-            self.plot = gui.add_uplot(
-                data=data,
-                series=tuple(series),
-                aspect=1.6,
-                title="health of every pair",
-                **panels.health_axes("pair", top * 1.08),
-            )
         self.toggle.on_click(lambda _: session.guarded(self.switch))
         self.slider.on_update(lambda _: session.guarded(self.draw))
         self.prev_flagged.on_click(lambda _: session.guarded(lambda: self.step_flagged(-1)))
