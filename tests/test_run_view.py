@@ -51,7 +51,7 @@ def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses(chunks, monkey
         ]
         assert np.allclose(np.concatenate(shown), np.concatenate(expected[: n + 2]))
     # the health timeline: one point per pair, each as its record says
-    x, overlap, odo, flagged, residual = model.series()
+    x, overlap, odo, flagged, residual = model.series
     assert list(x) == list(range(1, len(rows) + 1))
     assert np.allclose(overlap, [100 * r.overlap for r in rows])
     assert np.allclose(odo, [1000 * r.odometry_xy for r in rows])

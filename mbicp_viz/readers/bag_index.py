@@ -96,6 +96,10 @@ class BagScans:
     def records(self) -> int:
         return len(self.stamps_ns)
 
+    def poses(self, records: list[int]) -> np.ndarray:
+        """(n, 3) NaN: a bag stores no scan poses, only odometry (said without reading a scan)."""
+        return np.full((len(records), 3), np.nan)
+
     def _open(self):
         if self._reader is None:
             from .rosbag import open_bag
@@ -114,8 +118,9 @@ class BagScans:
         msgs = decoded_messages(self._open(), self.path, wanted, start_ns, stop_ns)
         return [(t * 1e-9, m) for _, t, m in msgs]
 
-    def load(self, k: int) -> Scan | UnusableScan:
-        """Record ``k``: its scan, or why it cannot be matched."""
+    def load(self, k: int, odometry: bool = True) -> Scan | UnusableScan:
+        """Record ``k``: its scan, or why it cannot be matched (without ``odometry``, its
+        odometry may be left unread: a map's scans; such a scan is not kept)."""
         with self._lock:
             if k in self._cache:
                 self._cache.move_to_end(k)
@@ -123,6 +128,8 @@ class BagScans:
             t = int(self.stamps_ns[k])
             first = bisect.bisect_left(self.stamps_ns, t)  # records sharing this stamp
             msgs = self._decoded(self.topic, t, t + 1)
+            if not odometry:
+                return self._scan(k, msgs[k - first][1], None)
             scan = self._scan(k, msgs[k - first][1], self._odometry_around(t))
             self._cache[k] = scan
             if len(self._cache) > CACHED_SCANS:

@@ -127,8 +127,9 @@ class ScanLog:
         else:
             self.scans.append(scan)
 
-    def scan(self, index: int) -> Scan:
-        """The scan of record ``index`` (negative: counted from the end)."""
+    def scan(self, index: int, odometry: bool = True) -> Scan:
+        """The scan of record ``index`` (negative: counted from the end; without ``odometry``, a
+        lazily read log may leave its odometry unread)."""
         n = self.records
         if not -n <= index < n:
             raise InputError(
@@ -137,7 +138,9 @@ class ScanLog:
                 field="index",
             )
         index %= n
-        scan = self.store.load(index) if self.store is not None else self.unusable.get(index)
+        scan = (
+            self.store.load(index, odometry) if self.store is not None else self.unusable.get(index)
+        )
         if isinstance(scan, UnusableScan):
             raise InputError(
                 f"scan {index} cannot be matched: {scan.reason}",
@@ -162,9 +165,9 @@ class ScanLog:
         yield from zip(records[k:], self.scans[k:])
 
     def poses_of(self, records: list[int]) -> np.ndarray:
-        """(n, 3) the stored poses of ``records``' scans (NaN where one has none); a cached log's
-        are read at once, without making its scans."""
-        if self.store is not None and self.store.random_access:  # log_cache.CachedScans
+        """(n, 3) the stored poses of ``records``' scans (NaN where one has none); a lazily read
+        log's store says them without making its scans."""
+        if self.store is not None:
             return self.store.poses(records)
         none = (math.nan,) * 3
         scans = self.scans_of(records, odometry=False)
@@ -179,7 +182,7 @@ class ScanLog:
         sparse = not records or len(records) * SPARSE_READ < records[-1] - records[0]
         one_by_one = self.store is None or self.store.random_access or sparse
         if one_by_one or any(b <= a for a, b in zip(records, records[1:])):
-            yield from (self.scan(r) for r in records)
+            yield from (self.scan(r, odometry) for r in records)
             return
         wanted = iter(records)
         r = next(wanted, None)

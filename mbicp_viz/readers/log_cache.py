@@ -136,7 +136,8 @@ class CachedScans:
                 self._index = {int(r): k for k, r in enumerate(self._arrays["records"])}
             return self._arrays
 
-    def load(self, record: int) -> Scan | UnusableScan:
+    def load(self, record: int, odometry: bool = True) -> Scan | UnusableScan:
+        """Record ``record`` (stored with its odometry: ``odometry`` is moot)."""
         if record in self._unusable:
             reason, line = self._unusable[record]
             return UnusableScan(ScanSource(self.path, record, line), reason)

@@ -96,6 +96,8 @@ class App:
         else:  # where every tab starts
             TopDownCamera(self.server).fit(source.log.scan(source.pair[0]).points())
             threading.Thread(target=self._warm_up, daemon=True).start()
+            if source.run is not None:  # the run view's model, ready before the first tab asks
+                threading.Thread(target=self._warm_run, daemon=True).start()
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
 
@@ -136,6 +138,14 @@ class App:
                 sessions = list(self.sessions.values())
             for s in sessions:
                 s.compiled()
+
+    def _warm_run(self) -> None:
+        from .run_model import tab_model
+
+        try:
+            tab_model(self.source)
+        except Exception:  # the first tab computes it again and shows what is wrong
+            traceback.print_exc()
 
     async def _check_origin(self, ws, conn) -> None:
         connection = ws._live_connections.get(conn.client_id)

@@ -168,7 +168,7 @@ class LiveTab:
     def plot(self, model: RunModel, log, lags: list[float]) -> None:
         t = np.array([log.scan(r.obj).stamp or 0.0 for r in model.rows])
         t = t - t[-1]
-        _, overlap, odo, flagged, residual = model.series()
+        _, overlap, odo, flagged, residual = model.series
         # the time axis set each time (the page keeps an auto range from the plot's first data)
         x = {"x": uplot.Scale(time=False, auto=False, range=(min(float(t[0]), -1.0), 0.0))}
         self.health.data = (t, overlap, odo, flagged, residual)

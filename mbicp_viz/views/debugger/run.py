@@ -32,7 +32,7 @@ class RunPanel:
                 f"without truth. World frame: the first scan's ({rows[0].frame})."
             )
             self.toggle = gui.add_button("show the run", hint="the whole run, or back to the pair")
-            data = model.series()
+            data = model.series
             top = max(
                 (float(np.nanmax(v)) for v in (data[2], *data[4:]) if np.any(np.isfinite(v))),
                 default=1.0,

@@ -197,10 +197,9 @@ class Session:
         """A run's view and an evaluation's lists of pairs to open."""
         if src.run is not None:
             from .run import RunPanel
-            from .run_model import RunModel
+            from .run_model import tab_model
 
-            model = RunModel(src.log, src.run, src.versus, src.relations, src.offset, src.loops)
-            self.run = RunPanel(self, gui, 4.5, model)
+            self.run = RunPanel(self, gui, 4.5, tab_model(src))
         if src.rows_label:
             self._pair_lists(gui, src)
 
