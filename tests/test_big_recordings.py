@@ -82,6 +82,14 @@ def test_a_long_bag_opens_without_reading_its_scans(tmp_path, intel):
     survey = log.scans.survey
     assert log.scan(7000).stamp is not None and survey._usable is None  # read alone
     assert log.consecutive_pairs(3) == [(0, 1), (1, 2), (2, 3)] and survey._usable is None
+    # a bag stores no scan poses: said without reading a scan (the run view asks for them all)
+    cached = set(log.store._cache)
+    assert np.isnan(log.poses_of(list(range(0, 7201, 7)))).all()
+    assert set(log.store._cache) == cached and survey._usable is None
+    # a map's scan, read without its odometry, is the scan; it is not kept
+    bare = log.scan(5000, odometry=False)
+    assert 5000 not in log.store._cache
+    assert np.array_equal(bare.points(), log.scan(5000).points()) and 5000 in log.store._cache
 
 
 def test_bench_bag_plays_real_scans_to_and_fro_with_real_intervals(tmp_path, intel):
