@@ -251,3 +251,99 @@ def test_a_parameter_set_seen_before_is_not_trusted_on_another_line(rows_file, t
     with pytest.raises(InputError) as e:
         read_rows(path)
     assert e.value.line == 3 and key in str(e.value)
+
+
+def _long_run(rows_file, path, n):
+    """A real run's rows repeated into a run of ``n`` pairs (records renumbered 0 -> 1 -> ...),
+    as JSON lines: the size of an hour's run without matching one."""
+    real = json_lines(rows_file)
+    with open(path, "w") as f:
+        for k in range(n):
+            f.write(json.dumps(real[k % len(real)] | {"ref": k, "obj": k + 1}) + "\n")
+    return path
+
+
+def key(r):
+    """What tells records apart (a record's covariance is an array: no ``==``)."""
+    return (r.line, r.ref, r.obj, r.result.pose, r.result.error, r.flags, r.score, r.params)
+
+
+def keys(rows):
+    return [key(r) for r in rows]
+
+
+def test_a_run_read_as_columns_is_its_rows(rows_file, tmp_path, monkeypatch):
+    """The run view's rows (``run_of_log``): every column equals what the records say, a record
+    asked for equals ``read_rows``', the failures and flagged pairs come in their order; the
+    columns are kept in the cache for the next opening, which reads no row again, and a damaged
+    entry is read afresh."""
+    from mbicp_viz.evaluation import run_rows
+    from mbicp_viz.evaluation.health import severity
+    from mbicp_viz.readers import ScanLog, read_log
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    n = run_rows.CACHED_FROM + 7
+    path = _long_run(rows_file, tmp_path / "long.jsonl", n)
+    scan = read_log(LOG).scan(0)
+    log = ScanLog("many", [scan] * (n + 1))
+    run = run_rows.run_of_log(path, log)
+    rows = read_rows(path)
+    assert len(run) == n and key(run.first) == key(rows[0])
+    for k in (0, 1, 17, n - 1, -1):
+        assert key(run[k]) == key(rows[k])
+    for name, of in run_rows.COLUMNS.items():
+        np.testing.assert_array_equal(run.column(name), np.array([of(r) for r in rows]))
+    m = run.column("motion")[9]
+    assert (m[0], m[1], m[2]) == (
+        rows[9].result.pose.x,
+        rows[9].result.pose.y,
+        rows[9].result.pose.theta,
+    )
+    bad = sorted(
+        (r for r in rows if failed(r)),
+        key=lambda r: (-r.score.error_xy, -r.score.error_theta, r.line),
+    )
+    assert keys(run.worst_first()) == keys(bad) == keys(worst_first(rows))
+    flagged = sorted((r for r in rows if r.flags), key=lambda r: (-severity(r), r.ref, r.obj))
+    assert flagged and keys(run.ranked()) == keys(flagged)
+    assert keys(run.ranked()[:3]) == keys(flagged[:3])
+    # the next opening reads the cached columns: no row is read again but those asked for
+    monkeypatch.setattr(run_rows, "file_rows", None)
+    again = run_rows.run_of_log(path, log)
+    assert len(again) == n and key(again[n - 1]) == key(rows[n - 1])
+    np.testing.assert_array_equal(again.column("severity"), run.column("severity"))
+    # a damaged entry is removed and the file read again
+    folder = run_rows.log_cache.entry(str(path), "rows", (run_rows._code_digest(),))
+    (folder / "motion.npy").write_bytes(b"not an array")
+    monkeypatch.undo()
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    np.testing.assert_array_equal(
+        run_rows.run_of_log(path, log).column("motion"), run.column("motion")
+    )
+    # rows of another log are refused as ``rows_of_log`` refuses them
+    with pytest.raises(InputError) as e:
+        run_rows.run_of_log(path, ScanLog("few", [scan] * 10))
+    assert e.value.field == "obj" and e.value.line == 10 and "another log" in e.value.message
+
+
+def test_a_long_run_keeps_its_columns_not_its_records(rows_file, tmp_path, monkeypatch):
+    """Memory: a run of 6,000 pairs as columns takes a tenth of its records as objects."""
+    import tracemalloc
+
+    from mbicp_viz.evaluation.run_rows import run_of_log
+    from mbicp_viz.readers import ScanLog, read_log
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    n = 6000
+    path = _long_run(rows_file, tmp_path / "long.jsonl", n)
+    log = ScanLog("many", [read_log(LOG).scan(0)] * (n + 1))
+    read_rows(path)  # the parameter sets met once, as both readers meet them
+    held = {}
+    for name, read in (("records", read_rows), ("columns", lambda p: run_of_log(p, log))):
+        tracemalloc.start()
+        kept = read(path)
+        held[name] = tracemalloc.get_traced_memory()[0]
+        tracemalloc.stop()
+        assert len(kept) == n
+        del kept
+    assert held["columns"] < held["records"] / 10, held

@@ -124,7 +124,8 @@ def serve(
                 "--rows",
                 field="--rows",
             )
-        source = replace(source, loops=closed_run(source.log, source.run, loop_gap_m))
+        # the records in memory: closing loops reads them all, several times
+        source = replace(source, loops=closed_run(source.log, list(source.run), loop_gap_m))
     open_debugger(
         replace(source, budget_s=budget_s), host, port, tuple(allow_origin or ()), for_seconds
     )

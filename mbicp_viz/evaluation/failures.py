@@ -64,12 +64,9 @@ def failure_reason(row: PairMatch) -> str:
 
 def worst_first(rows: list[PairMatch]) -> list[PairMatch]:
     """The failed rows: the largest translation error first, then rotation error, then order."""
+    from .run_rows import RunRows  # it ranks with this module's ``failed``
 
-    def badness(r: PairMatch) -> tuple[float, float, int]:
-        sc = r.score
-        return (-sc.error_xy, -sc.error_theta, r.line) if sc else (0.0, 0.0, r.line)
-
-    return sorted((r for r in rows if failed(r)), key=badness)
+    return list(RunRows.of(rows).worst_first()) if rows else []
 
 
 def failure_label(rank: int, row: PairMatch) -> str:

@@ -135,8 +135,10 @@ def _beyond(name: Suspicion, value: tuple[float, ...]) -> float:
 
 
 def ranked(rows: list[PairMatch]) -> list[PairMatch]:
-    """The flagged rows, the most suspicious first (then in the run's order)."""
-    return sorted((r for r in rows if r.flags), key=lambda r: (-severity(r), r.ref, r.obj))
+    """The flagged rows, the most suspicious first (then by their records)."""
+    from .run_rows import RunRows  # it ranks with this module's ``severity``
+
+    return list(RunRows.of(rows).ranked()) if rows else []
 
 
 def flag_text(name: Suspicion, value: tuple[float, ...]) -> str:

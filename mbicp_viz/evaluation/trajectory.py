@@ -11,6 +11,7 @@ odometry; ``kalman`` does that on SE(2): odometry increments predict, the matche
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -29,16 +30,23 @@ STORED = "log poses"
 
 def accumulate(rows: list[PairMatch]) -> list[Pose2]:
     """Poses of scans rows[0].ref, rows[k].obj ... composed from the matched motions."""
-    return placed(rows, [r.result.pose for r in rows])
+    return placed(*_pairs(rows), [r.result.pose for r in rows])
 
 
-def placed(rows: list[PairMatch], motions: list[Pose2]) -> list[Pose2]:
-    """The poses of the scans the rows visit, from the identity at the first: each row's motion
-    composed on the pose of the scan it starts from."""
-    at = {rows[0].ref: Pose2()}
-    for r, m in zip(rows, motions):
-        at[r.obj] = at[r.ref] @ m
-    return [at[k] for k in scan_indices(rows)]
+def _pairs(rows: list[PairMatch]) -> tuple[list[int], list[int]]:
+    """(refs, objs) of the rows (a ``run_rows.RunRows``' columns, its records not made)."""
+    if hasattr(rows, "column"):
+        return rows.column("ref").tolist(), rows.column("obj").tolist()
+    return [r.ref for r in rows], [r.obj for r in rows]
+
+
+def placed(refs: Sequence[int], objs: Sequence[int], motions: Sequence[Pose2]) -> list[Pose2]:
+    """The poses of the scans a run visits (refs[0], objs[0], objs[1] ...), from the identity at
+    the first: each pair's motion composed on the pose of the scan it starts from."""
+    at = {refs[0]: Pose2()}
+    for ref, obj, m in zip(refs, objs, motions):
+        at[obj] = at[ref] @ m
+    return [at[refs[0]], *(at[k] for k in objs)]
 
 
 def is_run(rows: list[PairMatch]) -> bool:
@@ -49,11 +57,14 @@ def is_run(rows: list[PairMatch]) -> bool:
 def off_the_run(rows: list[PairMatch]) -> int | None:
     """The first row that starts from a scan the rows before it did not place, or places one
     again (None: the rows are a run)."""
-    seen = {rows[0].ref} if rows else set()
-    for k, r in enumerate(rows):
-        if r.ref not in seen or r.obj in seen:
+    if not rows:
+        return None
+    refs, objs = _pairs(rows)
+    seen = {refs[0]}
+    for k, (ref, obj) in enumerate(zip(refs, objs)):
+        if ref not in seen or obj in seen:
             return k
-        seen.add(r.obj)
+        seen.add(obj)
     return None
 
 
@@ -61,20 +72,30 @@ def odometry_chain(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
     """The odometry's track over the scans the rows visit, from the first, in the frame the rows
     report (the base's when they do): each row's odometry motion chained, no scan read again.
     None when a row has no odometry."""
-    if any(r.odometry is None for r in rows):
+    return odometry_placed(log, *_pairs(rows), [r.odometry for r in rows], rows[0].frame)
+
+
+def odometry_placed(
+    log: ScanLog, refs: Sequence[int], objs: Sequence[int], odometry: list, frame: str
+) -> list[Pose2] | None:
+    """``odometry_chain`` of a run's pairs and their odometry motions (laser frame; None: none)
+    reported in ``frame``."""
+    if any(o is None for o in odometry):
         return None
-    base = rows[0].frame != "laser"
-    return placed(rows, [log.frames.reported(r.odometry, base) for r in rows])
+    base = frame != "laser"
+    return placed(refs, objs, [log.frames.reported(o, base) for o in odometry])
 
 
 def scan_indices(rows: list[PairMatch]) -> list[int]:
     """The scans a run visits, in its order."""
-    return [rows[0].ref] + [r.obj for r in rows]
+    refs, objs = _pairs(rows)
+    return [refs[0], *objs]
 
 
-def log_poses(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
-    """The log's own scan poses for the same scans, in the first scan's frame (None if missing)."""
-    xyt = log.poses_of(scan_indices(rows))
+def log_poses(log: ScanLog, records: list[int]) -> list[Pose2] | None:
+    """The log's own poses of the scans ``records``, in the first one's frame (None if one has
+    none)."""
+    xyt = log.poses_of(records)
     if np.isnan(xyt).any():  # a bag stores none
         return None
     # each pose relative to the first (``relative``, for all at once)
@@ -90,7 +111,7 @@ def sequence_tracks(log: ScanLog, rows: list[PairMatch], fuse: bool) -> dict[str
     and with ``fuse`` the EKF of the matches with the log's odometry (last; the one a map is drawn
     on)."""
     out = {MATCHED: accumulate(rows)}
-    stored = log_poses(log, rows)
+    stored = log_poses(log, scan_indices(rows))
     if stored is not None:
         out[STORED] = stored
     if fuse:

@@ -15,8 +15,11 @@ import gc
 import json
 import os
 import shutil
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+import numpy as np
 
 from mbicp_viz.errors import InputError
 from mbicp_viz.outputs import written
@@ -58,12 +61,13 @@ def _decoded(line: str, path: str, n: int):
 
 
 def _lines(lines, path: str):
-    """(line, object) for each non-empty line of JSON lines; a partial file's header is skipped."""
-    for n, line in enumerate(lines, 1):
+    """(line, its byte offset, object) for each non-empty line of JSON lines (``lines``: offset
+    and text of each); a partial file's header is skipped."""
+    for n, (offset, line) in enumerate(lines, 1):
         if line.strip():
             obj = _decoded(line, path, n)
             if n > 1 or _header(obj) is None:
-                yield n, obj
+                yield n, offset, obj
 
 
 def _objects(text: str, path: str):
@@ -126,12 +130,22 @@ def gc_paused():
 
 
 def read_rows(path: str | Path) -> list[PairMatch]:
-    """Every row of a rows file, in order; an empty file or array is refused. JSON lines (what
-    `eval sequence` writes) are read one line at a time, an hour-long run's hundreds of MB never
-    held whole; a JSON array (as written before) is read whole, up to ``MAX_FILE_BYTES``."""
+    """Every row of a rows file, in order; an empty file or array is refused."""
+    with gc_paused():
+        rows = [row for _, _, row in file_rows(path)]
+    if not rows:
+        raise InputError("no rows", str(path))
+    return rows
+
+
+def file_rows(path: str | Path) -> Iterator[tuple[int, int | None, PairMatch]]:
+    """(line, byte offset, row) of each row of a rows file, in order, each checked. JSON lines
+    (what `eval sequence` writes) are read one line at a time, an hour-long run's hundreds of MB
+    never held whole; a JSON array (as written before) is read whole, up to ``MAX_FILE_BYTES``
+    (its rows have no offset: None)."""
     path = str(path)
     p = Path(path)
-    with opening(p), open(p, "rb") as f, gc_paused():
+    with opening(p), open(p, "rb") as f:
         start = f.read(64).lstrip()
         f.seek(0)
         if start.startswith(b"["):
@@ -139,13 +153,11 @@ def read_rows(path: str | Path) -> list[PairMatch]:
                 raise InputError(
                     f"larger than {MAX_FILE_BYTES // 1_000_000} MB: not a rows file", path
                 )
-            objects = _objects(_text(f.read(), path), path)
+            objects = ((n, None, obj) for n, obj in _objects(_text(f.read(), path), path))
         else:
-            objects = _lines(_file_lines(f, path), path)
-        rows = [parse_row(obj, path, line) for line, obj in objects]
-    if not rows:
-        raise InputError("no rows", path)
-    return rows
+            objects = _lines(_offset_lines(f, path), path)
+        for line, offset, obj in objects:
+            yield line, offset, parse_row(obj, path, line)
 
 
 MAX_LINE_BYTES = 1_000_000  # a row is a few kB
@@ -158,12 +170,20 @@ def _text(data: bytes, path: str, line: int | None = None) -> str:
         raise InputError(f"not UTF-8 text ({e.reason} at byte {e.start})", path, line) from None
 
 
-def _file_lines(f, path: str):
-    """The lines of an open file, decoded, each at most ``MAX_LINE_BYTES``."""
+def _offset_lines(f, path: str):
+    """(byte offset, line) of each line of an open file, decoded, each at most
+    ``MAX_LINE_BYTES``."""
+    offset = f.tell()
     for n, data in enumerate(iter(lambda: f.readline(MAX_LINE_BYTES + 1), b""), 1):
         if len(data) > MAX_LINE_BYTES:
             raise InputError(f"a line longer than {MAX_LINE_BYTES} bytes: not a rows file", path, n)
-        yield _text(data, path, n)
+        yield offset, _text(data, path, n)
+        offset += len(data)
+
+
+def _file_lines(f, path: str):
+    """The lines of an open file, decoded, each at most ``MAX_LINE_BYTES``."""
+    return (line for _, line in _offset_lines(f, path))
 
 
 class PartialRows:
@@ -254,34 +274,50 @@ class PartialRows:
 
 
 def rows_of_log(path: str | Path, log) -> list[PairMatch]:
-    """``read_rows``, each row checked to belong to ``log`` (a ``ScanLog``) as it is read: its
-    scan records, its scan stream and the frame its poses are in."""
-    path, rows = str(path), read_rows(path)
-    for row in rows:
-        for key, k in (("ref", row.ref), ("obj", row.obj)):
-            if k >= log.records:
-                raise InputError(
-                    f"record {k} is beyond the {log.records} records of {log.path}: rows of "
-                    "another log?",
-                    path,
-                    row.line,
-                    key,
-                )
-    if rows[0].stream != log.topic and rows[0].stream is not None:
+    """``read_rows``, the rows checked to belong to ``log`` (``belong``)."""
+    rows = read_rows(path)
+    belong(
+        str(path),
+        log,
+        np.array([r.ref for r in rows]),
+        np.array([r.obj for r in rows]),
+        np.array([r.line for r in rows]),
+        rows[0],
+    )
+    return rows
+
+
+def belong(
+    path: str, log, refs: np.ndarray, objs: np.ndarray, lines: np.ndarray, first: PairMatch
+) -> None:
+    """Rows (their records ``refs`` and ``objs``, their ``lines``, the ``first``) checked to
+    belong to ``log`` (a ``ScanLog``): its scan records, its scan stream and the frame its poses
+    are in; the first row that does not is named."""
+    beyond = np.flatnonzero((refs >= log.records) | (objs >= log.records))
+    if len(beyond):
+        k = beyond[0]
+        key = "ref" if refs[k] >= log.records else "obj"
         raise InputError(
-            f"written for the scans of {rows[0].stream!r}, but {log.path} is read as "
-            f"{log.topic or 'its only stream'!r}: open it with --topic {rows[0].stream}",
+            f"record {refs[k] if key == 'ref' else objs[k]} is beyond the {log.records} records "
+            f"of {log.path}: rows of another log?",
             path,
-            rows[0].line,
+            int(lines[k]),
+            key,
+        )
+    if first.stream != log.topic and first.stream is not None:
+        raise InputError(
+            f"written for the scans of {first.stream!r}, but {log.path} is read as "
+            f"{log.topic or 'its only stream'!r}: open it with --topic {first.stream}",
+            path,
+            first.line,
             "stream",
         )
     frames = log.frames
-    if rows[0].frame not in (frames.frame_name(True), frames.frame_name(False)):
+    if first.frame not in (frames.frame_name(True), frames.frame_name(False)):
         raise InputError(
-            f"written for poses in {rows[0].frame!r}, but {log.path} reads as "
+            f"written for poses in {first.frame!r}, but {log.path} reads as "
             f"{frames.frame_name(True)!r}: rows of another log, or read with other options?",
             path,
-            rows[0].line,
+            first.line,
             "frame",
         )
-    return rows

@@ -511,7 +511,8 @@ def log_sequence(
     root = SEQUENCE_ROOT
     for space in (scene.SEQUENCE, f"{scene.PAIR}/{scene.SCANS}"):
         log_y_up(stream, f"/{root}/{space}")
-    poses, stored, records = accumulate(rows), log_poses(log, rows), scan_indices(rows)
+    records = scan_indices(rows)
+    poses, stored = accumulate(rows), log_poses(log, records)
     mount = log.frames.mount if rows[0].frame != "laser" else Pose2()
     every = map_step(log, records, MAP_POINTS)
     scans = log.scans_of(records, odometry=False)

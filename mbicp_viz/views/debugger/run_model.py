@@ -23,18 +23,19 @@ import numpy as np
 from mbicp_viz.core import Pose2
 from mbicp_viz.evaluation.health import flags_text
 from mbicp_viz.evaluation.loops import LoopRun
+from mbicp_viz.evaluation.run_rows import RunRows
 from mbicp_viz.evaluation.run_score import RelationErrors, relation_errors
 from mbicp_viz.evaluation.trajectory import (
     accumulate,
     log_poses,
     map_step,
-    odometry_chain,
+    odometry_placed,
+    placed,
     scan_indices,
     stamps,
 )
 from mbicp_viz.evaluation.versus import Versus
 from mbicp_viz.readers import ScanLog
-from mbicp_viz.readers.pair_match import PairMatch, Suspicion
 from mbicp_viz.readers.relations import Relation
 
 from .. import scene
@@ -60,7 +61,7 @@ class RunModel:
     """A run's rows on their log: the poses and the map, computed once."""
 
     log: ScanLog
-    rows: list[PairMatch]
+    rows: RunRows  # (a list of records is taken as one)
     versus: Versus | None = None  # a second configuration's run of the same pairs (run B)
     relations: list[Relation] | None = None  # Kümmerle et al.'s, on the log's clock + offset
     offset: float = 0.0
@@ -69,9 +70,13 @@ class RunModel:
     # the map at each set of poses it was drawn at: id(poses) -> (poses, (points, their scans))
     _maps: dict = field(default_factory=dict, init=False, repr=False)
 
+    def __post_init__(self):
+        self.rows = RunRows.of(self.rows)
+
     @cached_property
     def poses(self) -> list[Pose2]:
-        return accumulate(self.rows)
+        r = self.rows
+        return placed(r.column("ref"), r.column("obj"), r.poses("motion"))
 
     @property
     def drawn(self) -> list[Pose2]:
@@ -101,7 +106,7 @@ class RunModel:
     @cached_property
     def base(self) -> bool:
         """Whether the rows report the robot base's motion (else the laser's)."""
-        return self.rows[0].frame != "laser"
+        return self.rows.first.frame != "laser"
 
     @cached_property
     def mount(self) -> Pose2:
@@ -111,7 +116,7 @@ class RunModel:
     @cached_property
     def stored(self) -> list[Pose2] | None:
         """The log's scan poses (laser frame) in the frame the rows report, the run's world."""
-        laser = log_poses(self.log, self.rows)
+        laser = log_poses(self.log, self.scans)
         if laser is None:
             return None
         return [self.log.frames.reported(p, self.base) for p in laser]
@@ -120,11 +125,14 @@ class RunModel:
     def odometry(self) -> list[Pose2] | None:
         """The odometry's track, chained from each row's odometry motion (the log's scans are
         not read again)."""
-        return odometry_chain(self.log, self.rows)
+        r = self.rows
+        return odometry_placed(
+            self.log, r.column("ref"), r.column("obj"), r.poses("odometry"), r.first.frame
+        )
 
     @cached_property
     def flagged(self) -> list[int]:
-        return [n for n, r in enumerate(self.rows) if r.flags]
+        return np.flatnonzero(self.rows.column("flagged")).tolist()
 
     def world_points(self, k: int) -> np.ndarray:
         """The points of the run's k-th scan in the world frame."""
@@ -278,15 +286,13 @@ class RunModel:
         """The health timeline: pair number, overlap [%], distance from odometry [mm], flagged
         (100 where a pair is, else 0), residual (RMS of the kept pairs' distances) [mm] and,
         beside a run B, how far A and B end apart where they disagree [mm]."""
+        c = self.rows.column
         x = np.arange(1, len(self.rows) + 1, dtype=float)
-        apart = [r.flags.get(Suspicion.DISAGREE, (0.0,))[0] * 1000 for r in self.rows]
-        overlap = [100 * r.overlap if r.overlap is not None else np.nan for r in self.rows]
         # the RMS of the kept pairs' distances (the record's error is their mean square)
-        residual = [1000 * math.sqrt(r.result.error) for r in self.rows]
-        odo = [1000 * r.odometry_xy if r.odometry_xy is not None else np.nan for r in self.rows]
-        flagged = [100.0 if r.flags else 0.0 for r in self.rows]
-        out = (x, np.array(overlap), np.array(odo), np.array(flagged), np.array(residual))
-        return out + ((np.array(apart),) if self.versus is not None else ())
+        residual = 1000 * np.sqrt(c("error").astype(float))
+        flagged = np.where(c("flagged"), 100.0, 0.0)
+        out = (x, 100 * c("overlap"), 1000 * c("odometry_xy"), flagged, residual)
+        return out + ((1000 * c("apart"),) if self.versus is not None else ())
 
 
 # one warmed model per run a source holds, computed once (by the server when it starts, or by the

@@ -5,6 +5,7 @@ from __future__ import annotations
 from mbicp_viz.core import Pose2
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.pairs import Guess
+from mbicp_viz.evaluation.run_rows import RunRows, run_of_log
 from mbicp_viz.evaluation.scenarios import find_scenario
 from mbicp_viz.evaluation.trajectory import is_run
 from mbicp_viz.evaluation.versus import versus as compare_runs
@@ -63,7 +64,7 @@ def files_source(
         )
         return Source(f"{first} -> {second}", log, guess_kind=guess)
     log = read_log(first, options)
-    run = rows_of_log(rows, log) if rows is not None else []
+    run = run_of_log(rows, log) if rows is not None else []
     both = None
     if versus is not None:
         if rows is None:
@@ -108,8 +109,8 @@ def log_source(
     given), and a chained run has its run view."""
     if len(log.record_numbers(2)) < 2:
         raise InputError("needs at least two usable scans (or give two files)", log.path)
-    run = list(run)
-    failed, suspects = _failures(run) if run else ([], [])
+    run = RunRows.of(run) if len(run) else []
+    failed, suspects = (run.worst_first(), run.ranked()) if run else ([], [])
     opened = (failed or suspects or [None])[0] if pair is None else None
     i, j = (
         pair
@@ -135,15 +136,6 @@ def log_source(
         opened=opened,
         options=options,
     )
-
-
-def _failures(rows: list[PairMatch]) -> tuple[list[PairMatch], list[PairMatch]]:
-    """The failed rows of an evaluation, worst first, and its flagged rows, the most suspicious
-    first."""
-    from mbicp_viz.evaluation.failures import worst_first
-    from mbicp_viz.evaluation.health import ranked
-
-    return worst_first(rows), ranked(rows)
 
 
 def demo_source(path: str) -> Source:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -59,10 +59,11 @@ class Source:
     note: str = ""  # Markdown shown above the panels (a scenario's "what to look at")
     teaching: bool = False  # iso-distance curves on from the start
     # an evaluation's failed pairs, worst first
-    failures: list[PairMatch] = field(default_factory=list)
+    failures: Sequence[PairMatch] = field(default_factory=list)
     # its flagged pairs (evaluation/health.py), the most suspicious first
-    suspects: list[PairMatch] = field(default_factory=list)
-    run: list[PairMatch] | None = None  # its rows when they are a run (eval sequence): run view
+    suspects: Sequence[PairMatch] = field(default_factory=list)
+    # its rows when they are a run (eval sequence): run view (evaluation/run_rows.RunRows)
+    run: Sequence[PairMatch] | None = None
     versus: object | None = None  # evaluation/versus.Versus: a second run of the same pairs
     relations: list | None = None  # Kümmerle et al.'s relations to score the run on (run view)
     offset: float = 0.0  # added to the log's stamps to meet the relations'

@@ -1,0 +1,262 @@
+"""A run's rows as the run view reads them: numpy columns of what it needs of every pair (the
+pairs, the motions, the odometry, the health timeline, the ranking of flagged and failed pairs),
+and each pair's whole record made only when it is asked for.
+
+A rows file is read once, every row checked as ``read_rows`` checks it, and only its columns and
+each row's place in the file are kept: an hour-long run's 144,000 records as objects took 261 MB,
+its columns take about 20 MB. A long file's columns are kept in the cache folder, so its next
+opening reads no row (``log_cache``'s folder and size limit). A run already in memory (``eval
+sequence --serve``, a live buffer) is wrapped as it is, its columns made from its records when
+first asked for.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import shutil
+import sys
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from mbicp_viz.core import Pose2
+from mbicp_viz.errors import InputError
+from mbicp_viz.readers import log_cache
+from mbicp_viz.readers.pair_match import PairMatch, Suspicion
+from mbicp_viz.readers.rows import belong, file_rows, gc_paused, parse_row
+
+from .failures import failed
+from .health import severity
+
+NONE3 = (math.nan,) * 3
+
+# each column: what it holds of one record (one definition, for a file's pass and a list alike)
+COLUMNS: dict[str, Callable[[PairMatch], object]] = {
+    "ref": lambda r: r.ref,
+    "line": lambda r: r.line,
+    "obj": lambda r: r.obj,
+    "motion": lambda r: r.result.pose.as_array(),  # x, y [m], theta [rad]
+    "odometry": lambda r: NONE3 if r.odometry is None else r.odometry.as_array(),  # NaN: none
+    "overlap": lambda r: math.nan if r.overlap is None else r.overlap,  # share, NaN: not measured
+    "error": lambda r: r.result.error,  # mean squared distance of the kept pairs [m^2]
+    "odometry_xy": lambda r: math.nan if r.odometry_xy is None else r.odometry_xy,  # [m]
+    "apart": lambda r: r.flags.get(Suspicion.DISAGREE, (0.0,))[0],  # from run B's [m]
+    "flagged": lambda r: bool(r.flags),
+    "severity": severity,
+    "failed": failed,
+    # a failed row's translation and rotation error against the truth (0: not scored)
+    "error_xy": lambda r: r.score.error_xy if r.score is not None else 0.0,
+    "error_theta": lambda r: r.score.error_theta if r.score is not None else 0.0,
+}
+CACHED_ROWS = 256  # records made again from the file, kept (a slider's neighbourhood)
+
+
+class RunRows(Sequence[PairMatch]):
+    """A run's rows: ``rows[k]`` is the k-th record, each column a numpy array over all of them.
+    Its records are a list in memory (``rows``), or made again from a file when asked for
+    (``fetch``, with every column already made)."""
+
+    def __init__(
+        self,
+        first: PairMatch,
+        rows: list[PairMatch] | None = None,
+        fetch: Callable[[int], PairMatch] | None = None,
+        columns: dict[str, np.ndarray] | None = None,
+    ):
+        self.first, self._rows, self._fetch = first, rows, fetch or rows.__getitem__
+        self._columns = columns or {}
+        self._n = len(rows) if rows is not None else len(self._columns["ref"])
+
+    @staticmethod
+    def of(rows: Sequence[PairMatch]) -> RunRows:
+        """``rows`` as a RunRows (itself when it is one); a list's columns are made when asked."""
+        if isinstance(rows, RunRows):
+            return rows
+        rows = list(rows)
+        if not rows:
+            raise ValueError("a run has rows")
+        return RunRows(rows[0], rows)
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self._fetch(i) for i in range(*k.indices(self._n))]
+        if not -self._n <= k < self._n:
+            raise IndexError(k)
+        return self._fetch(k % self._n)
+
+    def __iter__(self) -> Iterator[PairMatch]:
+        return iter(self._rows) if self._rows is not None else map(self._fetch, range(self._n))
+
+    def column(self, name: str) -> np.ndarray:
+        """A column (``COLUMNS``) over every row."""
+        if name not in self._columns:
+            self._columns[name] = np.array([COLUMNS[name](r) for r in self._rows])
+        return self._columns[name]
+
+    def poses(self, name: str) -> list[Pose2 | None]:
+        """A pose column (``motion``, ``odometry``) as poses (None where it is NaN)."""
+        return [None if math.isnan(p[0]) else Pose2(*p) for p in self.column(name).tolist()]
+
+    def picked(self, keep: np.ndarray, *keys: np.ndarray) -> Sequence[PairMatch]:
+        """The rows where ``keep`` holds, ordered by ``keys`` (each a value per row, smallest
+        first; ties by the first key, then the next, then in the run's order), each made only
+        when read."""
+        idx = np.flatnonzero(keep)
+        order = np.lexsort([k[idx] for k in reversed(keys)]) if keys else np.arange(len(idx))
+        return _Picked(self, idx[order])
+
+    def worst_first(self) -> Sequence[PairMatch]:
+        """The failed rows: the largest translation error first, then rotation error."""
+        c = self.column
+        return self.picked(c("failed"), -c("error_xy"), -c("error_theta"))
+
+    def ranked(self) -> Sequence[PairMatch]:
+        """The flagged rows, the most suspicious first (then by their records)."""
+        c = self.column
+        return self.picked(c("flagged"), -c("severity"), c("ref"), c("obj"))
+
+
+class _Picked(Sequence[PairMatch]):
+    """Some of a run's rows, in an order of their own, each made when read."""
+
+    def __init__(self, rows: RunRows, index: np.ndarray):
+        self.rows, self.index = rows, index
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self.rows[int(i)] for i in self.index[k]]
+        return self.rows[int(self.index[k])]
+
+
+def run_of_log(path: str | Path, log) -> RunRows:
+    """A rows file as a RunRows, checked to belong to ``log`` (``rows.belong``): read once, each
+    row checked as ``read_rows`` does; its columns and each row's offset in the file kept, a row
+    made again from its line when asked for (a JSON array, as written before, is kept whole).
+    A file of ``CACHED_FROM`` rows or more has its columns kept in the cache folder for the next
+    opening (``log_cache``: by its path, size and modification time, and the code that made
+    them)."""
+    path = str(path)
+    folder = log_cache.entry(path, "rows", (_code_digest(),))
+    run = _cached(folder, path)
+    if run is None:
+        run, offsets = _read(path)
+        if offsets is not None and len(run) >= CACHED_FROM:
+            _save(folder, run, offsets)
+    belong(path, log, run.column("ref"), run.column("obj"), run.column("line"), run.first)
+    return run
+
+
+CACHED_FROM = 5_000  # rows files with fewer rows are read each time: well under a second
+
+
+def _read(path: str) -> tuple[RunRows, np.ndarray | None]:
+    """The rows file read once: its RunRows, and each row's offset in it (None: a JSON array)."""
+    columns = {name: [] for name in COLUMNS}
+    offsets, rows, first = [], [], None
+    with gc_paused():
+        for _, offset, row in file_rows(path):
+            first = first or row
+            if offset is None:  # a JSON array's row has no line of its own
+                rows.append(row)
+                continue
+            offsets.append(offset)
+            for name, value in COLUMNS.items():
+                columns[name].append(value(row))
+    if first is None:
+        raise InputError("no rows", path)
+    if rows:
+        return RunRows(first, rows), None
+    arrays = {name: np.array(v) for name, v in columns.items()}
+    offsets = np.array(offsets, dtype=np.int64)
+    return RunRows(first, None, _FileRows(path, offsets, arrays["line"]), arrays), offsets
+
+
+def _code_digest() -> str:
+    """What makes the columns (the record's reader, the flags' ranking, the failures, this
+    module): another version of it makes them afresh."""
+    from mbicp_viz.readers import pair_match
+
+    from . import failures, health
+
+    digest = hashlib.sha256()
+    for module in (pair_match, failures, health, sys.modules[__name__]):
+        digest.update(Path(module.__file__).read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _save(folder: Path, run: RunRows, offsets: np.ndarray) -> None:
+    """The columns and offsets written to ``folder``, whole or not at all."""
+    from mbicp_viz.outputs import written_folder
+
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with written_folder(folder) as tmp:
+            tmp.mkdir()
+            for name in COLUMNS:
+                np.save(tmp / f"{name}.npy", run.column(name))
+            np.save(tmp / "offsets.npy", offsets)
+            (tmp / "meta.json").write_text(json.dumps({"rows": len(run)}))
+    except OSError:  # a full disk, or another process wrote it first: read the file next time
+        return
+    log_cache.prune(folder.parent, log_cache.CACHE_BYTES, keep=folder)
+
+
+def _cached(folder: Path, path: str) -> RunRows | None:
+    """The RunRows a cache folder holds (None: none, or damaged, and then removed)."""
+    if not folder.is_dir():
+        return None
+    try:
+        n = json.loads((folder / "meta.json").read_text())["rows"]
+        arrays = {name: np.load(folder / f"{name}.npy") for name in COLUMNS}
+        offsets = np.load(folder / "offsets.npy")
+        if any(len(a) != n for a in (*arrays.values(), offsets)) or not n:
+            raise ValueError("rows")
+        fetch = _FileRows(path, offsets, arrays["line"])
+        first = fetch(0)
+    except (OSError, ValueError, KeyError, TypeError, InputError):
+        shutil.rmtree(folder, ignore_errors=True)
+        return None
+    os.utime(folder / "meta.json")  # used: the last to be removed
+    return RunRows(first, None, fetch, arrays)
+
+
+class _FileRows:
+    """A row made again from its line of the rows file (a few kept)."""
+
+    def __init__(self, path: str, offsets: np.ndarray, lines: np.ndarray):
+        self.path, self.offsets, self.lines = path, offsets, lines
+        self._kept: OrderedDict[int, PairMatch] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def __call__(self, k: int) -> PairMatch:
+        with self._lock:
+            if k in self._kept:
+                self._kept.move_to_end(k)
+                return self._kept[k]
+        with open(self.path, "rb") as f:
+            f.seek(int(self.offsets[k]))
+            text = f.readline()
+        line = int(self.lines[k])
+        try:
+            row = parse_row(json.loads(text), self.path, line)
+        except (ValueError, InputError):  # checked when read: the file changed since
+            raise InputError(
+                "changed since it was opened: open it again", self.path, line
+            ) from None
+        with self._lock:
+            self._kept[k] = row
+            if len(self._kept) > CACHED_ROWS:
+                self._kept.popitem(last=False)
+        return row
