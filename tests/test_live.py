@@ -137,7 +137,7 @@ def test_a_key_frame_run_live_is_eval_sequences_key_frame_run(bag):
     try:
         run, rows = lockstep_run(robot, path, keyframes=KeyFrames(1.5, math.radians(45.0)))
         assert any(r.obj - r.ref > 1 for r in rows)  # some scans matched across a key frame
-        _, log, viewed, _ = run.view()
+        _, log, viewed, _, _ = run.view()
         assert is_run(viewed) and len(viewed) == len(rows) and log.records == SCANS
     finally:
         if run is not None:
@@ -307,6 +307,55 @@ def test_a_wrong_url_is_one_line():
             LiveRun(url, ImprovedParams())
 
 
+def test_the_live_map_grows_by_the_new_scans_and_stays_where_it_was_drawn(bag, tmp_path):
+    """The live page's world frame is the first scan it drew, carried along as the buffer drops
+    its oldest scans: a scan's pose never moves between refreshes; each refresh adds the map of
+    the scans new to it as one node and leaves the nodes drawn before untouched; the map of
+    scans that left the buffer is removed."""
+    from mbicp_viz.views.debugger.app import viser_server
+    from mbicp_viz.views.debugger.live import LiveTab
+
+    _, served = bag
+    robot = FoxgloveRobot(served)
+    run = LiveRun(robot.url, ImprovedParams(), buffer_s=4.0)  # 8 scans of a 20 s drive
+    server = viser_server("127.0.0.1", 0)
+    tab = LiveTab(server, run, tmp_path, None)
+    seen: dict[int, object] = {}  # each map node by its last scan's number
+    moved, refreshed, removed = [], 0, set()
+
+    def refresh() -> None:
+        nonlocal refreshed
+        before = dict(tab.world)
+        tab._guarded(tab.refresh)
+        refreshed += 1
+        for g in before.keys() & tab.world.keys():  # the same to rounding (composed anew)
+            a, b = before[g], tab.world[g]
+            moved.append(max(abs(a.x - b.x), abs(a.y - b.y), abs(a.theta - b.theta)))
+        parts = {last: node for last, node, _ in tab.map_parts}
+        for last, node in parts.items():
+            assert seen.setdefault(last, node) is node  # drawn once, kept as it was
+        removed.update(seen.keys() - parts.keys())
+        assert all(last >= min(tab.world) for last in parts)  # only scans still in the buffer
+
+    def before_scan(n: int) -> None:
+        assert wait_for(lambda: caught_up(run, n), 60), run.snapshot()[0].line()
+        if n > 1:
+            refresh()
+
+    try:
+        robot.publish(TOPICS, rate=10.0, before_scan=before_scan, received=lambda: has(run))
+        assert wait_for(lambda: caught_up(run, SCANS), 60)
+        refresh()
+    finally:
+        tab.close()
+        server.stop()
+        run.stop()
+        robot.stop()
+    assert refreshed >= SCANS - 1 and max(moved) < 1e-9, max(moved)
+    assert min(tab.world) > SCANS // 2  # the buffer dropped its first scans: the frame went on
+    assert removed and len(seen) > len(tab.map_parts)
+
+
 def test_a_frozen_buffer_opens_in_the_debugger_with_its_pairs_as_matched_live(bag, tmp_path):
     """Freeze: the buffer's run view in a real headless Chromium; "open this pair" opens the pair
     debugger on the pair as it was matched live."""
@@ -391,7 +440,7 @@ def test_the_live_page_grows_with_the_run_freezes_opens_a_pair_and_resumes(bag, 
             legend = page.locator(".mbicp-legend")
             for style in (scene.RUN_TRAJECTORY, scene.RUN_MAP, scene.RUN_OBJECT):
                 legend.get_by_text(style.label, exact=True).wait_for(timeout=30000)
-            legend.get_by_text("the buffer's first scan's (base_link)").wait_for()
+            legend.get_by_text("the first scan this page drew (base_link)").wait_for()
             page.get_by_text("how far behind the robot").wait_for()
             page.screenshot(path=str(tmp_path / "live.png"))
             tab = next(iter(app.sessions.values()))

@@ -365,10 +365,10 @@ class LiveRun:
         with self._lock:
             return replace(self.status, notes=list(self.status.notes)), [r for _, r, _ in self.rows]
 
-    def view(self) -> tuple[Status, ScanLog, list[PairMatch], list[float]]:
+    def view(self) -> tuple[Status, ScanLog, list[PairMatch], list[float], list[int]]:
         """What the live page draws: the status, the chain's last unbroken stretch in the buffer
         as a log of its scans (read from memory, not saved) with its rows numbered as that log's
-        records, and each row's lag [s]."""
+        records, each row's lag [s], and each record's number in the robot's run."""
         with self._lock:
             status = replace(self.status, notes=list(self.status.notes))
             scans, kept = list(self.scans), list(self.rows)
@@ -376,7 +376,7 @@ class LiveRun:
         kept = [(r, lag) for _, r, lag in kept if r.ref in number and r.obj in number]
         rows = [replace(r, ref=number[r.ref], obj=number[r.obj]) for r, _ in kept]
         log = ScanLog(self.url, [s for _, s in scans], frames=self.frames(self._frame_id))
-        return status, log, rows, [lag for _, lag in kept]
+        return status, log, rows, [lag for _, lag in kept], [k for k, _ in scans]
 
     def stop(self) -> None:
         self._stop.set()

@@ -1,5 +1,5 @@
 """The live page (``live URL --serve``): a running robot's run as it grows, in the world frame of
-the buffer's first scan (its trajectory, the map, the newest pair's scans), the health of every
+the first scan the page drew (its trajectory, the map, the newest pair's scans), the health of every
 pair in the buffer, how far behind the robot each result came, and the status (connected, scans
 matched and skipped, the buffer's seconds and size). "freeze" opens the buffer in the debugger
 (its run view, any pair in the pair debugger with everything it has); "resume" goes live again.
@@ -20,10 +20,12 @@ import numpy as np
 import viser
 import viser.uplot as uplot
 
+from mbicp_viz.core import Pose2
+
 from .. import scene, viser_draw
 from . import panels
 from .camera import TopDownCamera
-from .run_model import RunModel
+from .run_model import MAP_POINTS, RunModel
 
 REFRESH_S = 0.5  # the page follows the run this often
 TIME_AXIS = "time of the scan [s], 0 = the newest"
@@ -93,6 +95,14 @@ class LiveTab:
         self.drawn: tuple = ()  # what the scene shows: (pairs, the newest pair's scans)
         self.box: np.ndarray | None = None  # what the view was fitted to (lo, hi) [m]
         self.extent = np.zeros((1, 2))
+        self.scale = 1.0  # the dots' and lines' size, set when the view is fitted
+        # the page's world frame is the first scan it drew, carried along as the buffer drops its
+        # oldest scans: each scan's pose in it, by its number in the robot's run
+        self.world: dict[int, Pose2] = {}
+        # the map, drawn once per refresh for the scans new to it: (its last scan's number, its
+        # node, its points' lower and upper corners), removed once its scans left the buffer
+        self.map_parts: deque[tuple[int, object, np.ndarray]] = deque()
+        self.mapped = -1  # the number of the last scan the map has
 
     def _follow(self) -> None:
         while not self.closed.wait(self.every_s):
@@ -111,7 +121,7 @@ class LiveTab:
 
     def refresh(self) -> None:
         """The status each time; the scene and the plots when a pair was added."""
-        status, log, rows, lags = self.run.view()
+        status, log, rows, lags, numbers = self.run.view()
         error = self.run.error()
         line = status.line()
         self.h_status.content = (
@@ -128,24 +138,50 @@ class LiveTab:
         self.drawn = key
         t0 = time.perf_counter()
         model = RunModel(log, rows)
-        self.draw(model)
+        self.draw(model, numbers)
         self.plot(model, log, lags)
         self.refresh_s.append(time.perf_counter() - t0)
 
-    def draw(self, model: RunModel) -> None:
-        pts = model.extent()
-        self.extent = pts
-        scale = scene.scene_scale(pts)
-        n = len(model.rows) - 1
-        layers = [
-            *scene.run_track_layers(model.tracks(), scale),
-            *scene.run_map_layers([np.concatenate(model.chunks(model.poses))], scale),
-            *scene.run_pair_layers(model.pair_at(n), scale),
-        ]
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
+    def draw(self, model: RunModel, numbers: list[int]) -> None:
+        """The buffer's run in the page's world frame: its tracks and the newest pair drawn anew,
+        the map only for the scans new to it (the whole map each refresh took most of it), and
+        the map of scans that left the buffer removed."""
+        visited = [numbers[k] for k in model.scans]  # each scan's number in the robot's run
+        origin = self.world.get(visited[0])
+        if origin is None:  # the first pair, or the chain broke: the world starts here
+            self._clear_map()
+            origin = Pose2()
+        poses = [origin @ p for p in model.poses]
+        self.world = dict(zip(visited, poses))
+        track = np.array([[p.x, p.y] for p in poses])
+        self.extent = np.concatenate([track, *(part[2] for part in self.map_parts)])
+        lo, hi = self.extent.min(axis=0), self.extent.max(axis=0)
         if self.box is None or np.any(lo < self.box[0]) or np.any(hi > self.box[1]):
             self.fit()  # the run left the view
+        odometry = model.odometry
+        n = len(model.rows) - 1
+        mount = model.mount
+        layers = [
+            *scene.run_track_layers(
+                scene.RunTracks(
+                    poses,
+                    odometry=None if odometry is None else [origin @ p for p in odometry],
+                    suspects=track[[f + 1 for f in model.flagged]].reshape(-1, 2),
+                ),
+                self.scale,
+            ),
+            *scene.run_pair_layers(
+                scene.RunPair(
+                    [],
+                    (poses[n] @ mount).apply(model.log.scan(model.scans[n]).points()),
+                    (poses[n + 1] @ mount).apply(model.log.scan(model.scans[n + 1]).points()),
+                    poses[n + 1],
+                ),
+                self.scale,
+            ),
+        ]
         with self.client.atomic():
+            self._extend_map(model, visited, poses)
             drawn = {}
             for layer in layers:
                 name = f"/{layer.path}"
@@ -154,14 +190,45 @@ class LiveTab:
                 self.nodes[name].remove()
             self.nodes = drawn
         shown = {layer.style.label: layer.style for layer in layers if scene.has_content(layer)}
-        frame = f"the world frame: the buffer's first scan's ({model.rows[0].frame})"
+        if self.map_parts:
+            shown[scene.RUN_MAP.label] = scene.RUN_MAP
+        frame = f"the world frame: the first scan this page drew ({model.rows[0].frame})"
         self.h_legend.content = panels.legend_html(list(shown.values()), self.grid_m, frame)
+
+    def _extend_map(self, model: RunModel, visited: list[int], poses: list[Pose2]) -> None:
+        """The scans new to the map added as one node (every k-th scan of the run, the map kept
+        near ``MAP_POINTS``), the parts whose scans all left the buffer removed."""
+        while self.map_parts and self.map_parts[0][0] < visited[0]:
+            self.map_parts.popleft()[1].remove()
+        beams = len(model.log.scan(model.scans[-1]).ranges)
+        every = max(1, math.ceil(len(visited) * beams / MAP_POINTS))
+        new = [k for k, v in enumerate(visited) if v > self.mapped and v % every == 0]
+        self.mapped = visited[-1]
+        if not new:
+            return
+        scans = model.log.scans_of([model.scans[k] for k in new], False)
+        xy = np.concatenate(
+            [(poses[k] @ model.mount).apply(s.points()) for k, s in zip(new, scans)]
+        )
+        if not len(xy):
+            return
+        layer = scene.Points(
+            f"{scene.RUN}/map/{visited[new[0]]:09d}", xy, scene.RUN_MAP, 0.01 * self.scale
+        )
+        node = viser_draw.draw(self.client.scene, f"/{layer.path}", layer)
+        self.map_parts.append((visited[new[-1]], node, np.stack([xy.min(axis=0), xy.max(axis=0)])))
+
+    def _clear_map(self) -> None:
+        while self.map_parts:
+            self.map_parts.popleft()[1].remove()
+        self.world, self.mapped = {}, -1
 
     def fit(self) -> None:
         """Top-down over the run so far, with room to grow, and a metric grid under it."""
         lo, hi = self.extent.min(axis=0), self.extent.max(axis=0)
         margin = np.maximum(0.25 * (hi - lo), 2.0)
         self.box = np.stack([lo - margin, hi + margin])
+        self.scale = scene.scene_scale(self.extent)
         self.camera.fit(self.box)
         self.grid_m = viser_draw.metric_grid(self.client.scene, self.box)
 
