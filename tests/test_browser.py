@@ -332,7 +332,7 @@ def test_compare_two_matchers_two_colours_and_two_legend_entries(browser, app, t
 # (left, right, its middle's height), in page pixels
 TIMELINE_AND_TRACK = """() => {
   const title = [...document.querySelectorAll('.u-title')]
-    .find(e => e.textContent === 'health of every pair');
+    .find(e => e.textContent.startsWith('health of every pair'));
   const over = title.closest('.uplot').querySelector('.u-over').getBoundingClientRect();
   const below = [...document.querySelectorAll('.mantine-Slider-track')]
     .map(e => e.getBoundingClientRect()).filter(b => b.top > over.bottom)

@@ -15,6 +15,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from mbicp_viz.core import MATCHERS, Pose2
 from mbicp_viz.evaluation.loops import close_loops
@@ -174,3 +176,35 @@ def test_bench_run_times_the_run_view(tmp_path):
     assert res.exit_code == 0, res.output
     steps = next(x for x in res.output.splitlines() if x.startswith("run slider step redraw"))
     assert "(4 steps)" in steps and "open the run" in res.output
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(1, 3000),
+    most=st.integers(2, 500),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_a_long_health_timeline_keeps_every_spike(n, most, seed):
+    """Thinned for the page, each point is the worst of the pairs it covers (the lowest overlap,
+    the largest of the rest) at its first pair: the worst pair of the run stays on the plot."""
+    from mbicp_viz.views.debugger.panels import worst_of_each
+
+    rng = np.random.default_rng(seed)
+    x = np.arange(1.0, n + 1)
+    lines = [rng.uniform(0, 100, n) for _ in range(4)]
+    lines[0][rng.random(n) < 0.1] = np.nan  # pairs whose overlap was not measured
+    (tx, *thin), each = worst_of_each((x, *lines), most)
+    assert len(tx) <= most and each == max(1, -(-n // most))
+    for k, start in enumerate(tx.astype(int) - 1):
+        cover = slice(start, start + each)
+        overlap = lines[0][cover]
+        if np.isfinite(overlap).any():
+            assert thin[0][k] == np.nanmin(overlap)
+        else:
+            assert np.isnan(thin[0][k])
+        for line, t in zip(lines[1:], thin[1:]):
+            assert t[k] == line[cover].max()
+    # the run's worst pair of each line is on the plot
+    assert all(t.max() == line.max() for line, t in zip(lines[1:], thin[1:]))
+    if np.isfinite(lines[0]).any():
+        assert np.nanmin(thin[0]) == np.nanmin(lines[0])

@@ -40,11 +40,13 @@ class RunPanel:
             series = panels.health_legend("pair")
             if model.versus is not None:
                 series.append(panels._line("A and B apart [mm]", "mm", scene.RUN_OTHER))
+            data, each = panels.worst_of_each(data)
             self.plot = gui.add_uplot(
                 data=data,
                 series=tuple(series),
                 aspect=1.6,
-                title="health of every pair",
+                title="health of every pair"
+                + (f" (each point the worst of {each})" if each > 1 else ""),
                 **panels.timeline_over_slider("pair", top * 1.08, len(rows)),
             )
             # the timeline's own scrubber, right under it: a click under a spike picks its pair
