@@ -111,8 +111,7 @@ class RunRows(Sequence[PairMatch]):
         first; ties by the first key, then the next, then in the run's order), each made only
         when read."""
         idx = np.flatnonzero(keep)
-        order = np.lexsort([k[idx] for k in reversed(keys)]) if keys else np.arange(len(idx))
-        return _Picked(self, idx[order])
+        return _Picked(self, idx[np.lexsort([k[idx] for k in reversed(keys)])])
 
     def worst_first(self) -> Sequence[PairMatch]:
         """The failed rows: the largest translation error first, then rotation error."""
