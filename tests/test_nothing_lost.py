@@ -189,6 +189,27 @@ def test_ctrl_c_ends_any_command_in_one_line_without_a_traceback():
     assert "Traceback" not in err
 
 
+def test_a_ctrl_c_swallowed_inside_a_command_is_raised_again():
+    """C code can swallow a KeyboardInterrupt raised inside it (an extension module's
+    initialisation during a lazy import): the command ran on to its end, exit code 0. Here a
+    handler swallows the first one as that code does; the next comes while the work goes on."""
+    import threading
+
+    from mbicp_viz.evaluation.pool import one_command
+
+    t0, swallowed = time.monotonic(), 0
+    with pytest.raises(KeyboardInterrupt), one_command():
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            threading.Event().wait(30)
+        except KeyboardInterrupt:
+            swallowed += 1
+        while time.monotonic() - t0 < 30:  # the command's work, which Ctrl-C must end
+            sum(range(1000))
+    assert swallowed == 1 and time.monotonic() - t0 < STOPS_WITHIN_S
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_ctrl_c_in_a_command_of_several_runs_stops_them_all(monkeypatch):
     """eval covariance runs one pass per matcher: a Ctrl-C in the first ended that pass only, and
     the command went on with the five others."""

@@ -1,9 +1,12 @@
 """The viser debugger driven from Python: the real server, GUI handles and scene nodes, no browser.
 The model (``DebugState``) is tested without any server."""
 
+import contextlib
 import math
 import os
 import re
+import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -394,6 +397,49 @@ def test_the_camera_is_put_back_top_down():
     assert not TopDownCamera.is_top_down((1.0, 5.0, 10.0), (1.0, 2.0, 0.0), (0.0, 1.0, 0.0))
     # turned
     assert not TopDownCamera.is_top_down((1.0, 2.0, 10.0), (1.0, 2.0, 0.0), (1.0, 0.2, 0.0))
+
+
+class _Tab:
+    """A tab's camera as the server sees it: what the tab last reported, or what was last sent
+    (viser's handle keeps both in one state, as here)."""
+
+    def __init__(self):
+        self.client = SimpleNamespace(atomic=contextlib.nullcontext)
+        self.position, self.look_at = np.array([0.0, 0.0, 10.0]), np.zeros(3)
+        self.up_direction, self.fov, self.aspect, self.update_timestamp = (0, 1, 0), 1.0, 1.0, 1.0
+        self.client.camera = self
+
+    def report(self, position, look_at, up=(0.0, 1.0, 0.0)):
+        self.position, self.look_at, self.up_direction = map(np.asarray, (position, look_at, up))
+
+
+def test_a_framing_the_tab_overwrote_is_sent_again_and_a_view_of_its_own_is_kept(monkeypatch):
+    """A loaded tab's own opening view can land after the view the server placed: once the
+    placement has had time to settle, a tab still showing another view gets it again; a person's
+    pan after the camera was levelled is theirs."""
+    import mbicp_viz.views.debugger.camera as camera
+
+    monkeypatch.setattr(camera, "SETTLE_S", 0.2)
+    tab = _Tab()
+    cam = TopDownCamera(tab.client)
+    cam.fit(np.array([[4.0, 2.0], [6.0, 4.0]]))
+    placed = np.array(tab.look_at)
+    assert np.allclose(placed, [5.0, 3.0, 0.0])
+    tab.report((0.0, 0.0, 10.0), (0.0, 0.0, 0.0))  # the tab's opening view, top-down at 0
+    cam.level(tab)
+    assert wait_for(lambda: np.allclose(tab.look_at, placed), 5)
+    assert TopDownCamera.is_top_down(tab.position, tab.look_at, tab.up_direction)
+    assert wait_for(lambda: time.monotonic() > cam.placed_at + camera.SETTLE_S)
+
+    tab.report((1.0, 4.0, 10.0), (1.0, 1.0, 0.0))  # tilted by a drag: levelled where it looks
+    cam.level(tab)
+    assert wait_for(lambda: TopDownCamera.is_top_down(tab.position, tab.look_at, tab.up_direction))
+    assert np.allclose(tab.look_at, [1.0, 1.0, 0.0])
+    tab.report((2.0, 2.0, 10.0), (2.0, 2.0, 0.0))  # panned on at once: not pulled back
+    cam.level(tab)
+    settled = cam.placed_at + camera.SETTLE_S
+    assert wait_for(lambda: time.monotonic() > settled + 0.2 and not cam.recheck.is_alive(), 5)
+    assert np.allclose(tab.look_at, [2.0, 2.0, 0.0])
 
 
 def test_guess_kind_of_the_source_and_where_it_came_from():

@@ -239,7 +239,9 @@ def sequence(
             try:
                 application.server.sleep_forever()
             except KeyboardInterrupt:
-                pass
+                from mbicp_viz.evaluation.pool import interrupt_taken
+
+                interrupt_taken()
 
 
 def _serving_meanwhile(stack, log, lg, guess, reading, budget_s, pairs: int, port: int):

@@ -325,24 +325,13 @@ def check_outputs(options: dict, name=_option) -> None:
 INTERRUPTED_CODE = 130  # the shell's code for a command ended by Ctrl-C
 
 
-def _from_interrupt(e: BaseException | None) -> bool:
-    """Whether a KeyboardInterrupt is ``e`` or among its causes."""
-    seen = set()
-    while e is not None and id(e) not in seen:
-        if isinstance(e, KeyboardInterrupt):
-            return True
-        seen.add(id(e))
-        e = e.__cause__ or e.__context__
-    return False
-
-
 def user_errors(fn):
     """Bad input ends in one readable line on stderr and exit code 2, Ctrl-C in ``interrupted``
     and 130, never a traceback."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        from mbicp_viz.evaluation.pool import one_command
+        from mbicp_viz.evaluation.pool import from_interrupt, interrupt_taken, one_command
 
         result = None
         with one_command() as interrupted:
@@ -354,8 +343,9 @@ def user_errors(fn):
                     typer.echo(f"mbicp-viz: error: {e}", err=True)
                     raise typer.Exit(2) from None
             except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C where no run keeps rows
-                if not _from_interrupt(e):  # numba's SystemError: an interrupt in compiled code
+                if not from_interrupt(e):  # numba's SystemError: an interrupt in compiled code
                     raise
+                interrupt_taken()
                 interrupted.set()
             if interrupted.is_set():  # what was printed is of the part finished before Ctrl-C
                 typer.echo("mbicp-viz: interrupted", err=True)

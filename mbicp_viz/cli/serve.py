@@ -150,7 +150,9 @@ def open_debugger(
             else:
                 application.server.sleep_forever()
         except KeyboardInterrupt:
-            pass
+            from mbicp_viz.evaluation.pool import interrupt_taken
+
+            interrupt_taken()
 
 
 @contextmanager

@@ -8,10 +8,12 @@ break the clean stop the first one started.
 
 from __future__ import annotations
 
+import _thread
 import itertools
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
@@ -23,18 +25,71 @@ IN_FLIGHT_PER_WORKER = 3  # chunks sent ahead per worker: each busy while the pa
 # command that runs several, one per matcher, ends instead of going on with the next).
 INTERRUPTED = threading.Event()
 _IN_COMMAND = threading.Event()
+_TAKEN = threading.Event()  # the last Ctrl-C raised was taken by a handler
+INSIST_S = 0.5  # a Ctrl-C not taken by then is raised again (``_insist``)
 
 
 @contextmanager
 def one_command() -> Iterator[threading.Event]:
     """A command's runs: a Ctrl-C during one stops the others too; yields ``INTERRUPTED``.
-    Outside, every run starts afresh (a script calling the evaluations)."""
+    Outside, every run starts afresh (a script calling the evaluations). In the main thread a
+    Ctrl-C outside any run is a KeyboardInterrupt raised until something takes it (``_insist``)."""
     INTERRUPTED.clear()
     _IN_COMMAND.set()
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, _interrupt) if main else None
     try:
         yield INTERRUPTED
     finally:
         _IN_COMMAND.clear()
+        _TAKEN.set()  # the command has ended: nothing to raise again, in it or in the next
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _interrupt(signum, frame) -> None:
+    _TAKEN.clear()
+    _insist_later()
+    raise KeyboardInterrupt
+
+
+def _insist_later() -> None:
+    timer = threading.Timer(INSIST_S, _insist)
+    timer.daemon = True
+    timer.start()
+
+
+def _insist() -> None:
+    """A Ctrl-C nobody took is raised again: C code can swallow a KeyboardInterrupt raised inside
+    it (an extension module's initialisation, as a lazy ``import numpy.random`` runs it), and the
+    command then ran on to its end as if never interrupted. While the main thread still handles
+    the interrupt (an ``except`` or ``finally`` on its way out) it is left to finish."""
+    if _TAKEN.is_set() or not _IN_COMMAND.is_set():
+        return
+    handling = sys._current_exceptions().get(threading.main_thread().ident)
+    if isinstance(handling, tuple):  # Python 3.11 gives exc_info's triple
+        handling = handling[1]
+    if from_interrupt(handling):
+        _insist_later()
+    else:
+        _thread.interrupt_main()
+
+
+def interrupt_taken() -> None:
+    """A handler has taken the Ctrl-C (it stops the command its own way): not raised again."""
+    _TAKEN.set()
+
+
+def from_interrupt(e: BaseException | None) -> bool:
+    """Whether a KeyboardInterrupt is ``e`` or among its causes (numba's SystemError: an
+    interrupt inside compiled code)."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
 
 
 def ignore_interrupts() -> None:
@@ -105,6 +160,7 @@ def ordered_map(
                 try:
                     take(fn(job))
                 except KeyboardInterrupt:  # raised by the job itself (a handler of its own)
+                    interrupt_taken()
                     stop.set()
                     break
             return out

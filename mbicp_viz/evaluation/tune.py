@@ -31,7 +31,7 @@ from mbicp_viz.readers import ReadOptions, ScanLog, read_log
 
 from .cases import Case
 from .criteria import CONSECUTIVE
-from .pool import ignore_interrupts, stopping
+from .pool import ignore_interrupts, interrupt_taken, stopping
 
 
 @dataclass(frozen=True)
@@ -333,7 +333,7 @@ def optimise(
         with stopping(_STOP):  # Ctrl-C: the trial under way is dropped between two matches
             study.optimize(objective, n_trials=trials, callbacks=[finished], catch=(ParamError,))
     except KeyboardInterrupt:
-        pass
+        interrupt_taken()
     finally:
         _STOP.clear()  # the scores computed after the study (defaults, best, holdout) run in full
     return done

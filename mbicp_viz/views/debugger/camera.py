@@ -19,6 +19,7 @@ import viser
 TOLERANCE_RAD = math.radians(0.5)
 SETTLE_S = 1.0  # reports this soon after the camera was placed may still show the view before
 DEFAULT_ASPECT = 1.1  # a tab's view beside the fixed control panel, until it reports its own
+MAX_REPLACEMENTS = 3  # a placement a tab did not take is sent again at most this many times
 
 
 class TopDownCamera:
@@ -26,6 +27,8 @@ class TopDownCamera:
         self.client = client
         # when this put the camera somewhere (the tab's reports lag behind)
         self.placed_at = -math.inf
+        self.placement: tuple[np.ndarray, float] | None = None  # (centre, height) last placed
+        self.replaced = 0  # placements repeated since the last one asked for
         self.pending: np.ndarray | None = (
             None  # points to fit once the tab has reported its first view
         )
@@ -58,20 +61,46 @@ class TopDownCamera:
         if points is not None:
             self.fit(points)
             return
-        if self.is_top_down(cam.position, cam.look_at, cam.up_direction):
-            return
+        top_down = self.is_top_down(cam.position, cam.look_at, cam.up_direction)
         wait = SETTLE_S - (time.monotonic() - self.placed_at)
-        if wait > 0:  # maybe a report from before the tab took the last placement: look again later
+        if wait > 0 and not (top_down and self._shows_placement(cam)):
+            # maybe a report from before the tab took the last placement (a loaded tab's own
+            # opening view can even overwrite it): look again once it has had time to settle
             if self.recheck is None or not self.recheck.is_alive():
-                self.recheck = threading.Timer(wait, self.level, (cam,))
+                self.recheck = threading.Timer(wait, self._settled, (cam,))
                 self.recheck.daemon = True
                 self.recheck.start()
+            return
+        if top_down:
             return
         look = np.asarray(cam.look_at, float)
         self._place(cam, look[:2], float(np.linalg.norm(np.asarray(cam.position, float) - look)))
 
-    def _place(self, cam, centre, height: float) -> None:
+    def _settled(self, cam) -> None:
+        """A placement's settling time is over: a tab whose latest view is still not the placement
+        never took it, and gets it again (a few times at most: then its view is its own)."""
+        if self._shows_placement(cam) or self.replaced >= MAX_REPLACEMENTS:
+            self.level(cam)
+            return
+        self.replaced += 1
+        self._place(cam, *self.placement, framed=True)
+
+    def _shows_placement(self, cam) -> bool:
+        if self.placement is None:
+            return True
+        centre, height = self.placement
+        tol = 1e-3 * max(height, 1.0)
+        placed = np.array([centre[0], centre[1], height])
+        return bool(
+            np.allclose(cam.position, placed, atol=tol)
+            and np.allclose(cam.look_at, [centre[0], centre[1], 0.0], atol=tol)
+        )
+
+    def _place(self, cam, centre, height: float, framed: bool = False) -> None:
+        """Top-down over ``centre``; a ``framed`` view (a fit) is checked once it has settled, a
+        levelled one is the person's own view and is not."""
         self.placed_at = time.monotonic()
+        self.placement = (np.array(centre[:2], float), float(height)) if framed else None
         with cam.client.atomic():
             cam.up_direction = (0.0, 1.0, 0.0)
             cam.position = (float(centre[0]), float(centre[1]), float(height))
@@ -102,7 +131,8 @@ class TopDownCamera:
         cam = self.client.camera
         if cam.update_timestamp > 0.0:
             c, height = self.framing(pts, cam.fov, cam.aspect or DEFAULT_ASPECT)
-            self._place(cam, c, height)
+            self.replaced = 0
+            self._place(cam, c, height, framed=True)
         else:  # the tab has not shown its first view yet: a view placed now would race it
             with self._pending_lock:
                 self.pending = pts
