@@ -62,7 +62,7 @@ from .options import (
     user_errors,
 )
 from .resume import log_identity, matched_rows, settings_of
-from .serve import ServePortOpt, started_debugger
+from .serve import ServePortOpt, started_debugger, until_ctrl_c
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
 LimitOpt = Annotated[int | None, typer.Option("--limit", min=1, help="only the first N pairs")]
@@ -236,12 +236,7 @@ def sequence(
             done = log_source(log, lg, guess=guess, options=reading, run=rows, rows_label=label)
             background.finish(replace(done, budget_s=budget_s, loops=loops))
             say("the run view is open in the debugger (Ctrl-C stops)")
-            try:
-                application.server.sleep_forever()
-            except KeyboardInterrupt:
-                from mbicp_viz.evaluation.pool import interrupt_taken
-
-                interrupt_taken()
+            until_ctrl_c(application.server.sleep_forever)
 
 
 def _serving_meanwhile(stack, log, lg, guess, reading, budget_s, pairs: int, port: int):

@@ -144,15 +144,21 @@ def open_debugger(
 ) -> None:
     """The debugger on ``source`` until Ctrl-C (or ``for_seconds``)."""
     with started_debugger(source, host, port, origins) as application:
-        try:
-            if for_seconds is not None:
-                time.sleep(for_seconds)
-            else:
-                application.server.sleep_forever()
-        except KeyboardInterrupt:
-            from mbicp_viz.evaluation.pool import interrupt_taken
+        if for_seconds is not None:
+            until_ctrl_c(lambda: time.sleep(for_seconds))
+        else:
+            until_ctrl_c(application.server.sleep_forever)
 
-            interrupt_taken()
+
+def until_ctrl_c(wait) -> None:
+    """``wait()`` until it returns or Ctrl-C, which ends it as a stop asked for (not raised
+    again: ``pool._insist``)."""
+    from mbicp_viz.evaluation.pool import interrupt_taken
+
+    try:
+        wait()
+    except KeyboardInterrupt:
+        interrupt_taken()
 
 
 @contextmanager
