@@ -214,6 +214,58 @@ def test_damaged_bags(tmp_path, small_bag, cut, flips):
         )
 
 
+@pytest.fixture(scope="module")
+def small_bag_scans(tmp_path_factory, small_bag):
+    path = tmp_path_factory.mktemp("bag") / "intact.bag"
+    path.write_bytes(small_bag)
+    return read_log(path).scans
+
+
+def outside_chunk_data(bag: bytes) -> list[tuple[int, int]]:
+    """The byte ranges of a ROS 1 bag that are not messages: every record's header, and whole
+    the records that are index (bag header, index data after each chunk, connections, chunk
+    infos); a chunk's data only its header."""
+    from mbicp_viz.readers.ros1_format import MAGIC, OP_CHUNK, header, op_of
+
+    out, pos = [], len(MAGIC)
+    while pos + 4 <= len(bag):
+        hlen = int.from_bytes(bag[pos : pos + 4], "little")
+        dlen = int.from_bytes(bag[pos + 4 + hlen : pos + 8 + hlen], "little")
+        chunk = op_of(header(bag[pos + 4 : pos + 4 + hlen], "bag")) == OP_CHUNK
+        out.append((pos, pos + 8 + hlen + (0 if chunk else dlen)))
+        pos += 8 + hlen + dlen
+    return out
+
+
+@FUZZ
+@given(
+    flips=st.lists(
+        st.tuples(st.integers(0, 10**6), st.floats(0, 0.999), st.integers(0, 255)),
+        min_size=1,
+        max_size=4,
+    )
+)
+def test_a_damaged_index_gives_the_bags_scans_or_says_what_it_lost(
+    tmp_path, small_bag, small_bag_scans, flips
+):
+    """Bytes of the index flipped (where a bag read through its index is read, not its
+    messages): one clean error, or the bag's own scans, or fewer with a note saying what was
+    lost; never other scans, silently."""
+    regions, b = outside_chunk_data(small_bag), bytearray(small_bag)
+    for which, at, value in flips:
+        start, end = regions[which % len(regions)]
+        b[start + int(at * (end - start))] = value
+    path = tmp_path / "damaged.bag"
+    path.write_bytes(bytes(b))
+    log = read(path)
+    if log is not None:
+        same = len(log.scans) == len(small_bag_scans) and all(
+            a.stamp == c.stamp and np.array_equal(a.ranges, c.ranges, equal_nan=True)
+            for a, c in zip(log.scans, small_bag_scans)
+        )
+        assert same or log.notes, log.notes
+
+
 @FUZZ
 @given(line=st.lists(st.sampled_from(NUMBERS + ["1.0", "2.5", "#", "0.1"]), max_size=10))
 def test_relations_records_hold_exactly_eight_numbers(tmp_path, line):

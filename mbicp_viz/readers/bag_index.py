@@ -235,7 +235,6 @@ class BagScans:
 def records_with_stamps(reader, connections) -> np.ndarray:
     """The record stamps [ns] of ``connections``' messages in recording order: from a ROS 1 bag's
     index, else one pass over the raw messages (nothing decoded)."""
-    indexes = [getattr(c.owner, "indexes", {}).get(c.id) for c in connections]
-    if all(i is not None for i in indexes):
-        return np.sort(np.concatenate([[e.time for e in i] for i in indexes]).astype(np.int64))
+    if hasattr(reader, "stamps"):
+        return reader.stamps(connections)
     return np.fromiter((t for _, t, _ in reader.messages(connections)), dtype=np.int64)

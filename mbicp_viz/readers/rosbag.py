@@ -14,15 +14,16 @@ What a robotics engineer's bag holds, read as the robot recorded it:
 - **Damage** is never a traceback: a bag cut short keeps the scans of its intact chunks with a
   warning naming what was lost, or is one error when none survive.
 
-rosbags' reader refuses ROS 1 bags whose index records are damaged (``demo.bag`` of the Hokuyo
-data: its index data records announce 20 bytes per entry where the format has 12) or missing (a
-recording that was never closed). The chunks themselves are intact, so such a bag is read by
-walking its records from the start (ROS bag format 2.0) and decoding each message with rosbags.
+A ROS 1 bag is read through its own index by the project's reader (``ros1_index.py``: rosbags'
+reader holds the index as one Python object per message and refuses the damaged index records of
+``demo.bag`` of the Hokuyo data, which announce 20 bytes per entry where the format has 12). A bag
+whose index is missing (a recording that was never closed) or damaged otherwise is read by walking
+its records from the start (ROS bag format 2.0, ``ros1_format.py``), each message decoded with
+rosbags.
 """
 
 from __future__ import annotations
 
-import bz2
 import struct
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -34,14 +35,28 @@ from mbicp_viz.core import Pose2, ScanSource
 from mbicp_viz.errors import InputError
 
 from .log import Frames, ScanLog, scan_or_reason
+from .ros1_format import (
+    MAGIC,
+    MAX_CHUNK_BYTES,
+    OP_CHUNK,
+    OP_CHUNK_INFO,
+    OP_CONN,
+    OP_HEADER,
+    OP_INDEX,
+    OP_MSG,
+    CutShort,
+    decompress,
+    header,
+    op_of,
+    records,
+    register,
+    ros2_type,
+)
 from .tf import BASE_FRAMES, Mount, TfTree, interpolate
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
-_MAGIC = b"#ROSBAG V2.0\n"
-_OP_MSG, _OP_HEADER, _OP_INDEX, _OP_CHUNK, _OP_CONN = 2, 3, 4, 5, 7
-MAX_CHUNK_BYTES = 256 * 1024 * 1024  # a chunk unpacking to more is damaged (or hostile)
 
 
 @dataclass(frozen=True)
@@ -59,9 +74,10 @@ def read_rosbag(
     mount: Pose2 | None = None,
 ) -> ScanLog:
     """The scans of one LaserScan topic, with the laser's mount from tf (``mount``, --mount, wins)
-    and the odometry of the robot's base moved onto the laser through that mount. A bag rosbags
-    opens is read through its index, each scan when it is asked for (``bag_index.py``); a damaged
-    one is walked and read whole."""
+    and the odometry of the robot's base moved onto the laser through that mount. A bag is read
+    through its index (a ROS 1 bag's by ``ros1_index.py``, a ROS 2 bag's by rosbags), each scan
+    when it is asked for (``bag_index.py``); a ROS 1 bag whose index is damaged or missing is
+    walked and read whole."""
     p = Path(path)
     if not p.exists():
         raise InputError("no such file or folder", str(path))
@@ -70,21 +86,33 @@ def read_rosbag(
         reader = open_bag(p, typestore)
     except InputError:
         raise
-    except Exception as e:  # rosbags refuses the bag (AnyReaderError, or its parsers' errors)
+    except Exception as e:  # a damaged ROS 1 index, or rosbags refusing a ROS 2 bag
         reason = " ".join(str(a) for a in e.args) or type(e).__name__
-        if p.is_file() and p.read_bytes()[: len(_MAGIC)] == _MAGIC:
+        if _is_ros1(p):
             return _to_log(str(path), _walk_ros1(p, notes, reason), topic, notes, mount)
         raise InputError(f"not a readable ROS 1 or ROS 2 bag: {reason[:300]}", str(p)) from None
     return _indexed_log(str(path), reader, typestore, topic, notes, mount)
 
 
-def open_bag(p: Path, typestore: str):
-    """rosbags' reader on ``p``, opened (its index read); a bag without a LaserScan topic is
-    refused here, before any message is decoded."""
-    from rosbags.highlevel import AnyReader
+def _is_ros1(p: Path) -> bool:
+    if not p.is_file():
+        return False
+    with p.open("rb") as f:
+        return f.read(len(MAGIC)) == MAGIC
 
-    reader = AnyReader([p], default_typestore=typestore_named(typestore))
-    reader.open()
+
+def open_bag(p: Path, typestore: str):
+    """A reader on ``p``, its index read: the project's own for a ROS 1 bag, rosbags' for a ROS 2
+    one. A bag without a LaserScan topic is refused here, before any message is decoded."""
+    if _is_ros1(p):
+        from .ros1_index import Ros1Bag
+
+        reader = Ros1Bag(p, (LASER_SCAN, ODOMETRY, TF))
+    else:
+        from rosbags.highlevel import AnyReader
+
+        reader = AnyReader([p], default_typestore=typestore_named(typestore))
+        reader.open()
     if not any(ros2_type(c.msgtype) == LASER_SCAN for c in reader.connections):
         has = "; ".join(
             f"{c.topic} ({c.msgtype}, {c.msgcount} messages)" for c in reader.connections
@@ -203,93 +231,7 @@ def _has_fields(msg, fields, what: str, p: Path) -> None:
             )
 
 
-def ros2_type(msgtype: str) -> str:
-    """ROS 1 names types ``pkg/Type``; rosbags uses ``pkg/msg/Type``."""
-    pkg, _, name = msgtype.rpartition("/")
-    return msgtype if pkg.endswith("/msg") else f"{pkg}/msg/{name}"
-
-
 # ---- ROS 1 bags, walked record by record (rosbags refuses a damaged or missing index) ------------
-
-
-def _header(buf: bytes, path) -> dict[str, bytes]:
-    fields, i = {}, 0
-    while i < len(buf):
-        if i + 4 > len(buf):
-            raise InputError("truncated record header", str(path))
-        (n,) = struct.unpack_from("<I", buf, i)
-        key, sep, value = buf[i + 4 : i + 4 + n].partition(b"=")
-        if not sep:
-            raise InputError("malformed record header field", str(path))
-        fields[key.decode("ascii", "replace")] = value
-        i += 4 + n
-    return fields
-
-
-class _CutShort(Exception):
-    """A record runs past the end of the data: the bag was cut short there. ``header`` and ``data``
-    are what the cut record holds so far (its data cut short)."""
-
-    def __init__(self, at: int, header: dict | None = None, data: bytes = b""):
-        self.at, self.header, self.data = at, header, data
-
-
-def _records(buf: bytes, start: int, path):
-    """(op, header, data) of each record in ``buf`` from ``start`` (ROS bag 2.0 layout)."""
-    pos = start
-    while pos + 4 <= len(buf):
-        (hlen,) = struct.unpack_from("<I", buf, pos)
-        if pos + 8 + hlen > len(buf):
-            raise _CutShort(pos)
-        h = _header(buf[pos + 4 : pos + 4 + hlen], path)
-        (dlen,) = struct.unpack_from("<I", buf, pos + 4 + hlen)
-        data_at = pos + 8 + hlen
-        op = h.get("op", b"\0")[0]
-        if op == _OP_INDEX and "count" in h:
-            # The length field of damaged index records is wrong; the count is not (12 bytes/entry).
-            dlen = 12 * struct.unpack("<I", h["count"])[0]
-        if data_at + dlen > len(buf):
-            raise _CutShort(pos, h, buf[data_at:])
-        yield op, h, buf[data_at : data_at + dlen]
-        pos = data_at + dlen
-
-
-def _decompress(kind: bytes, data: bytes, size: int, path) -> bytes:
-    if size > MAX_CHUNK_BYTES:
-        raise InputError(f"a chunk announces {size} bytes unpacked: damaged", str(path))
-    try:
-        if kind == b"none":
-            return data
-        if kind == b"bz2":
-            return bz2.BZ2Decompressor().decompress(data, max_length=size)
-        if kind == b"lz4":
-            import lz4.frame
-
-            return lz4.frame.decompress(data)[:size]
-    except ImportError:
-        raise InputError(
-            "the bag's chunks are lz4-compressed: pip install lz4", str(path)
-        ) from None
-    except (OSError, ValueError, EOFError, RuntimeError) as e:
-        raise InputError(
-            f"a damaged compressed chunk ({type(e).__name__}: {e})", str(path)
-        ) from None
-    raise InputError(f"unknown chunk compression {kind[:20]!r}", str(path))
-
-
-def _register(store, definition: bytes, msgtype: str, p: Path) -> None:
-    """The types a ROS 1 connection defines (its message definition travels with it)."""
-    from rosbags.typesys import get_types_from_msg
-
-    if not definition or msgtype in store.types:
-        return
-    try:
-        store.register(get_types_from_msg(definition.decode("utf-8"), msgtype))
-    except Exception as e:  # a damaged definition
-        raise InputError(
-            f"the definition of {msgtype} cannot be read ({type(e).__name__}: {str(e)[:120]})",
-            str(p),
-        ) from None
 
 
 def _walk_ros1(p: Path, notes: list[str], why: str):
@@ -301,9 +243,10 @@ def _walk_ros1(p: Path, notes: list[str], why: str):
     store = get_typestore(Stores.ROS1_NOETIC)
     conns: dict[int, tuple[str, str]] = {}
     out: list[Message] = []
+    unknown = 0  # records of no kind the format has: their header was damaged
     try:
-        for op, h, data in _records(buf, len(_MAGIC), p):
-            if op == _OP_HEADER and "index_pos" in h:
+        for op, h, data in records(buf, len(MAGIC), p):
+            if op == OP_HEADER and "index_pos" in h:
                 index_pos = struct.unpack("<Q", h["index_pos"])[0]
                 if index_pos == 0 or index_pos > len(buf):
                     notes.append(
@@ -311,20 +254,22 @@ def _walk_ros1(p: Path, notes: list[str], why: str):
                         "short); "
                         "its chunks were read one by one"
                     )
-            elif op == _OP_CHUNK:
+            elif op == OP_CHUNK:
                 size = struct.unpack("<I", h["size"])[0] if "size" in h else MAX_CHUNK_BYTES
-                _chunk(
-                    _decompress(h.get("compression", b"none"), data, size, p), p, store, conns, out
+                unknown += _chunk(
+                    decompress(h.get("compression", b"none"), data, size, p), p, store, conns, out
                 )
-    except _CutShort as cut:
+            elif op not in (OP_HEADER, OP_INDEX, OP_CHUNK_INFO, OP_CONN):
+                unknown += 1
+    except CutShort as cut:
         if (
             cut.header is not None
-            and cut.header.get("op", b"\0")[0] == _OP_CHUNK
+            and op_of(cut.header) == OP_CHUNK
             and cut.header.get("compression", b"none") == b"none"
         ):
             try:
-                _chunk(cut.data, p, store, conns, out)
-            except _CutShort:
+                unknown += _chunk(cut.data, p, store, conns, out)
+            except CutShort:
                 pass
         notes.append(
             f"{p}: the bag ends inside a record at byte {cut.at} of {len(buf)} (cut short?): the "
@@ -333,28 +278,35 @@ def _walk_ros1(p: Path, notes: list[str], why: str):
         )
     except struct.error as e:
         raise InputError(f"a damaged record ({e}); rosbags: {why[:200]}", str(p)) from None
+    if unknown:
+        notes.append(
+            f"{p}: passed over {unknown} damaged record{'s' * (unknown > 1)} (of no kind the "
+            "format has): the messages in them are lost"
+        )
     return out
 
 
-def _chunk(data: bytes, p: Path, store, conns: dict, out: list) -> None:
-    """The messages of one chunk's records (connections registered as they come)."""
+def _chunk(data: bytes, p: Path, store, conns: dict, out: list) -> int:
+    """The messages of one chunk's records (connections registered as they come); how many of
+    its records are of no kind a chunk holds."""
     try:
-        _chunk_records(data, p, store, conns, out)
+        return _chunk_records(data, p, store, conns, out)
     except KeyError as e:
         raise InputError(f"a damaged record: its header has no {e} field", str(p)) from None
 
 
-def _chunk_records(data: bytes, p: Path, store, conns: dict, out: list) -> None:
-    for op, h, d in _records(data, 0, p):
-        if op == _OP_CONN:
-            conn = _header(d, p)
+def _chunk_records(data: bytes, p: Path, store, conns: dict, out: list) -> int:
+    unknown = 0
+    for op, h, d in records(data, 0, p):
+        if op == OP_CONN:
+            conn = header(d, p)
             msgtype = ros2_type(conn["type"].decode("utf-8", "replace"))
             conns[struct.unpack("<I", h["conn"])[0]] = (
                 h["topic"].decode("utf-8", "replace"),
                 msgtype,
             )
-            _register(store, conn.get("message_definition", b""), msgtype, p)
-        elif op == _OP_MSG:
+            register(store, conn.get("message_definition", b""), msgtype, p)
+        elif op == OP_MSG:
             conn_id = struct.unpack("<I", h["conn"])[0]
             if conn_id not in conns:
                 raise InputError(f"message for unknown connection {conn_id}", str(p))
@@ -369,6 +321,9 @@ def _chunk_records(data: bytes, p: Path, store, conns: dict, out: list) -> None:
                         decode(store.deserialize_ros1, d, msgtype, p, len(out)),
                     )
                 )
+        else:
+            unknown += 1
+    return unknown
 
 
 # ---- scans, topics, frames and odometry ---------------------------------------------------------
