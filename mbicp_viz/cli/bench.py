@@ -296,7 +296,7 @@ def live(
     from mbicp_viz.errors import InputError
     from mbicp_viz.evaluation.bench import machine_line
     from mbicp_viz.live.publisher import FoxgloveRobot
-    from mbicp_viz.live.run import LiveRun
+    from mbicp_viz.live.run import LiveRun, steady_latency
     from mbicp_viz.readers.params_toml import read_params
     from mbicp_viz.writers.bag import write
     from mbicp_viz.writers.replay import replayed
@@ -312,6 +312,7 @@ def live(
         server = FoxgloveRobot(next(bag.glob("*.mcap")))
         run = LiveRun(server.url, p, buffer_s=seconds + 10.0)
         tab = _live_page(run, Path(folder)) if page else None
+        steady_latency()  # as `live` does
         try:
             # at the robot's own pace, once the run has subscribed to what it reads
             server.publish(tuple(t for t in server.channels if t in ("/scan", "/odom")), 1.0)

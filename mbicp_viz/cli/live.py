@@ -80,7 +80,7 @@ def live(
     from mbicp_viz.core import tiers
     from mbicp_viz.evaluation.keyframes import KeyFrames
     from mbicp_viz.evaluation.pool import stopping
-    from mbicp_viz.live.run import LiveRun
+    from mbicp_viz.live.run import LiveRun, steady_latency
     from mbicp_viz.readers.params_toml import read_params
 
     tiers.quick_start()
@@ -96,6 +96,7 @@ def live(
 
             page = App(None, "127.0.0.1", port, live=run)
             say(f"mbicp-viz: the live page is at http://127.0.0.1:{page.port}")
+        steady_latency()
         with stopping(done):
             waited = 0.0
             while not done.wait(STATUS_EVERY_S) and (for_seconds is None or waited < for_seconds):

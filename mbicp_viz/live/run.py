@@ -13,6 +13,8 @@ as a bag's (``readers/rosbag.py``); a scan waits for odometry past its stamp (at
 
 from __future__ import annotations
 
+import gc
+import sys
 import threading
 import time
 from collections import deque
@@ -409,6 +411,23 @@ class LiveRun:
         with self._lock:
             messages = list(self.buffer)
         return save_bag(messages, Path(path))
+
+
+# [s] how long a thread holding the GIL keeps it from one that waits (Python's default: 5 ms): the
+# matcher takes it back after each compiled kernel, a dozen times a match, while the page draws
+GIL_SWITCH_S = 0.001
+
+
+def steady_latency() -> None:
+    """Once the run is up: every object made so far (the modules, the compiled kernels, the
+    page's server) moved out of the garbage collector's reach, and the GIL handed over sooner.
+    A full collection over those objects stopped every thread for 40-80 ms, three scan periods
+    at 40 Hz; the page's drawing delayed the matcher by up to 5 ms at each kernel it ran
+    (``bench live --page``: the slowest result 114-128 ms after its scan arrived, 20-24 ms with
+    both). The run's own objects are still collected, in a few milliseconds."""
+    gc.collect()
+    gc.freeze()
+    sys.setswitchinterval(GIL_SWITCH_S)
 
 
 def _warm_up(params: Params) -> None:
