@@ -186,13 +186,15 @@ def test_bench_run_times_the_run_view(tmp_path):
 )
 def test_a_long_health_timeline_keeps_every_spike(n, most, seed):
     """Thinned for the page, each point is the worst of the pairs it covers (the lowest overlap,
-    the largest of the rest) at its first pair: the worst pair of the run stays on the plot."""
+    the largest of the distances) at its first pair: the worst pair of the run stays on the plot;
+    the flag line is the share of its pairs flagged."""
     from mbicp_viz.views.debugger.panels import worst_of_each
 
     rng = np.random.default_rng(seed)
     x = np.arange(1.0, n + 1)
     lines = [rng.uniform(0, 100, n) for _ in range(4)]
     lines[0][rng.random(n) < 0.1] = np.nan  # pairs whose overlap was not measured
+    lines[2] = np.where(rng.random(n) < rng.random(), 100.0, 0.0)  # flagged or not
     (tx, *thin), each = worst_of_each((x, *lines), most)
     assert len(tx) <= most and each == max(1, -(-n // most))
     for k, start in enumerate(tx.astype(int) - 1):
@@ -202,9 +204,11 @@ def test_a_long_health_timeline_keeps_every_spike(n, most, seed):
             assert thin[0][k] == np.nanmin(overlap)
         else:
             assert np.isnan(thin[0][k])
-        for line, t in zip(lines[1:], thin[1:]):
-            assert t[k] == line[cover].max()
-    # the run's worst pair of each line is on the plot
-    assert all(t.max() == line.max() for line, t in zip(lines[1:], thin[1:]))
+        for i in (1, 3):
+            assert thin[i][k] == lines[i][cover].max()
+        assert thin[2][k] == pytest.approx(100.0 * np.mean(lines[2][cover] > 0))
+    # the run's worst pair of each line is on the plot, and a flag anywhere is
+    assert all(thin[i].max() == lines[i].max() for i in (1, 3))
+    assert (thin[2] > 0).sum() == sum(lines[2][s : s + each].any() for s in range(0, n, each))
     if np.isfinite(lines[0]).any():
         assert np.nanmin(thin[0]) == np.nanmin(lines[0])

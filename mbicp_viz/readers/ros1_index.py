@@ -146,10 +146,12 @@ class Ros1Bag:
         self._chunks: list[_Chunk] = []
         found: dict[int, list[tuple[np.ndarray, int]]] = {c: [] for c in conns}
         for (pos, counts), end in zip(infos, ends):
-            for conn, entries in self._chunk_index(pos, counts, end):
+            chunk, entries = self._chunk_index(pos, counts, end)
+            for conn, part in entries:
                 if conn not in found:
                     raise DamagedIndex(f"an index for connection {conn}, which it does not have")
-                found[conn].append((entries, len(self._chunks) - 1))
+                found[conn].append((part, len(self._chunks)))
+            self._chunks.append(chunk)
         self._index = {c: self._sorted(parts) for c, parts in found.items()}
         self.connections = [
             Connection(
@@ -165,24 +167,26 @@ class Ros1Bag:
         self.start_time = int(min(firsts)) if firsts else 0
 
     def _chunk_index(self, pos: int, counts: np.ndarray, end: int):
-        """(connection, entries) of the index-data records after the chunk at ``pos`` (the
-        chunk itself is read when a message in it is)."""
+        """The chunk at ``pos`` (where its data is: it is read when a message in it is) and its
+        index-data records, (connection, entries) each."""
         h, datapos, dlen = self._head(pos)
         if op_of(h) != OP_CHUNK:
             raise DamagedIndex(f"no chunk at byte {pos}, where the index says one is")
-        self._chunks.append(
-            _Chunk(datapos, dlen, h.get("compression", b"none"), struct.unpack("<I", h["size"])[0])
+        chunk = _Chunk(
+            datapos, dlen, h.get("compression", b"none"), struct.unpack("<I", h["size"])[0]
         )
         # the records hold 12 bytes per message and a header of a few dozen bytes each
         span = int(counts[:, 1].sum()) * ENTRY.itemsize + 1024 * len(counts)
         self._file.seek(datapos + dlen)
         area = self._file.read(max(0, min(end - datapos - dlen, span)))
         found = records(area, 0, self.path)
+        entries = []
         for _ in range(len(counts)):
             op, h, data = next(found, (None, {}, b""))
             if op != OP_INDEX or h.get("ver") != struct.pack("<I", 1):
                 raise DamagedIndex(f"no index-data record after the chunk at byte {pos}")
-            yield struct.unpack("<I", h["conn"])[0], np.frombuffer(data, ENTRY)
+            entries.append((struct.unpack("<I", h["conn"])[0], np.frombuffer(data, ENTRY)))
+        return chunk, entries
 
     @staticmethod
     def _sorted(parts: list[tuple[np.ndarray, int]]) -> _Index:

@@ -150,7 +150,7 @@ def health_legend(x_label: str) -> list[uplot.Series]:
         uplot.Series(label=x_label),
         _line("overlap [%]", "pct", scene.SURFACE),
         _line("from odometry [mm]", "mm", scene.FROM_ODOMETRY),
-        _line("flagged", "pct", scene.SUSPECT),
+        _line("flagged [% of pairs]", "pct", scene.SUSPECT),
         _line("residual [mm]", "mm", scene.RESIDUAL),
     ]
 
@@ -162,17 +162,22 @@ HEALTH_POINTS = 2_000
 
 def worst_of_each(series: tuple[np.ndarray, ...], most: int = HEALTH_POINTS):
     """A health timeline (``RunModel.series``) thinned to at most ``most`` points, each the worst
-    of the consecutive pairs it covers (the lowest overlap; the largest distances, residual and
-    flag), at the first one's number: a spike stays on the plot. Returns the series and how many
-    pairs a point covers."""
+    of the consecutive pairs it covers (the lowest overlap; the largest distances and residual)
+    at the first one's number: a spike stays on the plot. The flag line is the share of those
+    pairs flagged [%]: the largest would be a solid band where flags are frequent (the Intel
+    run), the share shows where they crowd. Returns the series and how many pairs a point
+    covers."""
     n = len(series[0])
     k = math.ceil(n / most)
     if k <= 1:
         return series, 1
     starts = np.arange(0, n, k)
-    lowest = 1  # the overlap: its lowest is its worst
+    counts = np.diff(np.append(starts, n))
+    lowest, share = 1, 3  # the overlap: its lowest is its worst; the flags (0 or 100 a pair)
     thinned = [
-        (np.fmin if i == lowest else np.fmax).reduceat(y, starts)
+        np.add.reduceat(y, starts) / counts
+        if i == share
+        else (np.fmin if i == lowest else np.fmax).reduceat(y, starts)
         for i, y in enumerate(series[1:], start=1)
     ]
     return (series[0][starts], *thinned), k

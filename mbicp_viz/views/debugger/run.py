@@ -46,7 +46,7 @@ class RunPanel:
                 series=tuple(series),
                 aspect=1.6,
                 title="health of every pair"
-                + (f" (each point the worst of {each})" if each > 1 else ""),
+                + (f" (each point the worst of {each}; flagged: their share)" if each > 1 else ""),
                 **panels.timeline_over_slider("pair", top * 1.08, len(rows)),
             )
             # the timeline's own scrubber, right under it: a click under a spike picks its pair
