@@ -163,6 +163,13 @@ def test_a_matcher_behind_skips_to_the_newest_scan_and_says_how_many(bag):
         assert status.skipped > 0 and status.matched + 1 + status.skipped == SCANS
         assert rows[-1].obj == SCANS - 1  # the newest was matched
         assert all(b.ref == a.obj for a, b in zip(rows, rows[1:]))  # still a chain
+        # the page's view numbers the scans it holds, which leave out those skipped: each pair
+        # is still the pair of the same two scans, matched alike
+        _, log, viewed, _, numbers = run.view()
+        assert len(numbers) < SCANS and len(viewed) == len(rows) == log.records - 1
+        for v, r in zip(viewed, rows):
+            assert (numbers[v.ref], numbers[v.obj]) == (r.ref, r.obj)
+            assert log.scan(v.obj).stamp == run.scans[v.obj][1].stamp and v.result == r.result
     finally:
         run.stop()
         robot.stop()

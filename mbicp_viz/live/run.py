@@ -18,6 +18,7 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from mbicp_viz.choices import MATCH_BUDGET_S, Guess
 from mbicp_viz.core import Params, Scan, ScanError, UnusableScan
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.keyframes import KeyFrames
+from mbicp_viz.evaluation.run_rows import RunRows
 from mbicp_viz.evaluation.sequence import match_row
 from mbicp_viz.readers.log import Frames, ScanLog
 from mbicp_viz.readers.pair_match import PairMatch
@@ -367,7 +369,7 @@ class LiveRun:
         with self._lock:
             return replace(self.status, notes=list(self.status.notes)), [r for _, r, _ in self.rows]
 
-    def view(self) -> tuple[Status, ScanLog, list[PairMatch], list[float], list[int]]:
+    def view(self) -> tuple[Status, ScanLog, Sequence[PairMatch], list[float], list[int]]:
         """What the live page draws: the status, the chain's last unbroken stretch in the buffer
         as a log of its scans (read from memory, not saved) with its rows numbered as that log's
         records, each row's lag [s], and each record's number in the robot's run."""
@@ -376,7 +378,13 @@ class LiveRun:
             scans, kept = list(self.scans), list(self.rows)
         number = {k: n for n, (k, _) in enumerate(scans)}
         kept = [(r, lag) for _, r, lag in kept if r.ref in number and r.obj in number]
-        rows = [replace(r, ref=number[r.ref], obj=number[r.obj]) for r, _ in kept]
+        rows = [r for r, _ in kept]
+        if rows:
+            rows = RunRows.renumbered(
+                rows,
+                np.array([number[r.ref] for r in rows]),
+                np.array([number[r.obj] for r in rows]),
+            )
         log = ScanLog(self.url, [s for _, s in scans], frames=self.frames(self._frame_id))
         return status, log, rows, [lag for _, lag in kept], [k for k, _ in scans]
 

@@ -233,7 +233,7 @@ class LiveTab:
         self.grid_m = viser_draw.metric_grid(self.client.scene, self.box)
 
     def plot(self, model: RunModel, log, lags: list[float]) -> None:
-        t = np.array([log.scan(r.obj).stamp or 0.0 for r in model.rows])
+        t = np.array([log.scan(k).stamp or 0.0 for k in model.rows.column("obj").tolist()])
         t = t - t[-1]
         _, overlap, odo, flagged, residual = model.series
         # the time axis set each time (the page keeps an auto range from the plot's first data)
