@@ -2,48 +2,53 @@
 
 from __future__ import annotations
 
-import numpy as np
-from scipy.spatial import cKDTree
+import math
 
+import numpy as np
+
+from .correspondence import first_at_least
 from .scan import Scan
 from .se2 import Pose2
+from .tiers import kernel, run
 
 INLIER_RADIUS_M = 0.05
-
-
-def _nearest(ref: Scan, obj: Scan, pose: Pose2):
-    """The reference points, the object points moved by ``pose``, and each moved point's distance
-    to its nearest reference point and that point's index (one k-d tree, one query)."""
-    q = pose.apply(obj.points())
-    p = ref.points()
-    if not len(q) or not len(p):
-        return p, q, np.full(len(q), np.inf), np.zeros(len(q), dtype=int)
-    best, nearest = cKDTree(p).query(q)
-    return p, q, best, nearest
-
-
-def inlier_fraction(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M) -> float:
-    """Fraction of the object's valid points within ``radius`` [m] of a reference point once moved
-    by ``pose`` (object frame -> reference frame). Lets a user compare two candidate poses — a
-    matcher's and a stored "truth" — on the data itself."""
-    _, q, best, _ = _nearest(ref, obj, pose)
-    return float(np.mean(best <= radius)) if len(q) else 0.0
-
 
 # A reference segment between neighbouring beams is taken as surface when it is at most this many
 # beam spacings long (r * beam step: a surface seen at up to ~70° incidence), plus the radius.
 SURFACE_GAP_BEAMS = 3.0
 
 
+def _distances(ref: Scan, obj: Scan, pose: Pose2, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each object point's distance, once moved by ``pose``, to its nearest reference point and
+    to the reference surface (``_to_surface``); inf where neither is within ``radius``."""
+    q = pose.apply(obj.points())
+    idx = ref.valid_indices()
+    return run(
+        _to_surface,
+        ref.points(),
+        ref.ranges[idx],
+        ref.bearings[idx],
+        q,
+        float(radius),
+        SURFACE_GAP_BEAMS,
+    )
+
+
+def inlier_fraction(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M) -> float:
+    """Fraction of the object's valid points within ``radius`` [m] of a reference point once moved
+    by ``pose`` (object frame -> reference frame). Lets a user compare two candidate poses — a
+    matcher's and a stored "truth" — on the data itself."""
+    return agreement(ref, obj, pose, radius)[0]
+
+
 def agreement(
     ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M
 ) -> tuple[float, float]:
-    """(``inlier_fraction``, ``surface_overlap``) from one nearest-point query."""
-    p, q, best, nearest = _nearest(ref, obj, pose)
-    if not len(q):
+    """(``inlier_fraction``, ``surface_overlap``) from one nearest-point search."""
+    to_point, to_surface = _distances(ref, obj, pose, radius)
+    if not len(to_point):
         return 0.0, 0.0
-    on_points = float(np.mean(best <= radius))
-    return on_points, float(np.mean(_to_surface(ref, p, q, best, nearest, radius) <= radius))
+    return float(np.mean(to_point <= radius)), float(np.mean(to_surface <= radius))
 
 
 def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M) -> float:
@@ -55,24 +60,66 @@ def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RA
     return agreement(ref, obj, pose, radius)[1]
 
 
-def _to_surface(ref: Scan, p, q, best, nearest, radius: float) -> np.ndarray:
-    """Each moved object point's distance to the reference surface (``surface_overlap``), from its
-    distance ``best`` to the ``nearest`` reference point."""
-    if not len(p):
-        return best
-    idx = ref.valid_indices()
-    r, b = ref.ranges[idx], ref.bearings[idx]
-    a, ab = p[:-1], np.diff(p, axis=0)
-    length = np.hypot(ab[:, 0], ab[:, 1])
-    surface = length <= SURFACE_GAP_BEAMS * np.maximum(r[:-1], r[1:]) * np.diff(b) + radius
-    # the nearest point's two segments hold the surface's nearest point
-    for s in (nearest - 1, nearest):
-        use = (s >= 0) & (s < len(a))
-        s = np.clip(s, 0, max(len(a) - 1, 0))
-        if not len(a):
-            break
-        t = np.einsum("ij,ij->i", q - a[s], ab[s]) / np.maximum(length[s] ** 2, 1e-12)
-        foot = a[s] + np.clip(t, 0.0, 1.0)[:, None] * ab[s]
-        d = np.hypot(*(q - foot).T)
-        best = np.where(use & surface[s], np.minimum(best, d), best)
-    return best
+@kernel
+def _to_surface(p, r, b, q, radius: float, gap_beams: float):
+    """Each point of ``q``'s distance to its nearest point of ``p`` (the reference's valid points
+    in scan order, of ranges ``r`` and increasing bearings ``b``) and to the reference surface:
+    the nearest point's two segments where they are surface (``SURFACE_GAP_BEAMS``), else the
+    point itself.
+
+    Exact wherever either distance is within ``radius``; inf where the nearest point lies beyond
+    ``reach``: a segment of length l whose ends are both farther than d from q passes no nearer
+    than sqrt(d^2 - l^2 / 4), so with reach^2 = radius^2 + l_max^2 / 4 such a point is within
+    ``radius`` of neither. The search walks the reference's bearings outwards from q's, both
+    ways round, and stops each way where the bearings left cannot hold a nearer point: a point
+    at bearing difference D from q lies at least |q| sin D from it (|q| past 90 degrees). A k-d
+    tree's build and query took a third of a run's time per pair at 1081 beams. Equal distances
+    go to the lower index."""
+    n, m = len(p), max(len(p) - 1, 0)
+    to_point, to_surface = np.full(len(q), np.inf), np.full(len(q), np.inf)
+    surface = np.zeros(m, dtype=np.bool_)
+    longest = 0.0
+    for i in range(m):
+        length = math.hypot(p[i + 1, 0] - p[i, 0], p[i + 1, 1] - p[i, 1])
+        if length <= gap_beams * max(r[i], r[i + 1]) * (b[i + 1] - b[i]) + radius:
+            surface[i] = True
+            longest = max(longest, length)
+    if n == 0:
+        return to_point, to_surface
+    reach2 = radius * radius + 0.25 * longest * longest
+    turn = 2.0 * math.pi
+    for i in range(len(q)):
+        qx, qy = q[i, 0], q[i, 1]
+        norm = math.hypot(qx, qy)
+        if not math.isfinite(norm):
+            continue
+        # q's bearing as one of the reference's turn [b[0], b[0] + 2 pi), and where it falls
+        a = b[0] + (math.atan2(qy, qx) - b[0]) % turn
+        s = first_at_least(b, a, False)
+        best, j = reach2, -1
+        for way in (1, -1):
+            k = s if way == 1 else s - 1
+            for _ in range(n):
+                kk = k % n
+                # the bearing difference along this way round, 0 to 2 pi
+                d_b = (b[kk] - a if way == 1 else a - b[kk]) % turn
+                if d_b > math.pi:
+                    break
+                low = norm * math.sin(d_b) if d_b < 0.5 * math.pi else norm
+                if low * low > best:
+                    break
+                d = (qx - p[kk, 0]) ** 2 + (qy - p[kk, 1]) ** 2
+                if d < best or (d == best and (j < 0 or kk < j)):
+                    best, j = d, kk
+                k += way
+        if j < 0:
+            continue
+        to_point[i] = to_surface[i] = math.sqrt(best)
+        for s in (j - 1, j):  # the nearest point's two segments hold the surface's nearest point
+            if 0 <= s < m and surface[s]:
+                ax, ay = p[s, 0], p[s, 1]
+                abx, aby = p[s + 1, 0] - ax, p[s + 1, 1] - ay
+                t = ((qx - ax) * abx + (qy - ay) * aby) / max(abx * abx + aby * aby, 1e-12)
+                t = min(max(t, 0.0), 1.0)
+                to_surface[i] = min(to_surface[i], math.hypot(qx - ax - t * abx, qy - ay - t * aby))
+    return to_point, to_surface

@@ -97,7 +97,7 @@ _NEAR_K = 3
 
 
 @kernel
-def _first_at_least(eb, a: float, strict: bool) -> int:
+def first_at_least(eb, a: float, strict: bool) -> int:
     """``np.searchsorted(eb, a, "right" if strict else "left")``: the first index whose bearing is
     above (``strict``) or at least ``a``. Written out: numba's searchsorted costs half a second of
     compilation on a first match, this loop a few milliseconds."""
@@ -155,13 +155,13 @@ def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
     clip_to_bw = Bw < _NEAR_K * max_step  # the 2K beams may reach beyond +/-Bw: clip them
     for i in range(len(alpha)):
         a, r, px, py = alpha[i], rng[i], p[i, 0], p[i, 1]
-        pos = _first_at_least(eb, a, False)
+        pos = first_at_least(eb, a, False)
         lo, hi = max(pos - _NEAR_K, 0), min(pos + _NEAR_K, len(eb))
         # clipping to +/-Bw changes the 2K beams only where their first lies below a - Bw or their
         # last above a + Bw (a partial scan's seam makes max_step wide: most points need no clip)
         if clip_to_bw and ((lo < len(eb) and eb[lo] < a - Bw) or (hi > 0 and eb[hi - 1] > a + Bw)):
-            lo = max(pos - _NEAR_K, _first_at_least(eb, a - Bw, False))
-            hi = max(min(pos + _NEAR_K, _first_at_least(eb, a + Bw, True)), lo)
+            lo = max(pos - _NEAR_K, first_at_least(eb, a - Bw, False))
+            hi = max(min(pos + _NEAR_K, first_at_least(eb, a + Bw, True)), lo)
             lo, hi = max(lo, 0), min(hi, len(eb))
         best, d2 = _window_min(px, py, ex, ey, ek, lo, hi)
         # the window that can hold anything closer (see above), never wider than +/-Bw: only
@@ -175,8 +175,8 @@ def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
             and _reaches(px, py, r, eux[lo - 1], euy[lo - 1], rho)
         ) or (hi < len(eb) and eb[hi] - a <= reach and _reaches(px, py, r, eux[hi], euy[hi], rho)):
             half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw) + 1e-12
-            wlo = _first_at_least(eb, a - half, False)
-            whi = min(_first_at_least(eb, a + half, True), wlo + n_ref, len(eb))  # a point once
+            wlo = first_at_least(eb, a - half, False)
+            whi = min(first_at_least(eb, a + half, True), wlo + n_ref, len(eb))  # a point once
             # [lo, hi) is searched: its two sides only (a tie there keeps the first search's point,
             # as a search of the whole window would)
             for s_lo, s_hi in ((wlo, min(lo, whi)), (max(hi, wlo), whi)):
@@ -267,8 +267,8 @@ def _window_kernel(p, alpha, R: ReferenceIndex, Bw: float, L: float, max_inter: 
     L2, mf2 = L * L, max_factor * max_factor
     for i in range(n):
         px, py, a = p[i, 0], p[i, 1], alpha[i]
-        lo = _first_at_least(eb, a - Bw, False)  # the C code's L
-        hi = min(_first_at_least(eb, a + Bw, False) - 1, lo + n_ref - 1)  # its R: a point once
+        lo = first_at_least(eb, a - Bw, False)  # the C code's L
+        hi = min(first_at_least(eb, a + Bw, False) - 1, lo + n_ref - 1)  # its R: a point once
         d2[i], kind[i], ref_index[i, 0], ref_index[i, 1] = np.inf, PairKind.POINT, -1, -1
         target[i, 0], target[i, 1] = 0.0, 0.0
         if hi < lo:  # no reference point within +/-Bw (the C code pairs it with the origin)
@@ -280,7 +280,7 @@ def _window_kernel(p, alpha, R: ReferenceIndex, Bw: float, L: float, max_inter: 
         A = 1.0 / (px * px + py * py + L2)
         B, C, D = 1.0 - A * py * py, 1.0 - A * px * px, A * px * py
         # the segment across the point's bearing
-        start = min(max(_first_at_least(eb, a, False), lo + 1), hi)
+        start = min(max(first_at_least(eb, a, False), lo + 1), hi)
         best_J = -1
         for J in range(start, hi + 1):  # up, then down
             if J > start and _ray_bound(px, py, eux[J - 1], euy[J - 1], mf2) > d2[i] * (

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .agreement import agreement
 from .events import Recorder
 from .matchers import MATCHERS
 from .metric import mad_threshold
@@ -45,6 +46,7 @@ def compile_all() -> None:
         m.run(ref, obj, guess, m.params_type())
         m.run(ref, obj, guess, m.params_type(), Recorder())
     run(mad_threshold, np.linspace(0.0, 1.0, 21), 2.0)  # the lesson's distances
+    agreement(ref, obj, guess)  # every pair's record
 
 
 if __name__ == "__main__":

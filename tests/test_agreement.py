@@ -2,13 +2,14 @@
 
 import math
 
+import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
 from mbicp_viz.core import Pose2
-from mbicp_viz.core.agreement import inlier_fraction
+from mbicp_viz.core.agreement import SURFACE_GAP_BEAMS, agreement, inlier_fraction
 from mbicp_viz.evaluation.pairs import seen_from
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.pair_match import Score
@@ -28,6 +29,45 @@ def test_the_true_displacement_lays_every_point_on_the_reference(k, x, y, theta)
     obj = seen_from(ref, truth)
     assert inlier_fraction(ref, obj, truth) > 0.95  # the points the displaced sensor still sees
     assert inlier_fraction(ref, obj, Pose2(x + 0.2, y + 0.2, theta + math.radians(15))) < 0.5
+
+
+def exhaustive(ref, obj, pose, radius=0.05) -> tuple[float, float]:
+    """``agreement`` as its definition reads, by trying every reference point for every object
+    point (equal distances to the lower index)."""
+    p, q = ref.points(), pose.apply(obj.points())
+    idx = ref.valid_indices()
+    r, b = ref.ranges[idx], ref.bearings[idx]
+    d2 = (q[:, None, 0] - p[None, :, 0]) ** 2 + (q[:, None, 1] - p[None, :, 1]) ** 2
+    nearest = d2.argmin(axis=1)
+    to_point = np.sqrt(d2[np.arange(len(q)), nearest])
+    ab = np.diff(p, axis=0)
+    surface = np.hypot(*ab.T) <= SURFACE_GAP_BEAMS * np.maximum(r[:-1], r[1:]) * np.diff(b) + radius
+    to_surface = to_point.copy()
+    for i, j in enumerate(nearest):
+        for s in (j - 1, j):
+            if 0 <= s < len(ab) and surface[s]:
+                t = np.dot(q[i] - p[s], ab[s]) / max(np.dot(ab[s], ab[s]), 1e-12)
+                foot = p[s] + min(max(t, 0.0), 1.0) * ab[s]
+                to_surface[i] = min(to_surface[i], math.hypot(*(q[i] - foot)))
+    return float(np.mean(to_point <= radius)), float(np.mean(to_surface <= radius))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    k=st.integers(0, len(SCANS) - 1),
+    truth=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.floats(-3.2, 3.2)),
+    off=st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(-0.5, 0.5)),
+    near=st.booleans(),
+)
+def test_agreement_is_what_trying_every_reference_point_gives(k, truth, off, near):
+    """The search that stops where no nearer point can lie (any pose: on the surfaces or far
+    off them; scans seen from anywhere around, their bearings wrapping at +/-pi) finds what
+    trying every point finds."""
+    ref = SCANS[k]
+    obj = seen_from(ref, Pose2(*truth))
+    pose = Pose2(*truth) if near else Pose2(*truth) @ Pose2(*off)
+    assert agreement(ref, obj, pose) == exhaustive(ref, obj, pose)
+    assert agreement(obj, ref, pose.inverse()) == exhaustive(obj, ref, pose.inverse())
 
 
 def test_a_failure_is_doubted_only_when_the_points_side_with_the_matcher():
