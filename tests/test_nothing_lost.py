@@ -19,6 +19,14 @@ from mbicp_viz.outputs import written
 
 from .conftest import HOKUYO_BAG, INTEL, LASERAZOS, json_lines
 
+# How a process a Ctrl-C ended exits: code 130, or killed by SIGINT (a shell shows 130 for both).
+# Seen beside two busy loops (5 runs in 60, `bench matches` interrupted): when the Ctrl-C first
+# lands inside an extension module's initialisation (``abc.register`` in a lazy ``import
+# numpy.random``, whose C code swallows it), the command takes the interrupt raised again, prints
+# its line and exits 130, and CPython then ends the process by SIGINT all the same (it seems to
+# mark the interrupt unhandled there; Python code cannot clear the mark).
+ENDED_BY_CTRL_C = (130, -signal.SIGINT)
+
 runner = CliRunner()
 
 
@@ -164,7 +172,7 @@ def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(t
     stdout, stderr = proc.communicate(timeout=60)
     assert time.monotonic() - t0 < STOPS_WITHIN_S
     stderr = seen + stderr
-    assert proc.returncode == 130, stderr
+    assert proc.returncode in ENDED_BY_CTRL_C, stderr
     rows = json_lines(out.with_name("seq.json.partial"))[1:]
     assert 0 < len(rows) < 359 and [r["ref"] for r in rows] == list(range(len(rows)))
     assert f"interrupted after {len(rows)} of 359 pairs" in stderr and not out.exists()
@@ -185,7 +193,8 @@ def test_ctrl_c_ends_any_command_in_one_line_without_a_traceback():
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert time.monotonic() - t0 < STOPS_WITHIN_S
-    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "mbicp-viz: interrupted", err
+    assert proc.returncode in ENDED_BY_CTRL_C, err
+    assert err.strip().splitlines()[-1] == "mbicp-viz: interrupted", err
     assert "Traceback" not in err
 
 
