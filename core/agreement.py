@@ -20,11 +20,12 @@ SURFACE_GAP_BEAMS = 3.0
 
 def _distances(ref: Scan, obj: Scan, pose: Pose2, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Each object point's distance, once moved by ``pose``, to its nearest reference point and
-    to the reference surface (``_to_surface``); inf where neither is within ``radius``."""
+    to the reference surface (``_nearest_and_surface``); inf where the nearest point is too far
+    for either to be within ``radius``."""
     q = pose.apply(obj.points())
     idx = ref.valid_indices()
     return run(
-        _to_surface,
+        _nearest_and_surface,
         ref.points(),
         ref.ranges[idx],
         ref.bearings[idx],
@@ -61,7 +62,7 @@ def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RA
 
 
 @kernel
-def _to_surface(p, r, b, q, radius: float, gap_beams: float):
+def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
     """Each point of ``q``'s distance to its nearest point of ``p`` (the reference's valid points
     in scan order, of ranges ``r`` and increasing bearings ``b``) and to the reference surface:
     the nearest point's two segments where they are surface (``SURFACE_GAP_BEAMS``), else the
@@ -77,6 +78,8 @@ def _to_surface(p, r, b, q, radius: float, gap_beams: float):
     go to the lower index."""
     n, m = len(p), max(len(p) - 1, 0)
     to_point, to_surface = np.full(len(q), np.inf), np.full(len(q), np.inf)
+    if n == 0:
+        return to_point, to_surface
     surface = np.zeros(m, dtype=np.bool_)
     longest = 0.0
     for i in range(m):
@@ -84,8 +87,6 @@ def _to_surface(p, r, b, q, radius: float, gap_beams: float):
         if length <= gap_beams * max(r[i], r[i + 1]) * (b[i + 1] - b[i]) + radius:
             surface[i] = True
             longest = max(longest, length)
-    if n == 0:
-        return to_point, to_surface
     reach2 = radius * radius + 0.25 * longest * longest
     turn = 2.0 * math.pi
     for i in range(len(q)):
