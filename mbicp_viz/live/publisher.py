@@ -55,12 +55,25 @@ class FoxgloveRobot:
             raise InputError("publishing a bag needs the Foxglove SDK: pip install foxglove-sdk")
         self.bag, self.ros1 = bag, bag.suffix == ".bag"
         self.listener = _Subscriptions()
-        self.server = foxglove.start_server(port=port, server_listener=self.listener)
+        self.server = self._start(port)
         self.port = self.server.port
         with AnyReader([bag]) as reader:
             self.channels = {c.topic: self._channel(c) for c in reader.connections}
             self.scan_topics = {c.topic for c in reader.connections if c.msgtype.endswith("Scan")}
             self.messages = [(c.topic, t, raw) for c, t, raw in reader.messages()]
+
+    def _start(self, port: int, timeout_s: float = 10.0):
+        """The server on ``port``. The SDK's ``stop()`` returns before its listening socket is
+        closed (a restart on the same port failed 238 times in 300 at once, never after 2 ms), so
+        a bridge coming back on its old port tries again until that socket is gone."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                return foxglove.start_server(port=port, server_listener=self.listener)
+            except RuntimeError as e:
+                if port == 0 or "in use" not in str(e) or time.monotonic() > deadline:
+                    raise
+            threading.Event().wait(0.01)
 
     @property
     def url(self) -> str:
