@@ -321,6 +321,7 @@ def test_the_live_map_grows_by_the_new_scans_and_stays_where_it_was_drawn(bag, t
     scans that left the buffer is removed."""
     from mbicp_viz.views.debugger.app import viser_server
     from mbicp_viz.views.debugger.live import LiveTab
+    from mbicp_viz.views.debugger.run_model import RunModel
 
     _, served = bag
     robot = FoxgloveRobot(served)
@@ -335,8 +336,8 @@ def test_the_live_map_grows_by_the_new_scans_and_stays_where_it_was_drawn(bag, t
         before = dict(tab.world)
         tab._guarded(tab.refresh)
         refreshed += 1
-        for g in before.keys() & tab.world.keys():  # the same to rounding (composed anew)
-            a, b = before[g], tab.world[g]
+        for g in before.keys() & tab.world.keys():  # placed once, never composed anew
+            a, b = before[g].pose, tab.world[g].pose
             moved.append(max(abs(a.x - b.x), abs(a.y - b.y), abs(a.theta - b.theta)))
         parts = {last: node for last, node, _ in tab.map_parts}
         for last, node in parts.items():
@@ -353,12 +354,24 @@ def test_the_live_map_grows_by_the_new_scans_and_stays_where_it_was_drawn(bag, t
         robot.publish(TOPICS, rate=10.0, before_scan=before_scan, received=lambda: has(run))
         assert wait_for(lambda: caught_up(run, SCANS), 60)
         refresh()
+        # placed pair by pair, the page's run is the buffer's run chained whole, in the page's
+        # world: its poses, its odometry and its health timeline
+        _, log, rows, lags, numbers = run.view()
+        model = RunModel(log, rows)
+        chain = [tab.world[numbers[k]] for k in model.scans]
+        for p, o, got in zip(model.poses, model.odometry, chain):
+            for a, b in ((chain[0].pose @ p, got.pose), (chain[0].odometry @ o, got.odometry)):
+                assert np.allclose(a.as_array(), b.as_array(), atol=1e-9)
+        t = np.array([log.scan(r.obj).stamp for r in rows])
+        series = (t - t[-1], *model.series[1:5])
+        assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(tab.health.data, series))
+        assert np.array_equal(tab.lateness.data[1], 1000 * np.asarray(lags))
     finally:
         tab.close()
         server.stop()
         run.stop()
         robot.stop()
-    assert refreshed >= SCANS - 1 and max(moved) < 1e-9, max(moved)
+    assert refreshed >= SCANS - 1 and max(moved) == 0.0, max(moved)
     assert min(tab.world) > SCANS // 2  # the buffer dropped its first scans: the frame went on
     assert removed and len(seen) > len(tab.map_parts)
 

@@ -13,7 +13,7 @@ import threading
 import time
 import traceback
 from collections import deque
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +21,7 @@ import viser
 import viser.uplot as uplot
 
 from mbicp_viz.core import Pose2
+from mbicp_viz.evaluation.trajectory import odometry_placed, placed
 
 from .. import scene, viser_draw
 from . import panels
@@ -31,6 +32,18 @@ REFRESH_S = 0.5  # the page follows the run this often
 TIME_AXIS = "time of the scan [s], 0 = the newest"
 LAG = scene.Style("lag: from a scan's arrival to its result [ms]", (220, 40, 40))
 PERIOD = scene.Style("one scan period of the robot [ms]", (120, 120, 120))
+
+
+@dataclass(frozen=True)
+class Placed:
+    """A scan of the live run as the page placed it, once: its pose is not composed anew."""
+
+    pose: Pose2  # in the page's world frame
+    odometry: Pose2 | None  # the odometry chained to it from the page's first scan (None: none)
+    # the pair that placed it: its scan's stamp [s], the health timeline's overlap [%], distance
+    # from odometry [mm], flagged (100, else 0) and residual [mm] (``RunModel.series``), and its
+    # result's lag [ms]; None at the scan the world starts at
+    health: np.ndarray | None
 
 
 class LiveTab:
@@ -97,8 +110,8 @@ class LiveTab:
         self.extent = np.zeros((1, 2))
         self.scale = 1.0  # the dots' and lines' size, set when the view is fitted
         # the page's world frame is the first scan it drew, carried along as the buffer drops its
-        # oldest scans: each scan's pose in it, by its number in the robot's run
-        self.world: dict[int, Pose2] = {}
+        # oldest scans: each scan as the page placed it, by its number in the robot's run
+        self.world: dict[int, Placed] = {}
         # the map, drawn once per refresh for the scans new to it: (its last scan's number, its
         # node, its points' lower and upper corners), removed once its scans left the buffer
         self.map_parts: deque[tuple[int, object, np.ndarray]] = deque()
@@ -138,35 +151,67 @@ class LiveTab:
         self.drawn = key
         t0 = time.perf_counter()
         model = RunModel(log, rows)
-        self.draw(model, numbers)
-        self.plot(model, log, lags)
+        visited = [numbers[k] for k in model.scans]  # each scan's number in the robot's run
+        self._place(model, visited, numbers, lags)
+        chain = [self.world[v] for v in visited]
+        self.draw(model, visited, chain)
+        self.plot(np.array([p.health for p in chain[1:]]))
         self.refresh_s.append(time.perf_counter() - t0)
 
-    def draw(self, model: RunModel, numbers: list[int]) -> None:
+    def _place(
+        self, model: RunModel, visited: list[int], numbers: list[int], lags: list[float]
+    ) -> None:
+        """The scans new to the page placed in its world frame on those it placed before, each
+        once (composing the whole buffer anew took most of a refresh, and the matcher waited on
+        it), with their pairs' health; the scans that left the buffer forgotten."""
+        if (
+            visited[0] not in self.world
+        ):  # the first pair, or the chain broke: the world starts here
+            self._clear_map()
+            self.world[visited[0]] = Placed(Pose2(), Pose2(), None)
+        while (first := next(iter(self.world))) < visited[0]:
+            del self.world[first]
+        fresh = [k for k, v in enumerate(visited[1:]) if v not in self.world]
+        if not fresh:
+            return
+        new = [model.rows[k] for k in fresh]
+        refs, objs = [r.ref for r in new], [r.obj for r in new]
+        start = {r: self.world[numbers[r]] for r in refs if numbers[r] in self.world}
+        poses = placed(
+            refs, objs, [r.result.pose for r in new], {r: p.pose for r, p in start.items()}
+        )
+        odometry = None
+        if all(p.odometry is not None for p in start.values()):
+            at = {r: p.odometry for r, p in start.items()}
+            motions = [r.odometry for r in new]
+            odometry = odometry_placed(model.log, refs, objs, motions, new[0].frame, at)
+        stamps = [model.log.scan(k).stamp or 0.0 for k in objs]
+        lag_ms = [1000 * lags[k] for k in fresh]
+        health = np.column_stack([stamps, *RunModel(model.log, new).series[1:5], lag_ms])
+        for k, obj in enumerate(objs):
+            odo = None if odometry is None else odometry[k + 1]
+            self.world[numbers[obj]] = Placed(poses[k + 1], odo, health[k])
+
+    def draw(self, model: RunModel, visited: list[int], chain: list[Placed]) -> None:
         """The buffer's run in the page's world frame: its tracks and the newest pair drawn anew,
         the map only for the scans new to it (the whole map each refresh took most of it), and
         the map of scans that left the buffer removed."""
-        visited = [numbers[k] for k in model.scans]  # each scan's number in the robot's run
-        origin = self.world.get(visited[0])
-        if origin is None:  # the first pair, or the chain broke: the world starts here
-            self._clear_map()
-            origin = Pose2()
-        poses = [origin @ p for p in model.poses]
-        self.world = dict(zip(visited, poses))
+        poses = [p.pose for p in chain]
+        odometry = [p.odometry for p in chain]
         track = np.array([[p.x, p.y] for p in poses])
         self.extent = np.concatenate([track, *(part[2] for part in self.map_parts)])
         lo, hi = self.extent.min(axis=0), self.extent.max(axis=0)
         if self.box is None or np.any(lo < self.box[0]) or np.any(hi > self.box[1]):
             self.fit()  # the run left the view
-        odometry = model.odometry
+        flagged = np.flatnonzero([p.health[3] for p in chain[1:]])
         n = len(model.rows) - 1
         mount = model.mount
         layers = [
             *scene.run_track_layers(
                 scene.RunTracks(
                     poses,
-                    odometry=None if odometry is None else [origin @ p for p in odometry],
-                    suspects=track[[f + 1 for f in model.flagged]].reshape(-1, 2),
+                    odometry=None if any(o is None for o in odometry) else odometry,
+                    suspects=track[flagged + 1].reshape(-1, 2),
                 ),
                 self.scale,
             ),
@@ -232,16 +277,15 @@ class LiveTab:
         self.camera.fit(self.box)
         self.grid_m = viser_draw.metric_grid(self.client.scene, self.box)
 
-    def plot(self, model: RunModel, log, lags: list[float]) -> None:
-        t = np.array([log.scan(k).stamp or 0.0 for k in model.rows.column("obj").tolist()])
-        t = t - t[-1]
-        _, overlap, odo, flagged, residual = model.series
+    def plot(self, health: np.ndarray) -> None:
+        """The health and the lag of the buffer's pairs (``Placed.health``, one row a pair)."""
+        t = health[:, 0] - health[-1, 0]
+        overlap, odo, flagged, residual, lag_ms = health[:, 1:].T
         # the time axis set each time (the page keeps an auto range from the plot's first data)
         x = {"x": uplot.Scale(time=False, auto=False, range=(min(float(t[0]), -1.0), 0.0))}
         self.health.data = (t, overlap, odo, flagged, residual)
         self.health.scales = panels.health_axes("", panels._top([*odo, *residual]))["scales"] | x
         period = np.median(np.diff(t)) * 1000 if len(t) > 1 else np.nan
-        lag_ms = 1000 * np.asarray(lags)
         self.lateness.data = (t, lag_ms, np.full(len(t), period))
         top = panels._top([*lag_ms, period])
         self.lateness.scales = panels._numeric("", ("ms", "", 3, top))["scales"] | x
