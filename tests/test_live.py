@@ -17,6 +17,7 @@ import pytest
 
 from mbicp_viz.core import ImprovedParams, Pose2
 from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.run_rows import RunRows
 from mbicp_viz.evaluation.sequence import match_sequence
 from mbicp_viz.live.publisher import FoxgloveRobot
 from mbicp_viz.live.run import LiveRun
@@ -374,6 +375,50 @@ def test_the_live_map_grows_by_the_new_scans_and_stays_where_it_was_drawn(bag, t
     assert refreshed >= SCANS - 1 and max(moved) == 0.0, max(moved)
     assert min(tab.world) > SCANS // 2  # the buffer dropped its first scans: the frame went on
     assert removed and len(seen) > len(tab.map_parts)
+
+
+def test_the_live_odometry_track_starts_again_where_odometry_came_back(bag, tmp_path):
+    """A robot whose odometry stops for three scans: their pairs have none; the odometry drawn
+    is chained from the last scan without it, at that scan's matched pose."""
+    from mbicp_viz.evaluation.trajectory import odometry_placed
+    from mbicp_viz.views import scene
+    from mbicp_viz.views.debugger.app import viser_server
+    from mbicp_viz.views.debugger.live import LiveTab
+    from mbicp_viz.views.debugger.run_model import RunModel
+
+    _, served = bag
+    robot = FoxgloveRobot(served)
+    scans = [k for k, m in enumerate(robot.messages) if m[0] == "/scan"]
+    lost = range(scans[20], scans[23])  # no odometry from scan 20 to scan 23
+    robot.messages = [m for k, m in enumerate(robot.messages) if m[0] != "/odom" or k not in lost]
+    run = LiveRun(robot.url, ImprovedParams())
+    server = viser_server("127.0.0.1", 0)
+    tab = LiveTab(server, run, tmp_path, None)
+
+    def before_scan(n: int) -> None:
+        assert wait_for(lambda: caught_up(run, n), 60), run.snapshot()[0].line()
+
+    try:
+        robot.publish(TOPICS, rate=10.0, before_scan=before_scan, received=lambda: has(run))
+        assert wait_for(lambda: caught_up(run, SCANS), 60)
+        tab._guarded(tab.refresh)
+        _, log, rows, _, numbers = run.view()
+        assert [r.obj for r in rows if r.odometry is None] == [20, 21, 22, 23]
+        after = RunRows.of(rows[23:])  # the pairs from scan 23 on
+        chain = odometry_placed(
+            log, after.column("ref"), after.column("obj"), after.poses("odometry"), "base_link"
+        )
+        gap = tab.world[numbers[23]]
+        for k, p in zip(after.column("obj"), chain[1:]):
+            got = tab.world[numbers[k]].odometry
+            assert np.allclose((gap.pose @ p).as_array(), got.as_array(), atol=1e-9)
+        assert f"/{scene.RUN}/odometry" in tab.nodes
+        assert len(RunModel(log, rows).poses) == len(tab.world)
+    finally:
+        tab.close()
+        server.stop()
+        run.stop()
+        robot.stop()
 
 
 def test_a_frozen_buffer_opens_in_the_debugger_with_its_pairs_as_matched_live(bag, tmp_path):

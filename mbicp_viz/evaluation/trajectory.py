@@ -40,17 +40,10 @@ def _pairs(rows: list[PairMatch]) -> tuple[list[int], list[int]]:
     return [r.ref for r in rows], [r.obj for r in rows]
 
 
-def placed(
-    refs: Sequence[int],
-    objs: Sequence[int],
-    motions: Sequence[Pose2],
-    at: dict[int, Pose2] | None = None,
-) -> list[Pose2]:
+def placed(refs: Sequence[int], objs: Sequence[int], motions: Sequence[Pose2]) -> list[Pose2]:
     """The poses of the scans a run visits (refs[0], objs[0], objs[1] ...), from the identity at
-    the first: each pair's motion composed on the pose of the scan it starts from. ``at``: the
-    poses of scans placed before (a run's newest pairs placed on its older ones, as the live page
-    does), where the pairs start."""
-    at = dict(at) if at is not None else {refs[0]: Pose2()}
+    the first: each pair's motion composed on the pose of the scan it starts from."""
+    at = {refs[0]: Pose2()}
     for ref, obj, m in zip(refs, objs, motions):
         at[obj] = at[ref] @ m
     return [at[refs[0]], *(at[k] for k in objs)]
@@ -83,19 +76,14 @@ def odometry_chain(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
 
 
 def odometry_placed(
-    log: ScanLog,
-    refs: Sequence[int],
-    objs: Sequence[int],
-    odometry: list,
-    frame: str,
-    at: dict[int, Pose2] | None = None,
+    log: ScanLog, refs: Sequence[int], objs: Sequence[int], odometry: list, frame: str
 ) -> list[Pose2] | None:
     """``odometry_chain`` of a run's pairs and their odometry motions (laser frame; None: none)
-    reported in ``frame``; ``at`` as ``placed``'s."""
+    reported in ``frame``."""
     if any(o is None for o in odometry):
         return None
     base = frame != "laser"
-    return placed(refs, objs, [log.frames.reported(o, base) for o in odometry], at)
+    return placed(refs, objs, [log.frames.reported(o, base) for o in odometry])
 
 
 def scan_indices(rows: list[PairMatch]) -> list[int]:

@@ -21,7 +21,6 @@ import viser
 import viser.uplot as uplot
 
 from mbicp_viz.core import Pose2
-from mbicp_viz.evaluation.trajectory import odometry_placed, placed
 
 from .. import scene, viser_draw
 from . import panels
@@ -39,7 +38,9 @@ class Placed:
     """A scan of the live run as the page placed it, once: its pose is not composed anew."""
 
     pose: Pose2  # in the page's world frame
-    odometry: Pose2 | None  # the odometry chained to it from the page's first scan (None: none)
+    # the odometry chained to it from the page's first scan, or from the newest scan before it
+    # without odometry (None: its pair has none)
+    odometry: Pose2 | None
     # the pair that placed it: its scan's stamp [s], the health timeline's overlap [%], distance
     # from odometry [mm], flagged (100, else 0) and residual [mm] (``RunModel.series``), and its
     # result's lag [ms]; None at the scan the world starts at
@@ -164,9 +165,7 @@ class LiveTab:
         """The scans new to the page placed in its world frame on those it placed before, each
         once (composing the whole buffer anew took most of a refresh, and the matcher waited on
         it), with their pairs' health; the scans that left the buffer forgotten."""
-        if (
-            visited[0] not in self.world
-        ):  # the first pair, or the chain broke: the world starts here
+        if visited[0] not in self.world:  # the first pair, or the chain broke: it starts here
             self._clear_map()
             self.world[visited[0]] = Placed(Pose2(), Pose2(), None)
         while (first := next(iter(self.world))) < visited[0]:
@@ -175,29 +174,26 @@ class LiveTab:
         if not fresh:
             return
         new = [model.rows[k] for k in fresh]
-        refs, objs = [r.ref for r in new], [r.obj for r in new]
-        start = {r: self.world[numbers[r]] for r in refs if numbers[r] in self.world}
-        poses = placed(
-            refs, objs, [r.result.pose for r in new], {r: p.pose for r, p in start.items()}
-        )
-        odometry = None
-        if all(p.odometry is not None for p in start.values()):
-            at = {r: p.odometry for r, p in start.items()}
-            motions = [r.odometry for r in new]
-            odometry = odometry_placed(model.log, refs, objs, motions, new[0].frame, at)
-        stamps = [model.log.scan(k).stamp or 0.0 for k in objs]
+        stamps = [model.log.scan(r.obj).stamp or 0.0 for r in new]
         lag_ms = [1000 * lags[k] for k in fresh]
         health = np.column_stack([stamps, *RunModel(model.log, new).series[1:5], lag_ms])
-        for k, obj in enumerate(objs):
-            odo = None if odometry is None else odometry[k + 1]
-            self.world[numbers[obj]] = Placed(poses[k + 1], odo, health[k])
+        base = model.base
+        for r, h in zip(new, health):
+            start = self.world[numbers[r.ref]]  # placed before, or by a pair before it here
+            odometry = None
+            if r.odometry is not None:  # chained on the start's, or from its pose after a gap
+                at = start.pose if start.odometry is None else start.odometry
+                odometry = at @ model.log.frames.reported(r.odometry, base)
+            self.world[numbers[r.obj]] = Placed(start.pose @ r.result.pose, odometry, h)
 
     def draw(self, model: RunModel, visited: list[int], chain: list[Placed]) -> None:
         """The buffer's run in the page's world frame: its tracks and the newest pair drawn anew,
         the map only for the scans new to it (the whole map each refresh took most of it), and
         the map of scans that left the buffer removed."""
         poses = [p.pose for p in chain]
-        odometry = [p.odometry for p in chain]
+        # the odometry since the newest scan without it (drawn from that scan's pose), if any
+        gap = max((k for k, p in enumerate(chain) if p.odometry is None), default=-1)
+        odometry = [poses[gap]] * (gap >= 0) + [p.odometry for p in chain[gap + 1 :]]
         track = np.array([[p.x, p.y] for p in poses])
         self.extent = np.concatenate([track, *(part[2] for part in self.map_parts)])
         lo, hi = self.extent.min(axis=0), self.extent.max(axis=0)
@@ -210,7 +206,7 @@ class LiveTab:
             *scene.run_track_layers(
                 scene.RunTracks(
                     poses,
-                    odometry=None if any(o is None for o in odometry) else odometry,
+                    odometry=odometry if len(odometry) > 1 else None,
                     suspects=track[flagged + 1].reshape(-1, 2),
                 ),
                 self.scale,
