@@ -34,15 +34,19 @@ while k < len(words):
     n = int(words[k]); k += 1 + 2 * n * per_ray
     out.append("1 " + " ".join(words[k:k + 3])); k += 3
 print("\\n".join(out[:len(out) - {drop}]))
+sys.stderr.write({log!r})
 print(0.001 * len(out), len(out), file=sys.stderr)
 """
 
 
-def stand_ins(folder, drop=0):
+def stand_ins(folder, drop=0, log=""):
+    """The two stand-in drivers; ``log``: what they write on stderr before their time."""
     for name, per_ray, header in (("mbicp_pairs", 2, 15), ("csm_pairs", 3, 0)):
         exe = folder / name
         exe.write_text(
-            ECHO_GUESS.format(python=sys.executable, per_ray=per_ray, header=header, drop=drop)
+            ECHO_GUESS.format(
+                python=sys.executable, per_ray=per_ray, header=header, drop=drop, log=log
+            )
         )
         exe.chmod(exe.stat().st_mode | stat.S_IXUSR)
     return folder
@@ -74,6 +78,15 @@ def test_every_pair_and_guess_reach_the_original_and_its_answers_are_scored(tmp_
         line.startswith("improved MbICP (as published)") and "against CSM's PL-ICP 1.000 ms" in line
         for line in lines
     ), out
+
+
+def test_a_drivers_log_in_colour_before_its_time_is_read_past(tmp_path):
+    """CSM logs to stderr in colour, its reset code not followed by a newline (seen at 1081
+    beams): the time after it is still read."""
+    drivers = stand_ins(tmp_path, log="\x1b[1;35;40m:sm_icp: some note\x1b[0m")
+    code, out = run(drivers, LASERAZOS, "--limit", 3, "--repeat", 1)
+    assert code == 0, out
+    assert "against CSM's PL-ICP 1.000 ms" in out, out
 
 
 def test_without_a_build_one_line_says_how_to_build(tmp_path):

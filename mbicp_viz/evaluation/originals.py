@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import subprocess
 import time
 from collections.abc import Callable
@@ -206,7 +207,8 @@ def run_driver(exe: Path, args: tuple[str, ...], text: str, n: int) -> tuple[lis
             f"no answer within {DRIVER_TIMEOUT_S} s for {n} pairs", path=str(exe)
         ) from None
     lines = [line.split() for line in out.stdout.splitlines() if line.strip()]
-    times = out.stderr.split()[-2:]
+    # CSM logs to stderr in colour, its reset code not followed by a newline
+    times = re.sub(r"\x1b\[[0-9;]*m", " ", out.stderr).split()[-2:]
     if out.returncode != 0 or len(lines) != n or len(times) != 2:
         raise InputError(
             f"exit code {out.returncode}, {len(lines)} poses for {n} pairs; expected one pose per "

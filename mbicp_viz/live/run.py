@@ -342,7 +342,7 @@ class LiveRun:
             self._previous = (k, scan)
         with self._lock:
             lag = time.monotonic() - received
-            if self.scans and all(n != i for n, _ in self.scans):  # the buffer lost its start
+            if self.scans and self.scans[0][0] > i:  # the buffer lost its start (numbers ascend)
                 self.scans.clear()
             self.scans.extend([previous] * (not self.scans) + [(k, scan)])
             self.rows.append((scan.stamp or 0.0, m, lag))
