@@ -24,12 +24,18 @@ def write(path: Path, robot: Robot, kind: str) -> Path:
 
 
 def intel_robot(
-    intel, first: int, count: int, mount: Pose2 | None, upside_down: bool = False, **kw
+    intel,
+    first: int,
+    count: int,
+    mount: Pose2 | None,
+    upside_down: bool = False,
+    period_s: float = 0.5,
+    **kw,
 ) -> Robot:
     """Intel scans ``first`` .. ``first + count - 1`` driven by a robot whose laser sits at
-    ``mount``."""
+    ``mount`` and scans every ``period_s`` from 100 s."""
     scans = [intel.scan(first + k) for k in range(count)]
-    stamps = [100.0 + 0.5 * k for k in range(count)]
+    stamps = [100.0 + period_s * k for k in range(count)]
     odometry = None
     if mount is not None:
         odometry = [s.pose @ mount.inverse() for s in scans]  # the base's poses

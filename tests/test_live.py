@@ -146,18 +146,42 @@ def test_a_key_frame_run_live_is_eval_sequences_key_frame_run(bag):
         robot.stop()
 
 
-def test_a_matcher_behind_skips_to_the_newest_scan_and_says_how_many(bag):
-    """A burst faster than any matcher: it matches the newest scan, never a queue, and counts the
-    scans it left out."""
-    _, served = bag
+def test_scans_that_arrive_two_at_once_are_both_matched(bag):
+    """The network delivers scans two at a time, faster than the matcher: neither is skipped, and
+    the run is eval sequence's."""
+    path, served = bag
     robot = FoxgloveRobot(served)
+    run = LiveRun(robot.url, ImprovedParams())
+    try:
+
+        def before_scan(n: int) -> None:  # scans 1 and 2, 3 and 4 ... sent together
+            assert n % 2 == 0 or wait_for(lambda: caught_up(run, n), 60)
+
+        robot.publish(TOPICS, rate=1e6, before_scan=before_scan, received=lambda: has(run))
+        assert wait_for(lambda: run.snapshot()[0].scans == SCANS and run.wait_idle(0), 60)
+        status, rows = run.snapshot()
+        assert status.skipped == 0 and status.matched == SCANS - 1
+        expected = match_sequence(read_log(path), ImprovedParams(), workers=1)
+        assert all(same(m, e) for m, e in zip(rows, expected))
+    finally:
+        run.stop()
+        robot.stop()
+
+
+def test_a_matcher_behind_skips_the_scans_it_would_reach_late_and_says_how_many(intel, tmp_path):
+    """A robot faster than any matcher (a scan every 0.5 ms): the scans it would reach more than
+    a scan period after they came are skipped and counted; the newest is matched, the pairs still
+    chain."""
+    path = tmp_path / "fast"
+    bags.write(path, bags.intel_robot(intel, 0, SCANS, None, period_s=0.0005), "mcap")
+    robot = FoxgloveRobot(next(path.glob("*.mcap")))
     run = LiveRun(robot.url, ImprovedParams(), guess="identity")
     try:
 
-        def before_scan(n: int) -> None:  # the first scan starts the chain, then the burst
+        def before_scan(n: int) -> None:  # the first scan starts the chain, then the rest
             assert n != 1 or wait_for(lambda: caught_up(run, 1), 60)
 
-        robot.publish(TOPICS, rate=1e6, before_scan=before_scan, received=lambda: has(run))
+        robot.publish(("/scan",), rate=1.0, before_scan=before_scan, received=lambda: has(run))
         assert wait_for(lambda: run.snapshot()[0].scans == SCANS, 60)
         assert wait_for(lambda: sum(_taken(run.snapshot()[0])) == SCANS)
         status, rows = run.snapshot()

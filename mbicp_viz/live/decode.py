@@ -35,6 +35,14 @@ class Decoder:
     def __init__(self, url: str, typestore: str):
         self.where, self.ros2 = Path(url), typestore_named(typestore)
 
+    def warm(self) -> None:
+        """Make each kind's decoder, in both encodings, before the first message: rosbags
+        generates it at its first use (the first Odometry took 70 ms, and the scans that arrived
+        meanwhile came together: the oldest were skipped)."""
+        for msgtype in KINDS:
+            self.ros2.get_msgdef(msgtype)
+            _ros1_store().get_msgdef(msgtype)
+
     def __call__(self, channel: Channel, payload: bytes, n: int):
         """The message, or an ``InputError`` naming the channel and message ``n``."""
         msgtype = ros2_type(channel.schema_name)
