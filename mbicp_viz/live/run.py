@@ -37,6 +37,7 @@ from mbicp_viz.readers.rosbag import (
     LASER_SCAN,
     ODOMETRY,
     TF,
+    header_stamp,
     laser_scan,
     odometry_track,
     tf_base,
@@ -281,16 +282,17 @@ class LiveRun:
         scan waiting for its odometry is never skipped for the one behind it."""
         while self._waiting:
             k, msg, received = self._waiting[0]
-            stamp, frame_id = _stamp(msg), msg.header.frame_id.lstrip("/")
+            stamp, frame_id = header_stamp(msg), msg.header.frame_id.lstrip("/")
             track = self._track(stamp, frame_id)
             if not self._odometry_ready(stamp, received, track):
                 return None
             self._waiting.popleft()
             if self._waiting:
                 _, after, arrived = self._waiting[0]
-                late = time.monotonic() - received > _stamp(after) - stamp
+                next_stamp = header_stamp(after)
+                late = time.monotonic() - received > next_stamp - stamp
                 if late and self._odometry_ready(
-                    _stamp(after), arrived, self._track(_stamp(after), frame_id)
+                    next_stamp, arrived, self._track(next_stamp, frame_id)
                 ):
                     self.status.skipped += 1
                     continue
@@ -312,8 +314,7 @@ class LiveRun:
         """The odometry around ``stamp`` (stamps, base poses): an Odometry topic's, else the
         track on /tf of the base the laser ``frame_id`` hangs from; older messages dropped."""
         while len(self._odometry) > 2:
-            s = self._odometry[1].header.stamp
-            if s.sec + 1e-9 * s.nanosec >= stamp - 2.0:
+            if header_stamp(self._odometry[1]) >= stamp - 2.0:
                 break
             self._odometry.popleft()
         self._tf.drop_before(stamp - 2.0)
@@ -459,11 +460,6 @@ def steady_latency() -> None:
     gc.collect()
     gc.freeze()
     sys.setswitchinterval(GIL_SWITCH_S)
-
-
-def _stamp(msg) -> float:
-    """A message's header stamp [s]."""
-    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
 def _warm_up(params: Params) -> None:

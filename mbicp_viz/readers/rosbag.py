@@ -396,9 +396,14 @@ def tf_base(tf: TfTree, mount: Mount | None) -> str | None:
     return None
 
 
+def header_stamp(msg) -> float:
+    """A ROS message's header stamp [s]."""
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
 def odometry_track(msgs: list) -> tuple[np.ndarray, np.ndarray]:
     """(stamps, base poses (N, 3)) of Odometry messages, in stamp order."""
-    stamps = np.array([o.header.stamp.sec + 1e-9 * o.header.stamp.nanosec for o in msgs])
+    stamps = np.array([header_stamp(o) for o in msgs])
     poses = np.array([_planar(o.pose.pose) for o in msgs]).reshape(-1, 3)
     order = np.argsort(stamps, kind="stable")
     return stamps[order], poses[order]
@@ -551,7 +556,7 @@ def laser_scan(m, path: str, k: int, upside_down: bool, track, mount: Pose2):
     if len(bearings) > 1 and bearings[1] < bearings[0]:
         ranges, bearings = ranges[::-1], bearings[::-1]
         times = None if times is None else times[::-1]
-    stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
+    stamp = header_stamp(m)
     odom = None
     if track is not None:
         base = interpolate(track[0], track[1], stamp)
