@@ -960,8 +960,10 @@ def test_a_runs_loops_are_drawn_listed_opened_and_decided_by_hand(browser, tmp_p
         k = next(n for n, c in enumerate(loops.closures) if c.verdict is not Verdict.ACCEPTED)
         c = loops.closures[k]
         pick(k)
-        assert wait_for(lambda: session.state.pair == (c.old, c.key))
-        assert session.state.guess == c.match.guess  # from the search's peak, as it was matched
+        # the pair and the guess from the search's peak, as it was matched (the page's thread sets
+        # the one after the other: both awaited)
+        opened = ((c.old, c.key), c.match.guess)
+        assert wait_for(lambda: (session.state.pair, session.state.guess) == opened)
         page.get_by_text(f"loop candidate ({c.verdict.value}").first.wait_for(timeout=30000)
         for label in (scene.RESPONSE.label, scene.CHOSEN_PEAK.label, scene.SECOND_PEAK.label):
             page.get_by_text(label).first.wait_for(timeout=30000)

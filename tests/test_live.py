@@ -483,8 +483,9 @@ def test_a_frozen_buffer_opens_in_the_debugger_with_its_pairs_as_matched_live(ba
             page.screenshot(path=str(tmp_path / "frozen-run.png"))
             page.get_by_role("button", name="open this pair").click()
             row = rows[session.run.n]
-            assert wait_for(lambda: session.state.pair == (row.ref, row.obj))
-            assert session.state.guess == row.guess
+            # the pair and its guess, set one after the other by the page's thread: both awaited
+            opened = ((row.ref, row.obj), row.guess)
+            assert wait_for(lambda: (session.state.pair, session.state.guess) == opened)
             legend.get_by_text(scene.REFERENCE.label, exact=True).wait_for(timeout=30000)
             page.screenshot(path=str(tmp_path / "frozen-pair.png"))
             browser.close()
