@@ -29,6 +29,21 @@ ARGS = [
 ]
 
 
+def scroll_to(locator) -> None:
+    """Scrolls to what a locator finds. A plot's legend is replaced when the page sends its data
+    again, and Playwright does not retry a scroll on an element that went: find it afresh."""
+    from playwright.sync_api import Error
+
+    def scrolled() -> bool:
+        try:
+            locator.scroll_into_view_if_needed(timeout=2000)
+            return True
+        except Error:
+            return False
+
+    assert wait_for(scrolled)
+
+
 @pytest.fixture(scope="module")
 def app():
     a = App(
@@ -205,7 +220,7 @@ def test_the_layers_offered_are_the_ones_this_pair_can_have(browser, app):
 
     page, session = open_tab(browser, app)
     rejected = page.get_by_text(scene.PAIR_REJECTED.label, exact=True)
-    rejected.first.scroll_into_view_if_needed()
+    scroll_to(rejected.first)
     assert rejected.first.is_visible()
     for label in (scene.RAW.label, scene.SEAM.label):
         box = page.get_by_text(label, exact=True).first
@@ -972,7 +987,7 @@ def test_a_runs_loops_are_drawn_listed_opened_and_decided_by_hand(browser, tmp_p
             f"relation score with it {score(forced).mean():.3f} m, without it "
             f"{score(loops).mean():.3f} m"
         ).wait_for(timeout=30000)
-        page.get_by_text(scene.SECOND_PEAK.label).first.scroll_into_view_if_needed()
+        scroll_to(page.get_by_text(scene.SECOND_PEAK.label).first)
         page.screenshot(path=str(tmp_path / "loop-candidate.png"))
 
         a = next(n for n, c in enumerate(loops.closures) if c.verdict is Verdict.ACCEPTED)
