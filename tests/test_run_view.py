@@ -178,6 +178,32 @@ def test_bench_run_times_the_run_view(tmp_path):
     assert "(4 steps)" in steps and "open the run" in res.output
 
 
+def test_bench_page_times_the_run_view_from_the_command_to_the_page(tmp_path):
+    """bench page starts `serve LOG --rows ROWS` as a command and loads its page in a headless
+    Chromium: listening, page loaded and run view shown come in that order, and the server is
+    ended after each opening (Ctrl-C); a server that cannot open says why in one line."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+
+    rows = tmp_path / "rows.jsonl"
+    res = CliRunner().invoke(cli, ["eval", "sequence", str(INTEL), "--out", str(rows)])
+    assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(cli, ["bench", "page", str(INTEL), str(rows), "--repeat", "2"])
+    assert res.exit_code == 0, res.output
+    medians = {
+        name: float(re.search(rf"^{name}\s+mean\s+\S+ ms\s+median\s+(\S+) ms", res.output, re.M)[1])
+        for name in ("listening", "page loaded", "run view shown")
+    }
+    assert 0 < medians["listening"] < medians["page loaded"] < medians["run view shown"]
+    assert "(2 opens)" in res.output
+    left = subprocess.run(["pgrep", "-f", str(rows)], capture_output=True, text=True).stdout
+    assert left == "", left  # no server left behind
+    res = CliRunner().invoke(cli, ["bench", "page", str(INTEL), str(tmp_path / "none.jsonl")])
+    assert res.exit_code == 2 and "serve did not open a page" in res.output
+    assert "none.jsonl" in res.output and "Traceback" not in res.output
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     n=st.integers(1, 3000),

@@ -630,3 +630,35 @@ def test_a_box_typed_without_enter_says_it_is_not_applied(session):
     submit(panel, Bw="60")  # Enter
     assert "not applied" not in panel.message.content
     assert session.state.params["improved"].Bw == pytest.approx(math.radians(60))
+
+
+def test_the_run_view_shows_before_its_map_and_the_map_follows_the_slider(server, tmp_path):
+    """The run opens on its trajectory and pair; the map's chunks follow, sent behind them hidden,
+    and a slider step past chunks not sent yet sends them shown. In the end every chunk is sent,
+    shown exactly when the pair in view has passed it. The pair's plots are hidden while the run
+    is shown (they are the pair debugger's match, not in view), and back with the pair."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+
+    rows = tmp_path / "rows.jsonl"
+    res = CliRunner().invoke(cli, ["eval", "sequence", str(INTEL), "--out", str(rows)])
+    assert res.exit_code == 0, res.output
+    s = Session(server, files_source(str(INTEL), None, rows=str(rows)))
+    run = s.run
+    n = len(run.model.rows)
+    assert run.active and not s.plots.folder.visible
+    with s.lock:  # the map's sender waits: the slider's step sends what it passes
+        run.slider.value = n
+        chunks = run.chunk_nodes
+        assert len(chunks) == 1 and len(chunks[0]) == n + 1
+        whole = run.model.whole_chunks(n - 1)
+        assert all(h is not None and h.visible for h in chunks[0][:whole])
+        run.slider.value = n // 2
+    assert wait_for(lambda: all(h is not None for h in run.chunk_nodes[0]))
+    whole = run.model.whole_chunks(n // 2 - 1)
+    assert 0 < whole < n + 1
+    assert [h.visible for h in run.chunk_nodes[0]] == [c < whole for c in range(n + 1)]
+    run.switch()  # back to the pair
+    assert not run.active and run.chunk_nodes == [] and s.plots.folder.visible
+    s.close()

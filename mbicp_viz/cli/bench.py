@@ -184,6 +184,24 @@ def run(
         typer.echo(t.line())
 
 
+def page(
+    log: Annotated[str, typer.Argument(help="the log the run matched")],
+    rows: Annotated[str, typer.Argument(metavar="ROWS", help="its rows (eval sequence --out)")],
+    repeat: Annotated[int, typer.Option("--repeat", min=1, help="openings to time")] = 5,
+    browser: Annotated[
+        str | None, typer.Option("--browser", help="Chromium to drive (default: on the PATH)")
+    ] = None,
+):
+    """How soon the run view shows: `serve LOG --rows ROWS` started as a command, its page in a
+    headless Chromium already running (Playwright, the test extra), until the run's legend shows."""
+    from mbicp_viz.evaluation.bench import machine_line
+    from mbicp_viz.views.debugger.page_timing import page_timings
+
+    typer.echo(f"run view of {rows} on {log}, command to page; {machine_line()}")
+    for t in page_timings(log, rows, repeat, browser):
+        typer.echo(t.line())
+
+
 def startup(repeat: Annotated[int, typer.Option("--repeat", min=3, help="runs of --help")] = 10):
     """How soon the tool answers: --help, the first match with an empty kernel cache, the
     debugger."""
@@ -441,6 +459,7 @@ def register(app: typer.Typer) -> None:
         ("originals", originals),
         ("gui", gui),
         ("run", run),
+        ("page", page),
         ("startup", startup),
         ("bag", bag),
         ("throughput", throughput),

@@ -111,10 +111,12 @@ class Session:
             if self.lesson is not None:
                 self.lesson.open(self.state.source.lesson_step)
                 return
-            self.after_match(self.state.rematch())
-            self.fit_view()
-            if self.run is not None:  # the rows of a run open on the whole run
-                self.run.enter()
+            error = self.state.rematch()
+            if self.run is not None:  # the rows of a run open on the whole run: the pair's scene
+                self.run.enter()  # is drawn when the pair is shown (not sent to be hidden)
+            else:
+                self.fit_view()
+            self.after_match(error)
 
     def load(self, source: Source, iteration: int | None = None) -> None:
         """Open another source (a lesson's step) in this tab: its pair, matchers, parameters and

@@ -1,0 +1,123 @@
+"""``bench page``: how soon a person sees the run view, the way they open it — ``mbicp-viz serve
+LOG --rows ROWS`` started as a command, its page loaded in a browser already running (a headless
+Chromium driven by Playwright, the test extra's), until the page shows the run's legend. The
+server side alone is ``bench run``."""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
+from mbicp_viz.errors import InputError
+from mbicp_viz.evaluation.bench import Timing
+from mbicp_viz.views import scene
+
+# what Chromium needs here to draw WebGL without a GPU (the browser tests use the same)
+CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"]
+URL = re.compile(r"open (http://\S+)")
+
+
+def find_chromium(path: str | None) -> str:
+    """The browser to drive: ``path``, else Chromium on the PATH."""
+    found = shutil.which(path or "chromium") or shutil.which("chromium-browser")
+    if found is None:
+        raise InputError("no Chromium found (Debian: apt-get install chromium)", field="--browser")
+    return found
+
+
+@contextmanager
+def serving(args: list[str], timeout_s: float) -> Iterator[tuple[str, float]]:
+    """``mbicp-viz ARGS`` started in a process group of its own: its page's address and when it
+    printed it [s since the start]. Ended with Ctrl-C (SIGINT), then killed if it lingers."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mbicp_viz", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
+    lines: queue.Queue[str | None] = queue.Queue()
+
+    def read() -> None:  # a server that says nothing must not hold the bench past its timeout
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    threading.Thread(target=read, daemon=True).start()
+    try:
+        said = ["nothing"]
+        while (left := timeout_s - (time.perf_counter() - t0)) > 0:
+            try:
+                line = lines.get(timeout=left)
+            except queue.Empty:
+                break
+            if line is None:  # it ended
+                break
+            said.append(line.strip())
+            if m := URL.search(line):
+                yield m.group(1), time.perf_counter() - t0
+                return
+        raise InputError(f"serve did not open a page; its last words: {said[-1]}")
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+
+
+def page_timings(
+    log: str, rows: str, repeat: int, browser: str | None = None, timeout_s: float = 120.0
+) -> list[Timing]:
+    """From the command to the run view on the page, ``repeat`` times: the server listening, the
+    page loaded, the run view shown (its legend's run trajectory entry) [ms]; and the browser's
+    own start, once."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        raise InputError(
+            "bench page drives a browser with Playwright: pip install '.[test]'", field="--browser"
+        ) from None
+    exe = find_chromium(browser)
+    parts: dict[str, list[float]] = {"listening": [], "page loaded": [], "run view shown": []}
+    with sync_playwright() as p:
+        t0 = time.perf_counter()
+        chromium = p.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
+        started = 1000.0 * (time.perf_counter() - t0)
+        try:
+            for _ in range(repeat):
+                with serving(["serve", log, "--rows", rows, "--port", "0"], timeout_s) as (
+                    url,
+                    listening,
+                ):
+                    t0 = time.perf_counter() - listening
+                    page = chromium.new_page(viewport={"width": 1400, "height": 900})
+                    page.goto(url, timeout=1000 * timeout_s)
+                    loaded = time.perf_counter() - t0
+                    legend = page.locator(".mbicp-legend")
+                    legend.get_by_text(scene.RUN_TRAJECTORY.label).first.wait_for(
+                        timeout=1000 * timeout_s
+                    )
+                    shown = time.perf_counter() - t0
+                    page.close()
+                for name, t in zip(parts, (listening, loaded, shown), strict=True):
+                    parts[name].append(1000.0 * t)
+        finally:
+            chromium.close()
+    return [Timing("browser started", np.array([started]), "starts")] + [
+        Timing(name, np.array(t), "opens") for name, t in parts.items()
+    ]
