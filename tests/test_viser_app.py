@@ -632,11 +632,11 @@ def test_a_box_typed_without_enter_says_it_is_not_applied(session):
     assert session.state.params["improved"].Bw == pytest.approx(math.radians(60))
 
 
-def test_the_run_view_shows_before_its_map_and_the_map_follows_the_slider(server, tmp_path):
-    """The run opens on its trajectory and pair; the map's chunks follow, sent behind them hidden,
-    and a slider step past chunks not sent yet sends them shown. In the end every chunk is sent,
-    shown exactly when the pair in view has passed it. The pair's plots are hidden while the run
-    is shown (they are the pair debugger's match, not in view), and back with the pair."""
+def test_the_run_view_shows_its_map_up_to_the_pair_and_hides_the_pairs_plots(server, tmp_path):
+    """The run opens on the whole run, never first on its pair's scene; the map's chunks are shown
+    exactly when the pair in view has passed them, forwards and back. The pair's plots are hidden
+    while the run is shown (they are the pair debugger's match, not in view), and back with the
+    pair."""
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app as cli
@@ -646,19 +646,14 @@ def test_the_run_view_shows_before_its_map_and_the_map_follows_the_slider(server
     assert res.exit_code == 0, res.output
     s = Session(server, files_source(str(INTEL), None, rows=str(rows)))
     run = s.run
+    assert run.active and not s.plots.folder.visible and s.nodes == {}
     n = len(run.model.rows)
-    assert run.active and not s.plots.folder.visible
-    with s.lock:  # the map's sender waits: the slider's step sends what it passes
-        run.slider.value = n
-        chunks = run.chunk_nodes
-        assert len(chunks) == 1 and len(chunks[0]) == n + 1
-        whole = run.model.whole_chunks(n - 1)
-        assert all(h is not None and h.visible for h in chunks[0][:whole])
-        run.slider.value = n // 2
-    assert wait_for(lambda: all(h is not None for h in run.chunk_nodes[0]))
-    whole = run.model.whole_chunks(n // 2 - 1)
-    assert 0 < whole < n + 1
-    assert [h.visible for h in run.chunk_nodes[0]] == [c < whole for c in range(n + 1)]
+    (chunks,) = run.chunk_nodes
+    for k in (n, n // 2, 1):
+        run.slider.value = k
+        whole = run.model.whole_chunks(k - 1)
+        assert [h.visible for h in chunks] == [c < whole for c in range(len(chunks))]
+    assert 0 < run.model.whole_chunks(n // 2 - 1) < len(chunks)
     run.switch()  # back to the pair
-    assert not run.active and run.chunk_nodes == [] and s.plots.folder.visible
+    assert not run.active and run.chunk_nodes == [] and s.plots.folder.visible and s.nodes
     s.close()

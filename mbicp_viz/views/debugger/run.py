@@ -7,8 +7,6 @@ The run itself is ``run_model.RunModel``.
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 
 from .. import scene, viser_draw
@@ -24,10 +22,7 @@ class RunPanel:
         self.s, self.model, self.active, self.scale = session, model, False, 1.0
         self.nodes: dict[str, object] = {}  # drawn once per showing of the run
         self.pair_nodes: dict[str, object] = {}  # drawn at each pair
-        # each map's chunks, shown as the pair passes them: their layers, and their nodes once sent
-        self.chunk_layers: list[list[scene.Points]] = []
-        self.chunk_nodes: list[list] = []  # a chunk not sent yet: None
-        self.showing = 0  # counts the run's drawings whole: a map sender of an older one stops
+        self.chunk_nodes: list[list] = []  # each map's chunks, shown as the pair passes them
         self.still: list = []
         self.chunks_shown = 0
         rows = model.rows
@@ -151,7 +146,8 @@ class RunPanel:
         self.toggle.label = "back to the pair"
         for handle in self.s.nodes.values():
             handle.visible = False
-        self.s.plots.folder.visible = False  # the pair's iterations: not what is in view
+        # the pair's plots are the pair debugger's match, not what is in view
+        self.s.plots.folder.visible = False
         pts = self.model.extent()
         self.scale = scene.scene_scale(pts)
         self.s.camera.fit(pts)
@@ -159,59 +155,36 @@ class RunPanel:
         self.draw_whole()
 
     def draw_whole(self) -> None:
-        """The run's trajectories, closures and the slider's pair drawn anew; then the map's
-        chunks are sent, hidden, behind them (``send_map``): the run shows before its map has
-        arrived, the bulk of what the page receives (3.3 MB on the Intel log)."""
+        """The run's trajectories, closures and the map's chunks (hidden) drawn anew, then the
+        slider's pair."""
         api = self.s.client.scene
         with self.s.client.atomic():
-            for handle in [*self.nodes.values(), *self.sent_chunks()]:
+            for handle in [*self.nodes.values(), *(h for m in self.chunk_nodes for h in m)]:
                 handle.remove()
             self.still = scene.run_track_layers(self.model.tracks(), self.scale)
             self.nodes = {
                 f"/{layer.path}": viser_draw.draw(api, f"/{layer.path}", layer)
                 for layer in self.still
             }
-            self.chunk_layers = [
-                scene.run_map_layers(self.model.chunks(poses), self.scale, style, name)
+            self.chunk_nodes = [
+                [
+                    viser_draw.draw(api, f"/{layer.path}", layer, visible=False)
+                    for layer in scene.run_map_layers(
+                        self.model.chunks(poses), self.scale, style, name
+                    )
+                ]
                 for name, poses, style in self.model.maps()
             ]
-            self.chunk_nodes = [[None] * len(layers) for layers in self.chunk_layers]
-        self.showing += 1
         self.chunks_shown = 0
         self.draw()
-        threading.Thread(target=self.send_map, args=(self.showing,), daemon=True).start()
-
-    def sent_chunks(self) -> list:
-        return [h for nodes in self.chunk_nodes for h in nodes if h is not None]
-
-    def show_chunk(self, c: int, visible: bool) -> None:
-        """Chunk c of every map shown or hidden, sent first if it has not been."""
-        for layers, nodes in zip(self.chunk_layers, self.chunk_nodes, strict=True):
-            if nodes[c] is None:
-                layer = layers[c]
-                nodes[c] = viser_draw.draw(
-                    self.s.client.scene, f"/{layer.path}", layer, visible=visible
-                )
-            else:
-                nodes[c].visible = visible
-
-    def send_map(self, showing: int) -> None:
-        """The map's chunks not sent yet, one at a time under the tab's lock (a slider step
-        between two goes first), until the run is drawn anew or left."""
-        for c in range(len(self.chunk_layers[0]) if self.chunk_layers else 0):
-            with self.s.lock:
-                if self.showing != showing or self.s.closed.is_set():
-                    return
-                if any(nodes[c] is None for nodes in self.chunk_nodes):
-                    self.show_chunk(c, c < self.chunks_shown)
 
     def leave(self) -> None:
         self.active = False
         self.toggle.label = "show the run"
-        self.showing += 1  # its map's sender stops
-        for handle in [*self.nodes.values(), *self.pair_nodes.values(), *self.sent_chunks()]:
+        chunks = [h for m in self.chunk_nodes for h in m]
+        for handle in [*self.nodes.values(), *self.pair_nodes.values(), *chunks]:
             handle.remove()
-        self.nodes, self.pair_nodes, self.chunk_layers, self.chunk_nodes = {}, {}, [], []
+        self.nodes, self.pair_nodes, self.chunk_nodes = {}, {}, []
         self.s.plots.folder.visible = True
         self.s.fit_view()
         self.s.redraw()
@@ -226,7 +199,8 @@ class RunPanel:
         whole = self.model.whole_chunks(self.n)
         with self.s.client.atomic():
             for c in range(min(whole, self.chunks_shown), max(whole, self.chunks_shown)):
-                self.show_chunk(c, c < whole)
+                for nodes in self.chunk_nodes:
+                    nodes[c].visible = c < whole
             self.chunks_shown = whole
             drawn = {}
             for layer in layers:
