@@ -191,6 +191,7 @@ def page(
     browser: Annotated[
         str | None, typer.Option("--browser", help="Chromium to drive (default: on the PATH)")
     ] = None,
+    topic: TopicOpt = None,
 ):
     """How soon the run view shows: `serve LOG --rows ROWS` started as a command, its page in a
     headless Chromium already running (Playwright, the test extra), until the run's legend shows."""
@@ -198,7 +199,7 @@ def page(
     from mbicp_viz.views.debugger.page_timing import page_timings
 
     typer.echo(f"run view of {rows} on {log}, command to page; {machine_line()}")
-    for t in page_timings(log, rows, repeat, browser):
+    for t in page_timings(log, rows, repeat, browser, topic):
         typer.echo(t.line())
 
 

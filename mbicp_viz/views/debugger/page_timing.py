@@ -81,11 +81,16 @@ def serving(args: list[str], timeout_s: float) -> Iterator[tuple[str, float]]:
 
 
 def page_timings(
-    log: str, rows: str, repeat: int, browser: str | None = None, timeout_s: float = 120.0
+    log: str,
+    rows: str,
+    repeat: int,
+    browser: str | None = None,
+    topic: str | None = None,
+    timeout_s: float = 120.0,
 ) -> list[Timing]:
     """From the command to the run view on the page, ``repeat`` times: the server listening, the
     page loaded, the run view shown (its legend's run trajectory entry) [ms]; and the browser's
-    own start, once."""
+    own start, once. ``topic``: the scan stream of a log with several (``serve --topic``)."""
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
@@ -98,12 +103,10 @@ def page_timings(
         t0 = time.perf_counter()
         chromium = p.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
         started = 1000.0 * (time.perf_counter() - t0)
+        args = ["serve", log, "--rows", rows, "--port", "0"] + (["--topic", topic] if topic else [])
         try:
             for _ in range(repeat):
-                with serving(["serve", log, "--rows", rows, "--port", "0"], timeout_s) as (
-                    url,
-                    listening,
-                ):
+                with serving(args, timeout_s) as (url, listening):
                     t0 = time.perf_counter() - listening
                     page = chromium.new_page(viewport={"width": 1400, "height": 900})
                     page.goto(url, timeout=1000 * timeout_s)
