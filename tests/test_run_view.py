@@ -176,6 +176,7 @@ def test_bench_run_times_the_run_view(tmp_path):
     assert res.exit_code == 0, res.output
     steps = next(x for x in res.output.splitlines() if x.startswith("run slider step redraw"))
     assert "(4 steps)" in steps and "open the run" in res.output
+    assert "viser" not in res.stdout  # its banner and farewell are no data of the command
 
 
 def test_bench_page_times_the_run_view_from_the_command_to_the_page(tmp_path):

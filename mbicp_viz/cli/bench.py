@@ -343,8 +343,10 @@ def live(
             lags = np.array(run.lags) * 1000.0
         finally:
             if tab is not None:
+                from mbicp_viz.views.debugger.app import stop_server
+
                 tab.close()
-                tab.client.stop()
+                stop_server(tab.client)
             run.stop()
             server.stop()
     sent = len(robot.stamps)

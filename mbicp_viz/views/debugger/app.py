@@ -67,6 +67,12 @@ def viser_server(host: str, port: int) -> viser.ViserServer:
         return viser.ViserServer(host=host, port=port, verbose=False)
 
 
+def stop_server(server: viser.ViserServer) -> None:
+    """Stop a viser server; its farewell goes to stderr, as its banner (``viser_server``)."""
+    with redirect_stdout(sys.stderr):
+        server.stop()
+
+
 class App:
     """A viser server with one Session per connected browser tab, or on a live run
     (``live.run.LiveRun``, ``source`` None) one ``live.LiveTab`` per tab."""
@@ -183,8 +189,7 @@ class App:
 
         for s in list(self.sessions.values()):
             s.close()
-        with redirect_stdout(sys.stderr):
-            self.server.stop()
+        stop_server(self.server)
         stop_recorder()
         if self.folder is not None:
             self.folder.cleanup()

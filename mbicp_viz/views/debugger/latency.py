@@ -6,13 +6,13 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import viser
 
 from mbicp_viz.core import Pose2
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.bench import Timing
 from mbicp_viz.readers import ReadOptions, read_log
 
+from .app import stop_server, viser_server
 from .session import Session
 from .state import Source
 
@@ -27,7 +27,7 @@ def gui_latency(
     """Iteration step -> redraw, and parameter change -> re-match -> redraw, as a user drives
     them."""
     log = read_log(path, options)
-    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    server = viser_server("127.0.0.1", 0)
     s = Session(server, Source(path, log, pair=pair, guess=Pose2(), options=options))
     try:
         step_ms = []
@@ -47,7 +47,7 @@ def gui_latency(
         )
     finally:
         s.close()
-        server.stop()
+        stop_server(server)
 
 
 def first_result_ms(
@@ -77,7 +77,7 @@ def run_latency(
     the run's trajectories and map sent), and a slider step over the run -> its redraw."""
     from .sources import files_source
 
-    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    server = viser_server("127.0.0.1", 0)
     t0 = time.perf_counter()
     s = Session(server, files_source(path, None, options=options, rows=rows))
     try:
@@ -95,4 +95,4 @@ def run_latency(
         )
     finally:
         s.close()
-        server.stop()
+        stop_server(server)
