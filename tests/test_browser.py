@@ -203,7 +203,7 @@ def test_plots_read_numbers_not_dates(browser, app):
     shown = legend.locator(".u-value").first.inner_text().strip()
     assert 0 <= float(shown) <= session.state.max_iteration(), shown  # not "1970-01-01 12:00am"
     labels = " ".join(legend.inner_text().split())
-    assert "mean squared residual [m²]" in labels and "MAD threshold" in labels
+    assert "mean squared residual [mm²]" in labels and "MAD threshold" in labels
     with session.lock:
         ev = report.event(session.state, session.state.runs[0])
         median = scene.histogram(ev.pairs.distance, ev.threshold).median

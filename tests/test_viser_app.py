@@ -657,3 +657,15 @@ def test_the_run_view_shows_its_map_up_to_the_pair_and_hides_the_pairs_plots(ser
     run.switch()  # back to the pair
     assert not run.active and run.chunk_nodes == [] and s.plots.folder.visible and s.nodes
     s.close()
+
+
+def test_the_error_plot_reads_mm2_so_a_converged_match_keeps_its_tick_labels(session):
+    """uPlot writes at most three decimals on a tick: the bundled pair's converged error in m²
+    would read "0" at every tick of its axis. The page plots it in mm², and says so."""
+    run = session.state.runs[0]
+    errors = np.array([e.error for e in run.iterations])
+    _, err, _ = session.plots.error.data
+    np.testing.assert_allclose(err[: len(errors)], errors * 1e6)
+    assert errors[-1] < 5e-4 <= err[len(errors) - 1]  # "0" in m², a number in mm²
+    assert [a["label"] for a in session.plots.error.axes][1] == "error [mm²]"
+    assert session.plots.error.series[1]["label"] == "improved: mean squared residual [mm²]"

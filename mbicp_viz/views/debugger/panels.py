@@ -272,7 +272,7 @@ class Plots:
             title="error and threshold per iteration",
             **_numeric(
                 "iteration",
-                ("err", "error [m²]", 3, _top(e.error for e in events)),
+                ("err", "error [mm²]", 3, _top(e.error * MM2_PER_M2 for e in events)),
                 ("m", "threshold [m]", 1, _top(e.threshold for e in events)),
             ),
         )
@@ -355,12 +355,18 @@ def legend_html(
 # ---- plot data (what the plots show at the current iteration) ---------------------------------
 
 
+# The page plots the error in mm²: uPlot labels a tick with at most three decimals, so the m² of
+# a converged match (1e-5 and below) read "0" at every tick of the axis.
+MM2_PER_M2 = 1e6
+ERROR_MM2 = replace(scene.ERROR, label="mean squared residual [mm²]")
+
+
 def error_legend(state: DebugState) -> tuple[uplot.Series, ...]:
     series = [uplot.Series(label="iteration")]
     for run in state.runs:
-        own = MATCHERS[run.matcher].colour if len(state.runs) > 1 else scene.ERROR.color
+        own = MATCHERS[run.matcher].colour if len(state.runs) > 1 else ERROR_MM2.color
         series.append(
-            _line(f"{run.matcher}: {scene.ERROR.label}", "err", replace(scene.ERROR, color=own))
+            _line(f"{run.matcher}: {ERROR_MM2.label}", "err", replace(ERROR_MM2, color=own))
         )
         thr = scene.threshold_style(run.start.params)
         own = MATCHERS[run.matcher].colour if len(state.runs) > 1 else thr.color
@@ -369,14 +375,14 @@ def error_legend(state: DebugState) -> tuple[uplot.Series, ...]:
 
 
 def error_series(state: DebugState) -> tuple[np.ndarray, ...]:
-    """Iteration, then error [m²] and threshold [m] of each run (NaN past its end or without
+    """Iteration, then error [mm²] and threshold [m] of each run (NaN past its end or without
     one)."""
     n = max(state.max_iteration(), 1)
     out = [np.arange(1, n + 1, dtype=float)]
     for run in state.runs:
         err, thr = np.full(n, np.nan), np.full(n, np.nan)
         for k, e in enumerate(run.iterations):
-            err[k] = e.error
+            err[k] = e.error * MM2_PER_M2
             thr[k] = np.nan if e.threshold is None else e.threshold
         out += [err, thr]
     return tuple(out)
