@@ -12,6 +12,7 @@ from playwright.sync_api import sync_playwright
 from mbicp_viz.core import ImprovedParams, Pose2, relative
 from mbicp_viz.readers import read_log
 from mbicp_viz.views.debugger.app import App
+from mbicp_viz.views.debugger.page_timing import CHROMIUM_ARGS
 from mbicp_viz.views.debugger.state import Source
 from mbicp_viz.views.scene import OBJECT, REFERENCE
 
@@ -19,9 +20,7 @@ from .conftest import DATA, EXAMPLES, INTEL, interpreted_kernels, wait_for
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = [
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--no-sandbox",
+    *CHROMIUM_ARGS,
     "--disable-background-networking",
     "--disable-component-update",
     "--disable-sync",

@@ -203,6 +203,10 @@ def test_bench_page_times_the_run_view_from_the_command_to_the_page(tmp_path):
     res = CliRunner().invoke(cli, ["bench", "page", str(INTEL), str(tmp_path / "none.jsonl")])
     assert res.exit_code == 2 and "serve did not open a page" in res.output
     assert "none.jsonl" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(  # a browser named is that one, or none
+        cli, ["bench", "page", str(INTEL), str(rows), "--browser", str(tmp_path / "no-browser")]
+    )
+    assert res.exit_code == 2 and "--browser: no browser to run at" in res.output
 
 
 @settings(max_examples=60, deadline=None)

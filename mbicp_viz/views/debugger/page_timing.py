@@ -23,14 +23,18 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.bench import Timing
 from mbicp_viz.views import scene
 
-# what Chromium needs here to draw WebGL without a GPU (the browser tests use the same)
+# what Chromium needs here to draw WebGL without a GPU (the browser tests' flags start with them)
 CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"]
 URL = re.compile(r"open (http://\S+)")
 
 
 def find_chromium(path: str | None) -> str:
-    """The browser to drive: ``path``, else Chromium on the PATH."""
-    found = shutil.which(path or "chromium") or shutil.which("chromium-browser")
+    """The browser to drive: ``path`` (never another in its place), else Chromium on the PATH."""
+    if path is not None:
+        if (found := shutil.which(path)) is None:
+            raise InputError(f"no browser to run at {path!r}", field="--browser")
+        return found
+    found = shutil.which("chromium") or shutil.which("chromium-browser")
     if found is None:
         raise InputError("no Chromium found (Debian: apt-get install chromium)", field="--browser")
     return found
