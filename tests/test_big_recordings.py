@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
@@ -320,16 +320,52 @@ def test_a_log_read_whole_is_cached_and_read_from_the_cache_alike(tmp_path, monk
     assert read_log(path).store is None
 
 
+@settings(max_examples=30, deadline=None)
 @given(n=st.integers(1, 70_000))
 def test_a_long_trajectory_is_drawn_through_evenly_spaced_poses_ending_at_its_last(n):
+    """... of which a line keeps those it needs: on a curve and a line of no width, all."""
     from mbicp_viz.views import scene
 
-    poses = [Pose2(float(k), 0.0, 0.0) for k in range(n)]
-    drawn = scene._drawn_track(poses)[:, 0]
+    poses = [Pose2(float(k), 1e-6 * k * k, 0.0) for k in range(n)]
+    drawn = scene._drawn_track(poses, 0.0)[:, 0]
     assert len(drawn) <= scene.RUN_TRACK_VERTICES + 1 and drawn[0] == 0 and drawn[-1] == n - 1
     steps = np.diff(drawn)
     assert np.all(steps > 0) and (n <= scene.RUN_TRACK_VERTICES) == np.all(steps == 1)
     assert len(set(steps[:-1])) <= 1  # evenly spaced, but for the step to the last pose
+
+
+@given(
+    n=st.integers(0, 400),
+    tol=st.floats(0.001, 1.0),
+    seed=st.integers(0, 2**32 - 1),
+    still=st.floats(0.0, 0.9),
+)
+def test_a_simplified_track_stays_within_its_tolerance_of_every_pose(n, tol, seed, still):
+    """Douglas and Peucker: every pose left out lies within the tolerance of the segment drawn
+    across it; the ends are kept, a straight run (or a robot standing still) is one segment per
+    span of ``SIMPLIFIED_SPAN`` poses."""
+    from mbicp_viz.views import scene
+
+    rng = np.random.default_rng(seed)
+    steps = rng.normal(size=(n, 2)) * rng.uniform(0.01, 1.0)
+    steps[rng.random(n) < still] = 0.0  # standing still: the same pose again
+    xy = np.cumsum(steps, axis=0)
+    at = scene.simplified(xy, tol)
+    assert list(at) == sorted(set(at)) and (n == 0 or (at[0] == 0 and at[-1] == n - 1))
+    k = 0  # each pose's segment: between the kept vertices around it
+    for i in range(n):
+        while k + 1 < len(at) and at[k + 1] <= i:
+            k += 1
+        if at[k] == i or (k + 1 < len(at) and at[k + 1] == i):
+            continue
+        a, b = xy[at[k]], xy[at[k + 1]]
+        d = b - a
+        t = np.clip((xy[i] - a) @ d / max(d @ d, 1e-300), 0.0, 1.0)
+        assert np.hypot(*(xy[i] - a - t * d)) <= tol * (1 + 1e-9)
+    line = np.column_stack([np.linspace(0, 10, max(n, 2)), np.zeros(max(n, 2))])
+    # a straight line: its ends, and the ends of the spans it is simplified in
+    spans = list(range(0, max(n, 2), scene.SIMPLIFIED_SPAN))
+    assert list(scene.simplified(line, tol)) == sorted({*spans, max(n, 2) - 1})
 
 
 def test_every_scan_of_a_lazily_read_log_is_read_front_to_back(tmp_path, intel):

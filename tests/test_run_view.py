@@ -181,8 +181,9 @@ def test_bench_run_times_the_run_view(tmp_path):
 
 def test_bench_page_times_the_run_view_from_the_command_to_the_page(tmp_path):
     """bench page starts `serve LOG --rows ROWS` as a command and loads its page in a headless
-    Chromium: listening, page loaded and run view shown come in that order, and the server is
-    ended after each opening (Ctrl-C); a server that cannot open says why in one line."""
+    Chromium: listening, page loaded and run view shown come in that order, then steps of the
+    run's slider are timed, and the server is ended after each opening (Ctrl-C); a server that
+    cannot open says why in one line."""
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app as cli
@@ -190,14 +191,17 @@ def test_bench_page_times_the_run_view_from_the_command_to_the_page(tmp_path):
     rows = tmp_path / "rows.jsonl"
     res = CliRunner().invoke(cli, ["eval", "sequence", str(INTEL), "--out", str(rows)])
     assert res.exit_code == 0, res.output
-    res = CliRunner().invoke(cli, ["bench", "page", str(INTEL), str(rows), "--repeat", "2"])
+    args = ["bench", "page", str(INTEL), str(rows), "--repeat", "2", "--steps", "3"]
+    res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0, res.output
     medians = {
         name: float(re.search(rf"^{name}\s+mean\s+\S+ ms\s+median\s+(\S+) ms", res.output, re.M)[1])
-        for name in ("listening", "page loaded", "run view shown")
+        for name in ("listening", "page loaded", "run view shown", "slider step shown")
     }
     assert 0 < medians["listening"] < medians["page loaded"] < medians["run view shown"]
     assert "(2 opens)" in res.output
+    # three steps of the run's slider at each opening, each to its pair's words on the page
+    assert "(6 steps)" in res.output and medians["slider step shown"] > 0
     left = subprocess.run(["pgrep", "-f", str(rows)], capture_output=True, text=True).stdout
     assert left == "", left  # no server left behind
     res = CliRunner().invoke(cli, ["bench", "page", str(INTEL), str(tmp_path / "none.jsonl")])

@@ -35,6 +35,23 @@ def server():
     s.stop()
 
 
+def test_the_debuggers_server_lights_a_top_down_view_without_shadows_or_reflections():
+    """What every tab is sent first: the default lights casting no shadow and no environment map
+    (a browser drawing WebGL in software spent most of a run view's slider step on them)."""
+    from viser import _messages
+
+    from mbicp_viz.views.debugger.app import stop_server, viser_server
+
+    s = viser_server("127.0.0.1", 0)
+    try:
+        sent = list(s._websock_server._broadcast_buffer.message_from_id.values())
+    finally:
+        stop_server(s)
+    (lights,) = [m for m in sent if isinstance(m, _messages.EnableLightsMessage)]
+    (environment,) = [m for m in sent if isinstance(m, _messages.EnvironmentMapMessage)]
+    assert lights.enabled and not lights.cast_shadow and environment.hdri_data is None
+
+
 @pytest.fixture
 def session(server):
     s = Session(server, Source("hokuyo pair", read_log(PAIR), guess=Pose2()))

@@ -192,14 +192,18 @@ def page(
         str | None, typer.Option("--browser", help="Chromium to drive (default: on the PATH)")
     ] = None,
     topic: TopicOpt = None,
+    steps: Annotated[
+        int, typer.Option("--steps", min=0, help="slider steps to time at each opening")
+    ] = 10,
 ):
     """How soon the run view shows: `serve LOG --rows ROWS` started as a command, its page in a
-    headless Chromium already running (Playwright, the test extra), until the run's legend shows."""
+    headless Chromium already running (Playwright, the test extra), until the run's legend shows;
+    then how long a step of its slider takes on the page."""
     from mbicp_viz.evaluation.bench import machine_line
     from mbicp_viz.views.debugger.page_timing import page_timings
 
     typer.echo(f"run view of {rows} on {log}, command to page; {machine_line()}")
-    for t in page_timings(log, rows, repeat, browser, topic):
+    for t in page_timings(log, rows, repeat, browser, topic, steps):
         typer.echo(t.line())
 
 

@@ -751,33 +751,68 @@ def _track(poses: list[Pose2]) -> np.ndarray:
 # through every 8th, 0.2 s apart, finer than a pixel of the whole run, and a page in software
 # WebGL no longer takes a minute a frame. The flagged pairs are drawn each at its own pose.
 RUN_TRACK_VERTICES = 20_000
+# ... and of those, the ones a line of width w needs: every pose left out lies within this share
+# of w of the line drawn (the full Intel run: 2,436 vertices for its three tracks, not 40,890; a
+# slider step on its page, drawing WebGL in software, took 3.4-3.7 s, most of it those lines)
+RUN_TRACK_TOLERANCE = 0.25
+SIMPLIFIED_SPAN = 256
 
 
-def _drawn_track(poses: list[Pose2]) -> np.ndarray:
-    """``_track`` of evenly spaced poses, at most ``RUN_TRACK_VERTICES``, the last one kept."""
+def simplified(xy: np.ndarray, tol: float) -> np.ndarray:
+    """The indices of the vertices of the polyline ``xy`` (N, 2) that Douglas and Peucker's
+    simplification (1973) keeps: every vertex left out lies within ``tol`` of the segment between
+    the kept vertices around it. The first and last are kept."""
+    n = len(xy)
+    keep = np.zeros(n, dtype=bool)
+    # spans of at most SIMPLIFIED_SPAN vertices, their ends kept: a track whose every vertex is
+    # needed (jitter wider than the line) costs n * SIMPLIFIED_SPAN, not n^2 (5.6 s at 20,000)
+    ends = np.unique(np.r_[np.arange(0, n, SIMPLIFIED_SPAN), n - 1]) if n else []
+    keep[ends] = True
+    spans = [(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:]) if b - a > 1]
+    while spans:
+        a, b = spans.pop()
+        d = xy[b] - xy[a]
+        v = xy[a + 1 : b] - xy[a]
+        t = np.clip(v @ d / max(float(d @ d), 1e-300), 0.0, 1.0)
+        off = np.hypot(*(v - t[:, None] * d).T)
+        k = int(np.argmax(off))
+        if off[k] > tol:
+            m = a + 1 + k
+            keep[m] = True
+            spans += [(i, j) for i, j in ((a, m), (m, b)) if j - i > 1]
+    return np.flatnonzero(keep)
+
+
+def _drawn_track(poses: list[Pose2], width: float) -> np.ndarray:
+    """``_track`` of evenly spaced poses, at most ``RUN_TRACK_VERTICES``, the last one kept, and
+    of those the vertices a line ``width`` wide needs (``RUN_TRACK_TOLERANCE``)."""
     step = max(1, -(-len(poses) // RUN_TRACK_VERTICES))
-    return _track([*poses[::step], *poses[-1:]] if (len(poses) - 1) % step else poses[::step])
+    even = [*poses[::step], *poses[-1:]] if (len(poses) - 1) % step else poses[::step]
+    xy = _track(even)
+    return xy[simplified(xy, RUN_TRACK_TOLERANCE * width)]
 
 
 def run_track_layers(r: RunTracks, scale: float = 1.0) -> list[Layer]:
     """The run's trajectories and flagged pairs; dots and lines ``scale`` times their size
     (``scene_scale`` of the whole run)."""
+    wide, thin = 0.01 * scale, 0.006 * scale
+
+    def track(path: str, poses: list[Pose2], style: Style, width: float) -> Strips:
+        return Strips(f"{RUN}/{path}", [_drawn_track(poses, width)], style, width)
+
     layers: list[Layer] = [
-        Strips(f"{RUN}/trajectory", [_drawn_track(r.poses)], RUN_TRAJECTORY, 0.01 * scale),
+        track("trajectory", r.poses, RUN_TRAJECTORY, wide),
         Points(f"{RUN}/suspects", r.suspects, SUSPECT, 0.04 * scale),
     ]
     if r.stored is not None:
-        track = _drawn_track(r.stored)
-        layers.append(Strips(f"{RUN}/stored", [track], LOG_TRAJECTORY, 0.006 * scale))
+        layers.append(track("stored", r.stored, LOG_TRAJECTORY, thin))
     if r.odometry is not None:
-        track = _drawn_track(r.odometry)
-        layers.append(Strips(f"{RUN}/odometry", [track], RUN_ODOMETRY, 0.006 * scale))
+        layers.append(track("odometry", r.odometry, RUN_ODOMETRY, thin))
     if r.other is not None:
         style = replace(RUN_OTHER, label=f"{RUN_OTHER.label}: {r.other_label}")
-        layers.append(Strips(f"{RUN}/other", [_drawn_track(r.other)], style, 0.01 * scale))
+        layers.append(track("other", r.other, style, wide))
     if r.loops is not None:
-        track = _drawn_track(r.loops)
-        layers.append(Strips(f"{RUN}/loops_closed", [track], LOOP_TRAJECTORY, 0.01 * scale))
+        layers.append(track("loops_closed", r.loops, LOOP_TRAJECTORY, wide))
         layers += closure_layers(f"{RUN}/{LOOPS}", r.closures, 0.008 * scale)
     return layers
 

@@ -61,10 +61,15 @@ def checked_from_the_start(check) -> Iterator[None]:
 
 
 def viser_server(host: str, port: int) -> viser.ViserServer:
-    """A viser server whose banner goes to stderr: stdout is a command's data (``live``'s
-    pairs)."""
+    """A viser server whose banner goes to stderr (stdout is a command's data: ``live``'s
+    pairs), lit for a top-down view of dots and lines: no shadows and no environment map, which
+    such a view never shows and a browser drawing WebGL in software pays for at every frame (the
+    Intel run view's slider step in headless Chromium: 0.68 s with them, 0.48 s without)."""
     with redirect_stdout(sys.stderr):
-        return viser.ViserServer(host=host, port=port, verbose=False)
+        server = viser.ViserServer(host=host, port=port, verbose=False)
+    server.scene.configure_default_lights(True, cast_shadow=False)
+    server.scene.configure_environment_map(hdri=None)
+    return server
 
 
 def stop_server(server: viser.ViserServer) -> None:

@@ -1,7 +1,8 @@
 """``bench page``: how soon a person sees the run view, the way they open it — ``mbicp-viz serve
 LOG --rows ROWS`` started as a command, its page loaded in a browser already running (a headless
-Chromium driven by Playwright, the test extra's), until the page shows the run's legend. The
-server side alone is ``bench run``."""
+Chromium driven by Playwright, the test extra's), until the page shows the run's legend — and how
+long a step of its slider takes there, from the key to the pair's numbers and the scene drawn.
+The server side alone is ``bench run``."""
 
 from __future__ import annotations
 
@@ -26,6 +27,9 @@ from mbicp_viz.views import scene
 # what Chromium needs here to draw WebGL without a GPU (the browser tests' flags start with them)
 CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"]
 URL = re.compile(r"open (http://\S+)")
+FIRST_PAIR = re.compile(r"pair 1 of (\d+)")  # the run view's words on its first pair (run_model)
+# resolves once the page has drawn two frames: the one a change was made in, and the next
+TWO_FRAMES = "() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))"
 
 
 def find_chromium(path: str | None) -> str:
@@ -84,17 +88,37 @@ def serving(args: list[str], timeout_s: float) -> Iterator[tuple[str, float]]:
                 proc.wait()
 
 
+def slider_steps(page, steps: int, timeout_s: float) -> list[float]:
+    """Up to ``steps`` steps of the run view's slider, as a person makes them (the right arrow on
+    it): each from the key to the page showing its pair's numbers and drawing the scene [s]."""
+    first = page.get_by_text(FIRST_PAIR).first
+    first.wait_for(timeout=1000 * timeout_s)
+    n = int(FIRST_PAIR.search(first.inner_text())[1])
+    slider = page.locator(f'[role=slider][aria-valuemin="1"][aria-valuemax="{n}"]').first
+    slider.focus()
+    took = []
+    for k in range(2, min(steps + 1, n) + 1):
+        t0 = time.perf_counter()
+        slider.press("ArrowRight")
+        page.get_by_text(f"pair {k} of {n}").first.wait_for(timeout=1000 * timeout_s)
+        page.evaluate(TWO_FRAMES)
+        took.append(time.perf_counter() - t0)
+    return took
+
+
 def page_timings(
     log: str,
     rows: str,
     repeat: int,
     browser: str | None = None,
     topic: str | None = None,
+    steps: int = 10,
     timeout_s: float = 120.0,
 ) -> list[Timing]:
     """From the command to the run view on the page, ``repeat`` times: the server listening, the
-    page loaded, the run view shown (its legend's run trajectory entry) [ms]; and the browser's
-    own start, once. ``topic``: the scan stream of a log with several (``serve --topic``)."""
+    page loaded, the run view shown (its legend's run trajectory entry) [ms], then ``steps``
+    slider steps each time (``slider_steps``); and the browser's own start, once. ``topic``: the
+    scan stream of a log with several (``serve --topic``)."""
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
@@ -103,6 +127,7 @@ def page_timings(
         ) from None
     exe = find_chromium(browser)
     parts: dict[str, list[float]] = {"listening": [], "page loaded": [], "run view shown": []}
+    stepped: list[float] = []
     with sync_playwright() as p:
         t0 = time.perf_counter()
         chromium = p.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
@@ -120,11 +145,14 @@ def page_timings(
                         timeout=1000 * timeout_s
                     )
                     shown = time.perf_counter() - t0
+                    stepped += slider_steps(page, steps, timeout_s)
                     page.close()
                 for name, t in zip(parts, (listening, loaded, shown), strict=True):
                     parts[name].append(1000.0 * t)
         finally:
             chromium.close()
-    return [Timing("browser started", np.array([started]), "starts")] + [
-        Timing(name, np.array(t), "opens") for name, t in parts.items()
-    ]
+    return (
+        [Timing("browser started", np.array([started]), "starts")]
+        + [Timing(name, np.array(t), "opens") for name, t in parts.items()]
+        + ([Timing("slider step shown", 1000.0 * np.array(stepped), "steps")] if stepped else [])
+    )
