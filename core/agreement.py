@@ -74,8 +74,9 @@ def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
     ``radius`` of neither. The search walks the reference's bearings outwards from q's, both
     ways round, and stops each way where the bearings left cannot hold a nearer point: a point
     at bearing difference D from q lies at least |q| sin D from it (|q| past 90 degrees). A k-d
-    tree's build and query took a third of a run's time per pair at 1081 beams. Equal distances
-    go to the lower index."""
+    tree's build and query took a third of a run's time per pair at 1081 beams; a sine and a
+    modulo at each step of the walk, 0.44 ms a pair against 0.25 ms. Equal distances go to the
+    lower index."""
     n, m = len(p), max(len(p) - 1, 0)
     to_point, to_surface = np.full(len(q), np.inf), np.full(len(q), np.inf)
     if n == 0:
@@ -89,6 +90,7 @@ def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
             longest = max(longest, length)
     reach2 = radius * radius + 0.25 * longest * longest
     turn = 2.0 * math.pi
+    ux, uy = np.cos(b), np.sin(b)  # each bearing's direction: |q x u| = |q| sin(D), no sine a step
     for i in range(len(q)):
         qx, qy = q[i, 0], q[i, 1]
         norm = math.hypot(qx, qy)
@@ -99,20 +101,30 @@ def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
         s = first_at_least(b, a, False)
         best, j = reach2, -1
         for way in (1, -1):
-            k = s if way == 1 else s - 1
-            for _ in range(n):
-                kk = k % n
-                # the bearing difference along this way round, 0 to 2 pi
-                d_b = (b[kk] - a if way == 1 else a - b[kk]) % turn
+            for step in range(n):
+                # the next point this way round and its bearing difference, 0 to 2 pi (a turn
+                # added past the scan's end: s is where a falls, so at most one)
+                kk = s + step if way == 1 else s - 1 - step
+                if kk >= n:
+                    kk -= n
+                    d_b = b[kk] + turn - a
+                elif kk < 0:
+                    kk += n
+                    d_b = a - b[kk] + turn
+                else:
+                    d_b = b[kk] - a if way == 1 else a - b[kk]
                 if d_b > math.pi:
                     break
-                low = norm * math.sin(d_b) if d_b < 0.5 * math.pi else norm
-                if low * low > best:
+                if d_b < 0.5 * math.pi:
+                    c = qx * uy[kk] - qy * ux[kk]
+                    low2 = c * c
+                else:
+                    low2 = norm * norm
+                if low2 > best:
                     break
                 d = (qx - p[kk, 0]) ** 2 + (qy - p[kk, 1]) ** 2
                 if d < best or (d == best and (j < 0 or kk < j)):
                     best, j = d, kk
-                k += way
         if j < 0:
             continue
         to_point[i] = to_surface[i] = math.sqrt(best)
