@@ -16,6 +16,11 @@ from .metric import metric_sq
 from .scan import Scan
 from .tiers import kernel, run
 
+# Candidates tried first around each point's bearing: the K reference beams on either side.
+_NEAR_K = 3
+# Entries of the extended arrays per block of known ranges (``ReferenceIndex.block_min_r``)
+_BLOCK = 16
+
 
 class ReferenceIndex(NamedTuple):
     """The reference scan prepared once per match: points in scan order and a bearing index.
@@ -35,6 +40,10 @@ class ReferenceIndex(NamedTuple):
     ext_sq_norm_L2: np.ndarray
     ext_ux: np.ndarray  # (3N,) the unit direction of each bearing
     ext_uy: np.ndarray
+    # (3N / _BLOCK rounded up,) the least and greatest range of each block of _BLOCK consecutive
+    # entries of the extended arrays: ``nearest`` skips blocks whose ranges a pair cannot have
+    block_min_r: np.ndarray
+    block_max_r: np.ndarray
     max_factor: float  # sqrt(max|q|^2 + L^2) / L: the Euclidean radius per unit of metric distance
     max_step: float  # the widest bearing gap between consecutive reference points [rad]
     full_circle: bool
@@ -53,8 +62,9 @@ class ReferenceIndex(NamedTuple):
 @kernel
 def _extended(pts, b, L: float, full: bool):
     """``ReferenceIndex``'s arrays over the three turns (bearings, point index, x, y, |q|^2 + L^2,
-    the bearing's unit direction), sqrt(max |q|^2 + L^2) / L, the widest bearing step (1 and
-    2 pi without points) and the scan neighbours (-1 past the ends of a partial scan)."""
+    the bearing's unit direction), the ranges of their blocks, sqrt(max |q|^2 + L^2) / L, the
+    widest bearing step (1 and 2 pi without points) and the scan neighbours (-1 past the ends of a
+    partial scan)."""
     n = len(b)
     ext_b, ext_map = np.empty(3 * n), np.empty(3 * n, dtype=np.int64)
     ext_x, ext_y, ext_k, ext_ux, ext_uy = (
@@ -80,20 +90,24 @@ def _extended(pts, b, L: float, full: bool):
                 c,
                 s,
             )
+    n_blocks = (3 * n + _BLOCK - 1) // _BLOCK
+    block_min, block_max = np.empty(n_blocks), np.empty(n_blocks)
+    block_min[:], block_max[:] = np.inf, -np.inf
+    for e in range(3 * n):
+        r = np.sqrt(ext_x[e] * ext_x[e] + ext_y[e] * ext_y[e])
+        block_min[e // _BLOCK] = min(block_min[e // _BLOCK], r)
+        block_max[e // _BLOCK] = max(block_max[e // _BLOCK], r)
+    extended = (ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, block_min, block_max)
     nb = np.empty((n, 2), dtype=np.int64)
     for i in range(n):
         for q, j in enumerate((i - 1, i + 1)):
             nb[i, q] = j % n if full else (j if 0 <= j < n else -1)
     if n == 0:
-        return ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, 1.0, 2 * np.pi, nb
+        return (*extended, 1.0, 2 * np.pi, nb)
     max_step = -np.inf
     for i in range(1, 3 * n):
         max_step = max(max_step, ext_b[i] - ext_b[i - 1])
-    return ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, np.sqrt(k_max) / L, max_step, nb
-
-
-# Candidates tried first around each point's bearing: the K reference beams on either side.
-_NEAR_K = 3
+    return (*extended, np.sqrt(k_max) / L, max_step, nb)
 
 
 @kernel
@@ -124,6 +138,23 @@ def _window_min(px: float, py: float, ex, ey, ek, lo: int, hi: int):
 
 
 @kernel(inline="always")
+def _window_min_in_ranges(px, py, R: ReferenceIndex, lo: int, hi: int, r_lo: float, r_hi: float):
+    """``_window_min`` over ext[lo, hi), skipping the blocks whose points all lie outside the
+    ranges [r_lo, r_hi] (their points are farther than wanted: see ``nearest``)."""
+    best, d_best = -1, np.inf
+    j = lo
+    while j < hi:
+        k = j // _BLOCK
+        end = min((k + 1) * _BLOCK, hi)
+        if R.block_max_r[k] >= r_lo and R.block_min_r[k] <= r_hi:
+            b, d = _window_min(px, py, R.ext_x, R.ext_y, R.ext_sq_norm_L2, j, end)
+            if d < d_best:
+                best, d_best = b, d
+        j = end
+    return best, d_best
+
+
+@kernel(inline="always")
 def _reaches(px, py, r, ux, uy, rho):
     """Whether the ray of direction u passes within rho of p (of range r)."""
     if r <= rho:
@@ -137,14 +168,23 @@ def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
     """Metric-nearest reference point of each moved point within MbICP's angular window +/-Bw.
 
     Exact for every pair whose metric distance is at most Br. First the 2K beams around the
-    point's bearing (inside +/-Bw) give a candidate at distance d*; the window that can hold a
-    closer point is then bounded: with d0 = min(d*, Br), since d^2(p, q) >= |p - q|^2 L^2 /
-    (|q|^2 + L^2), any q with d(p, q) <= d0 has |p - q| <= d0 sqrt(|q|^2 + L^2) / L
-    <= d0 (|p| + |p - q| + L) / L, i.e. |p - q| <= d0 (|p| + L) / (L - d0) when d0 < L (and
-    always <= d0 sqrt(max|q|^2 + L^2) / L): within the smaller radius rho of the two, so within
-    asin(rho / |p|) of p's bearing. Points whose bounded window reaches beyond the 2K beams (a ray
-    just outside them passes within rho of the point) are searched again over the whole bounded
-    window. Returns (index, squared metric distance) per point p (of bearing ``alpha`` and range
+    point's bearing (inside +/-Bw) give a candidate at distance d*; a closer point must lie within
+    d0 = min(d*, Br). The metric distance is the least norm sqrt(|t|^2 + L^2 theta^2) of a
+    linearised motion taking q onto p (MbICP eq. 12): p lies within sqrt(d0^2 - L^2 theta^2) of
+    q' = q + theta (-q_y, q_x) with |theta| <= d0 / L, and q' is q turned by atan(theta) and
+    stretched by sqrt(1 + theta^2). So any q with d(p, q) <= d0
+
+    - lies within atan(d0 / L) + asin(d0 / |p|) of p's bearing;
+    - lies within rho of p, the smaller of d0 (|p| + L) / (L - d0) (when d0 < L) and
+      d0 sqrt(max|q|^2 + L^2) / L (since d^2(p, q) >= |p - q|^2 L^2 / (|q|^2 + L^2)), so within
+      asin(rho / |p|) of p's bearing;
+    - has a range between (|p| - d0) / sqrt(1 + d0^2 / L^2) and |p| + d0.
+
+    Points whose bounded window reaches beyond the 2K beams (a ray just outside them passes within
+    rho of the point) are searched again over the narrower of the two windows, block by block,
+    skipping the blocks whose ranges all lie outside the third bound: points seen through a gap
+    in the reference (d0 = Br) searched their whole window of +/-Bw, most of the search at 1081
+    beams. Returns (index, squared metric distance) per point p (of bearing ``alpha`` and range
     ``rng``); a point with no candidate gets index -1 and distance inf.
     """
     eb, ex, ey, ek = R.ext_bearings, R.ext_x, R.ext_y, R.ext_sq_norm_L2
@@ -174,13 +214,21 @@ def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
             and a - eb[lo - 1] <= reach
             and _reaches(px, py, r, eux[lo - 1], euy[lo - 1], rho)
         ) or (hi < len(eb) and eb[hi] - a <= reach and _reaches(px, py, r, eux[hi], euy[hi], rho)):
-            half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw) + 1e-12
+            half = min(
+                np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi,
+                np.arctan(d0 / L) + (np.arcsin(d0 / r) if d0 < r else np.pi),
+                Bw,
+            )
+            half += 1e-12
             wlo = first_at_least(eb, a - half, False)
             whi = min(first_at_least(eb, a + half, True), wlo + n_ref, len(eb))  # a point once
+            # the ranges a point within d0 can have, widened by round-off
+            slack = 1e-9 * (1.0 + r)
+            r_lo, r_hi = (r - d0) / np.sqrt(1.0 + (d0 / L) ** 2) - slack, r + d0 + slack
             # [lo, hi) is searched: its two sides only (a tie there keeps the first search's point,
             # as a search of the whole window would)
             for s_lo, s_hi in ((wlo, min(lo, whi)), (max(hi, wlo), whi)):
-                b, d = _window_min(px, py, ex, ey, ek, s_lo, s_hi)
+                b, d = _window_min_in_ranges(px, py, R, s_lo, s_hi, r_lo, r_hi)
                 if d < d2:
                     best, d2 = b, d
         if d2 < np.inf:

@@ -26,6 +26,7 @@ Python code calls a kernel through ``run(kernel, *args)``; compiled code calls k
 
 from __future__ import annotations
 
+import functools
 import os
 import pickle
 import subprocess
@@ -62,7 +63,7 @@ def kernel(fn=None, *, inline: str = "never"):
     k = njit(cache=True, nogil=True, inline=inline)(fn)
     # an inlined kernel is compiled into its callers only: no cache entry of its own
     if inline == "never":
-        _stale_index_reads_as_stale(k)
+        _guard_index(k)
         _KERNELS.append(k)
     return k
 
@@ -70,18 +71,25 @@ def kernel(fn=None, *, inline: str = "never"):
 def elementwise(fn):
     """A compiled scalar kernel that broadcasts as a numpy ufunc (numba's vectorize, cached)."""
     k = vectorize(cache=True)(fn)
-    _stale_index_reads_as_stale(k)
+    _guard_index(k)
     _KERNELS.append(k)
     return k
 
 
-def _stale_index_reads_as_stale(k) -> None:
-    """numba unpickles a kernel's cache index before it checks that the index belongs to the
-    source as it is now; an index written by an earlier version whose argument types named a class
-    since renamed or removed (a named tuple a loop takes) then raises instead of reading as stale,
-    and every match fails. Such an index reads as empty here, as numba means a stale one to: the
-    kernel compiles anew and overwrites it."""
+def _guard_index(k) -> None:
+    """Make numba's cache index of ``k`` read as stale whenever it should, and never raise.
+
+    - numba stamps an index with the kernel's own file only, yet compiled code freezes the
+      module-level constants it reads, some from other modules of the core (the cycle period of
+      stopping.py in mbicp.py's loop): a change there kept the old machine code. The stamp here
+      also covers every module of the kernel's folder.
+    - numba unpickles an index before it checks the stamp; an index written by an earlier version
+      whose argument types named a class since renamed or removed (a named tuple a loop takes)
+      then raises instead of reading as stale, and every match fails. Such an index reads as
+      empty, as numba means a stale one to: the kernel compiles anew and overwrites it."""
     index = function_cache(k)._cache_file
+    folder = Path(python_function(k).__code__.co_filename).parent
+    index._source_stamp = (index._source_stamp, _folder_stamp(folder))
     load = index._load_index
 
     def tolerant():
@@ -91,6 +99,14 @@ def _stale_index_reads_as_stale(k) -> None:
             return {}
 
     index._load_index = tolerant
+
+
+@functools.cache
+def _folder_stamp(folder: Path) -> tuple:
+    """Name, modification time and size of every module in ``folder`` (numba's own stamp of one
+    file, for all of them)."""
+    files = sorted(folder.glob("*.py"))
+    return tuple((f.name, f.stat().st_mtime_ns, f.stat().st_size) for f in files)
 
 
 class _Tiers:

@@ -243,3 +243,40 @@ def test_a_cache_naming_a_class_since_renamed_is_compiled_anew(tmp_path):
         outputs.append(run.stdout.strip())
     assert outputs == ["12.0"] * 3
     assert any((tmp_path / "cache").rglob("*.nbi"))  # the kernel was cached
+
+
+def test_a_cached_kernel_is_compiled_anew_when_a_constant_it_reads_from_another_module_changes(
+    tmp_path,
+):
+    """mbicp.py's compiled loop freezes stopping.py's cycle period, and numba stamps a kernel's
+    cache with the kernel's own file alone: an edit of the period kept the old machine code. Here
+    a kernel returns a constant of a module beside it; the constant changes between two runs."""
+    package = tmp_path / "loops_of_a_package"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "loop.py").write_text(
+        "from mbicp_viz.core.tiers import kernel\n"
+        "from .limits import PERIOD\n\n\n"
+        "@kernel\n"
+        "def period():\n"
+        "    return PERIOD\n\n\n"
+        "print(period())\n"
+    )
+    env = os.environ | {
+        "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+        "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path]),
+    }
+    outputs = []
+    for period in (4, 4, 12):  # compiled, loaded from the cache, the constant changed
+        (package / "limits.py").write_text(f"PERIOD = {period}\n")
+        run = subprocess.run(
+            [sys.executable, "-c", "import loops_of_a_package.loop"],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert run.returncode == 0, run.stderr
+        outputs.append(run.stdout.strip())
+    assert outputs == ["4", "4", "12"]
+    assert any((tmp_path / "cache").rglob("*.nbi"))  # the kernel was cached
