@@ -49,7 +49,8 @@ def agreement(
     to_point, to_surface = _distances(ref, obj, pose, radius)
     if not len(to_point):
         return 0.0, 0.0
-    return float(np.mean(to_point <= radius)), float(np.mean(to_surface <= radius))
+    n = len(to_point)  # counted: np.mean's per-call cost was a tenth of a run's glue per pair
+    return np.count_nonzero(to_point <= radius) / n, np.count_nonzero(to_surface <= radius) / n
 
 
 def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M) -> float:

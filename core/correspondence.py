@@ -74,9 +74,13 @@ def _extended(pts, b, L: float, full: bool):
         np.empty(3 * n),
         np.empty(3 * n),
     )
+    n_blocks = (3 * n + _BLOCK - 1) // _BLOCK
+    block_min, block_max = np.empty(n_blocks), np.empty(n_blocks)
+    block_min[:], block_max[:] = np.inf, -np.inf
     k_max = 0.0
     for i in range(n):
-        k = pts[i, 0] * pts[i, 0] + pts[i, 1] * pts[i, 1] + L * L
+        sq = pts[i, 0] * pts[i, 0] + pts[i, 1] * pts[i, 1]
+        k, r = sq + L * L, np.sqrt(sq)
         c, s = np.cos(b[i]), np.sin(b[i])
         k_max = max(k_max, k)
         for t in range(3):
@@ -90,13 +94,8 @@ def _extended(pts, b, L: float, full: bool):
                 c,
                 s,
             )
-    n_blocks = (3 * n + _BLOCK - 1) // _BLOCK
-    block_min, block_max = np.empty(n_blocks), np.empty(n_blocks)
-    block_min[:], block_max[:] = np.inf, -np.inf
-    for e in range(3 * n):
-        r = np.sqrt(ext_x[e] * ext_x[e] + ext_y[e] * ext_y[e])
-        block_min[e // _BLOCK] = min(block_min[e // _BLOCK], r)
-        block_max[e // _BLOCK] = max(block_max[e // _BLOCK], r)
+            block_min[e // _BLOCK] = min(block_min[e // _BLOCK], r)
+            block_max[e // _BLOCK] = max(block_max[e // _BLOCK], r)
     extended = (ext_b, ext_map, ext_x, ext_y, ext_k, ext_ux, ext_uy, block_min, block_max)
     nb = np.empty((n, 2), dtype=np.int64)
     for i in range(n):
