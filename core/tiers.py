@@ -105,8 +105,8 @@ def _guard_index(k) -> None:
 def _folder_stamp(folder: Path) -> tuple:
     """Name, modification time and size of every module in ``folder`` (numba's own stamp of one
     file, for all of them)."""
-    files = sorted(folder.glob("*.py"))
-    return tuple((f.name, f.stat().st_mtime_ns, f.stat().st_size) for f in files)
+    stats = ((f.name, f.stat()) for f in sorted(folder.glob("*.py")))
+    return tuple((name, st.st_mtime_ns, st.st_size) for name, st in stats)
 
 
 class _Tiers:

@@ -220,27 +220,33 @@ print(total({name}(2.0, np.arange(4.0))))
 """
 
 
-def test_a_cache_naming_a_class_since_renamed_is_compiled_anew(tmp_path):
-    """A kernel that takes a named tuple, cached, then its class renamed (an upgrade): numba's index
-    of the old source names a class that is gone. The next run compiles anew instead of failing
-    (numba unpickles an index before it checks that the index is this source's)."""
+def _printed_on_import(tmp_path, module: str) -> str:
+    """What importing ``module`` (from ``tmp_path``) prints in a fresh process whose numba cache is
+    ``tmp_path / "cache"``."""
     env = os.environ | {
         "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
         "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path]),
     }
+    run = subprocess.run(
+        [sys.executable, "-c", f"import {module}"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0, run.stderr
+    return run.stdout.strip()
+
+
+def test_a_cache_naming_a_class_since_renamed_is_compiled_anew(tmp_path):
+    """A kernel that takes a named tuple, cached, then its class renamed (an upgrade): numba's index
+    of the old source names a class that is gone. The next run compiles anew instead of failing
+    (numba unpickles an index before it checks that the index is this source's)."""
     module = tmp_path / "loop_of_an_old_version.py"
     outputs = []
     for name in ("Params", "Params", "RenamedParams"):  # compiled, loaded from cache, renamed
         module.write_text(LOOP_MODULE.format(name=name))
-        run = subprocess.run(
-            [sys.executable, "-c", "import loop_of_an_old_version"],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        assert run.returncode == 0, run.stderr
-        outputs.append(run.stdout.strip())
+        outputs.append(_printed_on_import(tmp_path, "loop_of_an_old_version"))
     assert outputs == ["12.0"] * 3
     assert any((tmp_path / "cache").rglob("*.nbi"))  # the kernel was cached
 
@@ -262,21 +268,9 @@ def test_a_cached_kernel_is_compiled_anew_when_a_constant_it_reads_from_another_
         "    return PERIOD\n\n\n"
         "print(period())\n"
     )
-    env = os.environ | {
-        "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
-        "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path]),
-    }
     outputs = []
     for period in (4, 4, 12):  # compiled, loaded from the cache, the constant changed
         (package / "limits.py").write_text(f"PERIOD = {period}\n")
-        run = subprocess.run(
-            [sys.executable, "-c", "import loops_of_a_package.loop"],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        assert run.returncode == 0, run.stderr
-        outputs.append(run.stdout.strip())
+        outputs.append(_printed_on_import(tmp_path, "loops_of_a_package.loop"))
     assert outputs == ["4", "4", "12"]
     assert any((tmp_path / "cache").rglob("*.nbi"))  # the kernel was cached
