@@ -33,7 +33,7 @@ from .resample import grid_resample
 from .result import MatchResult, Termination
 from .scan import Scan
 from .se2 import Pose2
-from .stopping import CYCLE_PERIOD_MAX, remember, returned
+from .stopping import CYCLE_PERIOD_MAX, remember, returned, streaks
 from .tiers import kernel, run
 from .uncertainty import FinalSystem, build_result, surface_information, surface_tangents
 
@@ -48,8 +48,9 @@ _ENDS = (
     Termination.TOO_FEW_PAIRS,
     Termination.SINGULAR,
     Termination.HALTED,
+    Termination.OSCILLATING,
 )
-_MAX_ITER, _CONVERGED, _CYCLE, _TOO_FEW, _SINGULAR, _HALTED = range(6)
+_MAX_ITER, _CONVERGED, _CYCLE, _TOO_FEW, _SINGULAR, _HALTED, _OSCILLATING = range(7)
 
 
 @kernel
@@ -169,7 +170,7 @@ def _loop(P, x, y, th, R: ReferenceIndex, lp: MbicpLoopParams, ref_tangents, tra
     record = len(trace[0]) > 0
     n = len(P)
     recent = np.zeros((CYCLE_PERIOD_MAX - 1, 3))
-    n_recent, n_cycle, n_conv, prev_error, end, it = 0, 0, 0, -1.0, _MAX_ITER, 0
+    n_recent, n_short, n_any, n_conv, prev_error, end, it = 0, 0, 0, 0, -1.0, _MAX_ITER, 0
     A_last, err_last, targets_last = np.zeros((3, 3)), np.nan, np.zeros((0, 2))
     ref_last, kept_last, rejected_last, solved = np.zeros(0, np.int64), 0, 0, False
     moved, alpha, rng = np.empty((n, 2)), np.empty(n), np.empty(n)
@@ -268,9 +269,12 @@ def _loop(P, x, y, th, R: ReferenceIndex, lp: MbicpLoopParams, ref_tangents, tra
         # a cycle: the estimate returned to one of the last few (stopping.py)
         back = returned(recent, n_recent, x, y, th, errx, erry, errt)
         n_recent = remember(recent, n_recent, bx, by, bth)
-        n_cycle = n_cycle + 1 if back else 0
-        if n_cycle > lp.smooth:
+        n_short, n_any = streaks(n_short, n_any, back)
+        if n_short > lp.smooth:
             end = _CYCLE
+            break
+        if n_any > lp.smooth + CYCLE_PERIOD_MAX:  # a long cycle: unsettled (stopping.py)
+            end = _OSCILLATING
             break
         if lp.halt[0]:
             end = _HALTED

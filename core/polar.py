@@ -668,8 +668,9 @@ def run_polar(
         if n_small >= params.stop_after:
             reason = Termination.CONVERGED
             break
-        if cycles.step(before, est) >= params.stop_after:
-            reason = Termination.CYCLE
+        cycle = cycles.step(before, est, params.stop_after)
+        if cycle is not None:
+            reason = cycle
             break
         if halt.raised:
             reason = Termination.HALTED

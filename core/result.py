@@ -14,6 +14,7 @@ from .se2 import Pose2
 class Termination(enum.Enum):
     CONVERGED = "converged"  # the algorithm's stopping rule held
     CYCLE = "cycle"  # the estimate returns within the stopping thresholds (stopping.py)
+    OSCILLATING = "oscillating"  # it returns only after a long cycle: it swings between pairings
     MAX_ITERATIONS = "max_iterations"  # MaxIter reached first
     TOO_FEW_PAIRS = "too_few_pairs"  # fewer pairs than AsocError * points (or fewer than 3)
     SINGULAR = "singular"  # the normal equations could not be solved

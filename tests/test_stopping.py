@@ -52,17 +52,18 @@ def _period(estimates: np.ndarray) -> int:
     )
 
 
-def test_a_cycle_of_six_or_seven_iterations_ends_the_match(intel):
+def test_a_cycle_of_six_or_seven_iterations_ends_the_match_unsettled(intel):
     """Intel's scans resampled to 1081 beams (as a Hokuyo UTM-30LX): improved MbICP from odometry
-    settles into cycles of 6 and 7 iterations over millimetres. With a cycle stop that knew
-    periods up to 4 these ran to MaxIter (a fifth of a long replay's matching time)."""
+    falls into cycles of 7 and 6 iterations over millimetres. With a cycle stop that knew
+    periods up to 4 these ran to MaxIter (a fifth of a long replay's matching time); they end
+    early now, but as oscillating, not converged (a sign of a failed match, as MaxIter was)."""
     run = replay_log(intel, 22, 1081, 40.0)
     periods = []
-    for k in (18, 19, 21):
+    for k in (18, 21):
         ref, obj = run.scans[k], run.scans[k + 1]
         guess = relative(ref.odometry, obj.odometry)
         r = match(ref, obj, guess, ImprovedParams())
-        assert r.reason is Termination.CYCLE and r.iterations < 40
+        assert r.reason is Termination.OSCILLATING and not r.converged and r.iterations < 40
         events = []
         long_run = match(
             ref, obj, guess, ImprovedParams(IterSmoothConv=100, MaxIter=100), observer=events.append
