@@ -398,12 +398,19 @@ def throughput(
             "--pairs", min=2, help="consecutive pairs per run (a pool takes a while to start)"
         ),
     ] = 1000,
+    repeat: Annotated[
+        int,
+        typer.Option(
+            "--repeat", min=1, help="runs of each core count, alternated; the median is kept"
+        ),
+    ] = 3,
     matcher: MatcherOpt = DEFAULT_MATCHER,
     params: ParamsOpt = None,
     topic: TopicOpt = None,
 ):
     """A whole run's real-time factor (the recording's duration over the matching time, as `eval
-    sequence` matches it) per beam count, on one core and on every core."""
+    sequence` matches it) per beam count, on one core and on every core: the median of
+    alternated runs."""
     import os
 
     from mbicp_viz.errors import InputError
@@ -425,7 +432,7 @@ def throughput(
     typer.echo(f"{matcher.value} on {source} played to and fro at {rate_hz:g} Hz; {machine_line()}")
     before = speed_probe_us()
     for b in counts:
-        typer.echo(run_throughput(lg, p, b, pairs, rate_hz, cores).line())
+        typer.echo(run_throughput(lg, p, b, pairs, rate_hz, cores, repeat).line())
     typer.echo(probe_line(before, speed_probe_us()))
 
 

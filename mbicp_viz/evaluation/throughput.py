@@ -9,6 +9,7 @@ beam count asked for, at the scan rate asked for.
 
 from __future__ import annotations
 
+import statistics
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -24,19 +25,27 @@ class Throughput:
     beams: int
     pairs: int
     seconds: float  # the recording's duration over the pairs matched
-    wall_s: dict[int, float]  # workers -> wall time of the run
+    walls_s: dict[int, list[float]]  # workers -> wall time of each run
+
+    @property
+    def wall_s(self) -> dict[int, float]:
+        """Workers -> the median wall time of their runs."""
+        return {w: statistics.median(t) for w, t in self.walls_s.items()}
 
     def line(self) -> str:
-        one = self.wall_s[1]
+        wall = self.wall_s
+        one = wall[1]
+        runs = len(self.walls_s[1])
         cells = [
-            f"{self.beams:5d} beams  {self.pairs} pairs over {self.seconds:.1f} s",
+            f"{self.beams:5d} beams  {self.pairs} pairs over {self.seconds:.1f} s"
+            + (f" (median of {runs} runs)" if runs > 1 else ""),
             f"{1000.0 * one / self.pairs:6.2f} ms/pair on 1 core",
         ]
-        for w, wall in sorted(self.wall_s.items()):
-            cells.append(f"{self.seconds / wall:6.1f}x real time on {w} core{'s' * (w > 1)}")
-        if len(self.wall_s) > 1:
-            most = max(self.wall_s)
-            cells.append(f"scaling {one / self.wall_s[most]:.2f}x on {most}")
+        for w, t in sorted(wall.items()):
+            cells.append(f"{self.seconds / t:6.1f}x real time on {w} core{'s' * (w > 1)}")
+        if len(wall) > 1:
+            most = max(wall)
+            cells.append(f"scaling {one / wall[most]:.2f}x on {most}")
         return "   ".join(cells)
 
 
@@ -56,20 +65,28 @@ def replay_log(log: ScanLog, pairs: int, beams: int, rate_hz: float) -> ScanLog:
 
 
 def throughput(
-    log: ScanLog, params: Params, beams: int, pairs: int, rate_hz: float, workers: list[int]
+    log: ScanLog,
+    params: Params,
+    beams: int,
+    pairs: int,
+    rate_hz: float,
+    workers: list[int],
+    repeat: int = 1,
 ) -> Throughput:
     """The wall time of matching ``pairs`` consecutive pairs of the replayed run, per count of
-    ``workers``."""
+    ``workers``, ``repeat`` times: the counts alternate run by run, so a drift in the machine's
+    speed (15 % within minutes here) falls on each alike."""
     from .sequence import match_sequence
 
     run = replay_log(log, pairs, beams, rate_hz)
     match_sequence(run, params, limit=3, workers=1)  # kernels loaded (forked workers share them)
-    walls = {}
-    for w in workers:
-        t0 = time.perf_counter()
-        rows = match_sequence(run, params, workers=w)
-        walls[w] = time.perf_counter() - t0
-        assert len(rows) == pairs
+    walls: dict[int, list[float]] = {w: [] for w in workers}
+    for _ in range(repeat):
+        for w in workers:
+            t0 = time.perf_counter()
+            rows = match_sequence(run, params, workers=w)
+            walls[w].append(time.perf_counter() - t0)
+            assert len(rows) == pairs
     seconds = run.scans[-1].stamp - run.scans[0].stamp
     return Throughput(beams, pairs, seconds, walls)
 
