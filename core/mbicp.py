@@ -33,7 +33,7 @@ from .resample import grid_resample
 from .result import MatchResult, Termination
 from .scan import Scan
 from .se2 import Pose2
-from .stopping import CYCLE_PERIOD_MAX, remember, returned, streaks
+from .stopping import CYCLE_PERIOD_MAX, SETTLED, UNSETTLED, remember, returned, streaks
 from .tiers import kernel, run
 from .uncertainty import FinalSystem, build_result, surface_information, surface_tangents
 
@@ -269,11 +269,11 @@ def _loop(P, x, y, th, R: ReferenceIndex, lp: MbicpLoopParams, ref_tangents, tra
         # a cycle: the estimate returned to one of the last few (stopping.py)
         back = returned(recent, n_recent, x, y, th, errx, erry, errt)
         n_recent = remember(recent, n_recent, bx, by, bth)
-        n_short, n_any = streaks(n_short, n_any, back)
-        if n_short > lp.smooth:
+        n_short, n_any, cycle = streaks(n_short, n_any, back, lp.smooth + 1)
+        if cycle == SETTLED:
             end = _CYCLE
             break
-        if n_any > lp.smooth + CYCLE_PERIOD_MAX:  # a long cycle: unsettled (stopping.py)
+        if cycle == UNSETTLED:  # a long cycle (stopping.py)
             end = _OSCILLATING
             break
         if lp.halt[0]:

@@ -26,9 +26,7 @@ CYCLE_PERIOD_MAX = 12
 # A cycle up to this period has settled (Termination.CYCLE). Longer ones end the match unsettled
 # (Termination.OSCILLATING): improved MbICP's long cycles on the corrected Intel and ACES logs
 # were failures in 31 of 32 and 17 of 18 pairs (eval flags), and a key-frame run takes a new key
-# frame after a failed match (counted as settled, they cost its Intel score 0.552 -> 0.587 m). A
-# long streak must last CYCLE_PERIOD_MAX steps more than a short one: an estimate that comes
-# back at a long period on its way into a short cycle has settled.
+# frame after a failed match (counted as settled, they cost its Intel score 0.552 -> 0.587 m).
 SETTLED_PERIOD_MAX = 4
 
 
@@ -62,11 +60,21 @@ def remember(recent: np.ndarray, n: int, x: float, y: float, th: float) -> int:
     return n + 1 if n + 1 < len(recent) else len(recent)
 
 
+# How a streak of returns ends a match (``streaks``): not yet, settled, or unsettled
+NOT_YET, SETTLED, UNSETTLED = 0, 1, 2
+
+
 @kernel
-def streaks(short: int, any_: int, back: int) -> tuple[int, int]:
+def streaks(short: int, any_: int, back: int, needed: int) -> tuple[int, int, int]:
     """The two streaks of steps that came back, once one more came back with period ``back`` (0:
-    it did not): of returns within SETTLED_PERIOD_MAX iterations, and of any."""
-    return (short + 1 if 0 < back <= SETTLED_PERIOD_MAX else 0), (any_ + 1 if back else 0)
+    it did not) — of returns within SETTLED_PERIOD_MAX iterations, and of any — and how they end
+    the match: SETTLED after ``needed`` short steps, UNSETTLED after CYCLE_PERIOD_MAX more of any
+    (an estimate that comes back at a long period on its way into a short cycle has settled)."""
+    short = short + 1 if 0 < back <= SETTLED_PERIOD_MAX else 0
+    any_ = any_ + 1 if back else 0
+    if short >= needed:
+        return short, any_, SETTLED
+    return short, any_, UNSETTLED if any_ >= needed + CYCLE_PERIOD_MAX else NOT_YET
 
 
 class CycleWatch:
@@ -81,8 +89,8 @@ class CycleWatch:
         self.short = self.any = 0
 
     def step(self, before: Pose2, after: Pose2, needed: int) -> Termination | None:
-        """Record one iteration's move from ``before`` to ``after``; how the match ends when a
-        streak of ``needed`` steps (a long one: CYCLE_PERIOD_MAX more) has come back."""
+        """Record one iteration's move from ``before`` to ``after``; how the match ends once a
+        streak has come back long enough (``streaks``), else None."""
         p = self.params
         back = run(
             returned,
@@ -96,9 +104,5 @@ class CycleWatch:
             p.errt_out,
         )
         self.n = run(remember, self.recent, self.n, before.x, before.y, before.theta)
-        self.short, self.any = run(streaks, self.short, self.any, back)
-        if self.short >= needed:
-            return Termination.CYCLE
-        if self.any >= needed + CYCLE_PERIOD_MAX:
-            return Termination.OSCILLATING
-        return None
+        self.short, self.any, end = run(streaks, self.short, self.any, back, needed)
+        return {SETTLED: Termination.CYCLE, UNSETTLED: Termination.OSCILLATING}.get(end)
