@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .correspondence import first_at_least
+from .correspondence import bearing_bins, first_at_least
 from .scan import Scan
 from .se2 import Pose2
 from .tiers import kernel, run
@@ -92,6 +92,7 @@ def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
     reach2 = radius * radius + 0.25 * longest * longest
     turn = 2.0 * math.pi
     ux, uy = np.cos(b), np.sin(b)  # each bearing's direction: |q x u| = |q| sin(D), no sine a step
+    bins = bearing_bins(b)
     for i in range(len(q)):
         qx, qy = q[i, 0], q[i, 1]
         norm = math.hypot(qx, qy)
@@ -99,7 +100,7 @@ def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
             continue
         # q's bearing as one of the reference's turn [b[0], b[0] + 2 pi), and where it falls
         a = b[0] + (math.atan2(qy, qx) - b[0]) % turn
-        s = first_at_least(b, a, False)
+        s = first_at_least(b, bins, a, False)
         best, j = reach2, -1
         for way in (1, -1):
             for step in range(n):

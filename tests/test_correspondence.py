@@ -8,7 +8,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mbicp_viz.core import ImprovedParams, Pose2, match, pose_error
-from mbicp_viz.core.correspondence import ReferenceIndex, candidates, nearest
+from mbicp_viz.core.correspondence import (
+    ReferenceIndex,
+    bearing_bins,
+    candidates,
+    first_at_least,
+    nearest,
+)
 from mbicp_viz.core.events import PairKind
 from mbicp_viz.core.mbicp import rejection_floor
 from mbicp_viz.core.metric import metric_distance_sq
@@ -30,6 +36,30 @@ def brute_force_nearest(ref: ReferenceIndex, moved: np.ndarray, Bw: float, L: fl
     gap = np.abs((ref.bearings[None, :] - alpha[:, None] + np.pi) % (2 * np.pi) - np.pi)
     d2 = metric_distance_sq(moved[:, None, :], ref.points[None, :, :], L)
     return np.where(gap <= Bw, d2, np.inf).min(axis=1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    steps=st.lists(
+        st.one_of(st.floats(1e-9, 1e-6), st.floats(1e-3, 0.1), st.floats(0.1, 3.0)),
+        min_size=0,
+        max_size=60,
+    ),
+    start=st.floats(-10.0, 10.0),
+    at=st.lists(st.integers(0, 59), max_size=8),
+    queries=st.lists(st.floats(-20.0, 20.0), max_size=20),
+)
+def test_the_bearing_lookup_finds_what_a_bisection_finds(steps, start, at, queries):
+    """``first_at_least`` through its bins equals ``np.searchsorted`` on bearings spread evenly,
+    bunched nanoradians apart (a damaged scan) or with wide gaps, for queries outside them, on
+    them exactly, between them, and NaN."""
+    b = np.unique(start + np.cumsum([0.0, *steps]))  # strictly increasing, as a scan's are
+    asked = [*queries, *(b[i % len(b)] for i in at), math.nan]
+    bins = run(bearing_bins, b)
+    for a in asked:
+        for strict in (False, True):
+            expected = 0 if math.isnan(a) else np.searchsorted(b, a, "right" if strict else "left")
+            assert first_at_least(b, bins, a, strict) == expected, (a, strict)
 
 
 @pytest.fixture(scope="module")
