@@ -247,3 +247,43 @@ def test_a_long_health_timeline_keeps_every_spike(n, most, seed):
     assert (thin[2] > 0).sum() == sum(lines[2][s : s + each].any() for s in range(0, n, each))
     if np.isfinite(lines[0]).any():
         assert np.nanmin(thin[0]) == np.nanmin(lines[0])
+
+
+def test_a_slider_step_moves_the_pairs_nodes_in_place(tmp_path):
+    """A step of the run's slider sends the new pair's geometry into the nodes already on the page
+    (the same handles, their points now the new pair's scans in the world frame, as float32 goes
+    over the wire) instead of building the nodes anew."""
+    from typer.testing import CliRunner
+
+    from mbicp_viz.cli import app as cli
+    from mbicp_viz.views.debugger.app import viser_server
+    from mbicp_viz.views.debugger.latency import stop_server
+    from mbicp_viz.views.debugger.session import Session
+    from mbicp_viz.views.debugger.sources import files_source
+
+    rows = tmp_path / "rows.jsonl"
+    res = CliRunner().invoke(
+        cli, ["eval", "sequence", str(INTEL), "--limit", "12", "--out", str(rows), "--workers", "1"]
+    )
+    assert res.exit_code == 0, res.output
+    server = viser_server("127.0.0.1", 0)
+    s = Session(server, files_source(str(INTEL), None, rows=str(rows)))
+    try:
+        run = s.run
+        if not run.active:
+            run.switch()
+        run.slider.value = 3
+        before = dict(run.pair_nodes)
+        assert {"/run/reference", "/run/object", "/run/robot"} <= before.keys()
+        run.slider.value = 8
+        assert all(run.pair_nodes[name] is handle for name, handle in before.items())
+        pair = run.model.pair_at(7)
+        for name, xy in (("/run/reference", pair.ref_xy), ("/run/object", pair.obj_xy)):
+            sent = run.pair_nodes[name].points
+            assert sent.dtype == np.float32 and sent.shape == (len(xy), 3)
+            np.testing.assert_allclose(sent[:, :2], xy, atol=1e-5)
+        robot = run.pair_nodes["/run/robot"]
+        np.testing.assert_allclose(robot.position[:2], [pair.pose.x, pair.pose.y], atol=1e-9)
+    finally:
+        s.close()
+        stop_server(server)

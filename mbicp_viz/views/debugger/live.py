@@ -223,13 +223,9 @@ class LiveTab:
         ]
         with self.client.atomic():
             self._extend_map(model, visited, poses)
-            drawn = {}
-            for layer in layers:
-                name = f"/{layer.path}"
-                drawn[name] = viser_draw.draw(self.client.scene, name, layer)
-            for name in self.nodes.keys() - drawn.keys():
-                self.nodes[name].remove()
-            self.nodes = drawn
+            self.nodes = viser_draw.draw_nodes(
+                self.client.scene, self.nodes, ((f"/{x.path}", x, True) for x in layers)
+            )
         shown = {layer.style.label: layer.style for layer in layers if scene.has_content(layer)}
         if self.map_parts:
             shown[scene.RUN_MAP.label] = scene.RUN_MAP

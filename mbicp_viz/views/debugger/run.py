@@ -202,13 +202,9 @@ class RunPanel:
                 for nodes in self.chunk_nodes:
                     nodes[c].visible = c < whole
             self.chunks_shown = whole
-            drawn = {}
-            for layer in layers:
-                name = f"/{layer.path}"
-                drawn[name] = viser_draw.draw(self.s.client.scene, name, layer)
-            for name in self.pair_nodes.keys() - drawn.keys():  # a relation no longer chosen
-                self.pair_nodes[name].remove()
-            self.pair_nodes = drawn
+            self.pair_nodes = viser_draw.draw_nodes(
+                self.s.client.scene, self.pair_nodes, ((f"/{x.path}", x, True) for x in layers)
+            )
         shown = {
             layer.style.label: layer.style
             for layer in [*self.still, *layers]

@@ -245,20 +245,17 @@ class Session:
         with self.lock, self.client.atomic():
             self.layers.offered(self.state)
             shown: dict[str, scene.Style] = {}
-            drawn: dict[str, object] = {}
+            drawn = []
             for run in self.state.runs:
                 for layer in report.layers(self.state, run):
                     if not viser_draw.in_scan_plane(layer):
                         continue
                     visible = self.state.visible.get(layer.style.label, True)
-                    name = f"/{run.matcher}/{layer.path}"
-                    drawn[name] = viser_draw.draw(self.client.scene, name, layer, visible)
+                    drawn.append((f"/{run.matcher}/{layer.path}", layer, visible))
                     if visible and scene.has_content(layer):
                         shown.setdefault(layer.style.label, layer.style)
-            # a layer of another iteration (the step's points and pairs, at the initial guess)
-            for name in self.nodes.keys() - drawn.keys():
-                self.nodes[name].remove()
-            self.nodes = drawn
+            # a layer of another iteration (the step's points and pairs, at the initial guess) goes
+            self.nodes = viser_draw.draw_nodes(self.client.scene, self.nodes, drawn)
             self.shown = list(shown.values())
             self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
             self.playback.text.content = "  \n".join(
