@@ -260,9 +260,8 @@ def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
             )
             half += 1e-12
             wlo = first_at_least(eb, bins, a - half, False)
-            whi = min(
-                first_at_least(eb, bins, a + half, True), wlo + n_ref, len(eb)
-            )  # a point once
+            # each reference point once, however wide the window
+            whi = min(first_at_least(eb, bins, a + half, True), wlo + n_ref, len(eb))
             # the ranges a point within d0 can have, widened by round-off
             slack = 1e-9 * (1.0 + r)
             r_lo, r_hi = (r - d0) / np.sqrt(1.0 + (d0 / L) ** 2) - slack, r + d0 + slack

@@ -287,3 +287,28 @@ def test_a_slider_step_moves_the_pairs_nodes_in_place(tmp_path):
     finally:
         s.close()
         stop_server(server)
+
+
+def test_a_frame_redrawn_in_place_takes_its_new_size_whole():
+    """A frame drawn again at another length keeps its node, and its axes and origin sphere are
+    those a frame of that length is drawn with anew (viser sizes the origin from the axes only
+    when the node is added)."""
+    from mbicp_viz.views import viser_draw
+    from mbicp_viz.views.debugger.app import viser_server
+    from mbicp_viz.views.debugger.latency import stop_server
+
+    server = viser_server("127.0.0.1", 0)
+    try:
+        small = scene.Frame(f"{scene.RUN}/robot", Pose2(1.0, 2.0, 0.3), length=0.2)
+        nodes = viser_draw.draw_nodes(server.scene, {}, [("/robot", small, True)])
+        big = scene.Frame(f"{scene.RUN}/robot", Pose2(-1.0, 0.5, -0.4), length=0.8)
+        again = viser_draw.draw_nodes(server.scene, nodes, [("/robot", big, True)])
+        fresh = viser_draw.draw(server.scene, "/fresh", big)
+        handle = again["/robot"]
+        assert handle is nodes["/robot"]
+        for prop in ("axes_length", "axes_radius", "origin_radius"):
+            assert getattr(handle, prop) == pytest.approx(getattr(fresh, prop))
+        np.testing.assert_allclose(handle.position[:2], [-1.0, 0.5])
+        np.testing.assert_allclose(handle.wxyz, fresh.wxyz)
+    finally:
+        stop_server(server)

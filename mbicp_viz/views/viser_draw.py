@@ -92,15 +92,7 @@ def draw(scene_api, name: str, layer: scene.Layer, visible: bool = True):
         segs, colors, thickness = _lines(layer, z)
         return scene_api.add_line_segments(name, segs, colors, thickness=thickness, visible=visible)
     if isinstance(layer, scene.Frame):
-        p = layer.pose
-        return scene_api.add_frame(
-            name,
-            axes_length=layer.length,
-            axes_radius=0.04 * layer.length,
-            position=(p.x, p.y, z),
-            wxyz=yaw_to_wxyz(p.theta),
-            visible=visible,
-        )
+        return scene_api.add_frame(name, **_frame(layer, z), visible=visible)
     raise TypeError(f"the debugger cannot draw a {type(layer).__name__} layer ({layer.path})")
 
 
@@ -121,6 +113,18 @@ def _lines(layer, z: float) -> tuple[np.ndarray, np.ndarray, float]:
     if len(segs) == 0:
         segs, colors = np.zeros((1, 2, 3), np.float32), np.zeros((1, 2, 3), np.uint8)
     return segs, colors, max(width, 0.004) * 1.5
+
+
+def _frame(layer: scene.Frame, z: float) -> dict:
+    """A frame layer's node properties: its pose, and axes in proportion to its length."""
+    p, radius = layer.pose, 0.04 * layer.length
+    return dict(
+        position=(p.x, p.y, z),
+        wxyz=yaw_to_wxyz(p.theta),
+        axes_length=layer.length,
+        axes_radius=radius,
+        origin_radius=2.0 * radius,
+    )
 
 
 def draw_nodes(scene_api, nodes: dict, layers) -> dict:
@@ -152,9 +156,8 @@ def _update(handle, layer: scene.Layer, visible: bool) -> bool:
     elif isinstance(layer, LINES) and isinstance(handle, viser.LineSegmentsHandle):
         handle.points, handle.colors, handle.thickness = _lines(layer, z)
     elif isinstance(layer, scene.Frame) and isinstance(handle, viser.FrameHandle):
-        p = layer.pose
-        handle.position, handle.wxyz = (p.x, p.y, z), yaw_to_wxyz(p.theta)
-        handle.axes_length, handle.axes_radius = layer.length, 0.04 * layer.length
+        for prop, value in _frame(layer, z).items():
+            setattr(handle, prop, value)
     else:
         return False
     handle.visible = visible

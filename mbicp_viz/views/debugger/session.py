@@ -254,7 +254,7 @@ class Session:
                     drawn.append((f"/{run.matcher}/{layer.path}", layer, visible))
                     if visible and scene.has_content(layer):
                         shown.setdefault(layer.style.label, layer.style)
-            # a layer of another iteration (the step's points and pairs, at the initial guess) goes
+            # a node of a layer not drawn now (another iteration's step) is removed
             self.nodes = viser_draw.draw_nodes(self.client.scene, self.nodes, drawn)
             self.shown = list(shown.values())
             self.h_legend.content = panels.legend_html(self.shown, self.grid_m)
