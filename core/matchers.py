@@ -56,8 +56,6 @@ def check_inputs(ref, obj, guess) -> None:
     not a finite pose, or a scan whose valid readings are not finite points."""
     import math
 
-    import numpy as np
-
     values = (guess.x, guess.y, guess.theta)
     if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
         raise ValueError(f"the initial guess must be finite numbers, got {guess}")
@@ -67,9 +65,7 @@ def check_inputs(ref, obj, guess) -> None:
             f"{MAX_GUESS_M:g} m is no pose between two scans"
         )
     for name, scan in (("reference", ref), ("object", obj)):
-        # a point r (cos b, sin b) is finite exactly when r and b are (|r cos b| <= |r|)
-        r, b = scan.ranges[scan.valid], scan.bearings[scan.valid]
-        if len(r) == 0 or not (np.isfinite(r).all() and np.isfinite(b).all()):
+        if not scan.has_finite_points():
             raise ValueError(f"the {name} scan ({scan.source}) has no finite valid points")
 
 

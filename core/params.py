@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -113,6 +114,19 @@ def check_value(spec: FieldSpec, value) -> Any:
     return value
 
 
+_INTERNED: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
+
+
+def _interned(cls: type, values: tuple) -> Params:
+    """The parameters ``cls(*values)``: the one object of this process that has those values while
+    any is held (``Params.__reduce__``), checked once when first made."""
+    key = (cls, values)
+    p = _INTERNED.get(key)
+    if p is None:
+        p = _INTERNED[key] = cls(*values)
+    return p
+
+
 class Params:
     """Mixin for the parameter dataclasses: validation on construction, typed copies."""
 
@@ -128,6 +142,14 @@ class Params:
     def __post_init__(self):
         for spec in field_specs(type(self)):
             object.__setattr__(self, spec.name, check_value(spec, getattr(self, spec.name)))
+
+    def __reduce__(self):
+        # A pool's rows come back pickled, each with its parameters: unpickled as one object per
+        # value (``_interned``), not a copy per row nor a comparison and a copy of each record.
+        return _interned, (
+            type(self),
+            tuple(getattr(self, f.name) for f in dataclasses.fields(self)),
+        )
 
     def replace(self, **changes):
         unknown = set(changes) - {s.name for s in field_specs(type(self))}

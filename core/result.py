@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .pickled import by_value
 from .se2 import Pose2
 
 
@@ -27,6 +28,7 @@ class Termination(enum.Enum):
         return self in (Termination.CONVERGED, Termination.CYCLE)
 
 
+@by_value
 @dataclass(frozen=True, slots=True)
 class Degeneracy:
     """How well the final pairs constrain the pose.
@@ -51,6 +53,7 @@ class Degeneracy:
         return float(a - 180.0 if a > 90.0 else a + 180.0 if a <= -90.0 else a)
 
 
+@by_value
 @dataclass(frozen=True, slots=True)
 class MatchResult:
     """``pose`` is the pose of the object frame in the reference frame (maps object points into

@@ -44,17 +44,42 @@ class Scan:
         return self.points_and_bearings(max_range)[0]
 
     def points_and_bearings(self, max_range: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
-        """``points(max_range)`` and their bearings [rad]."""
-        from .points import valid_points
-        from .tiers import run
+        """``points(max_range)`` and their bearings [rad], shared: not to be written to.
 
-        return run(
-            valid_points,
-            np.ascontiguousarray(self.ranges),
-            np.ascontiguousarray(self.bearings),
-            np.ascontiguousarray(self.valid),
-            float(max_range),
-        )
+        Kept on the scan, which never changes: a run reads each scan's points four times (as the
+        reference and the object of a match, and again for its agreement), a tenth of a pair's
+        time outside the matcher's loop at 1081 beams. A limit above every valid reading is no
+        limit, so the matcher's 1000 m and the agreement's none share one computation."""
+        memo = self.__dict__.setdefault("_memo", {})  # frozen: set past __setattr__
+        top = memo.get("top")
+        if top is None:
+            top = memo["top"] = float(np.max(self.ranges, where=self.valid, initial=-np.inf))
+        key = ("points", np.inf if max_range > top else float(max_range))
+        if key not in memo:
+            from .points import valid_points
+            from .tiers import run
+
+            memo[key] = run(
+                valid_points,
+                np.ascontiguousarray(self.ranges),
+                np.ascontiguousarray(self.bearings),
+                np.ascontiguousarray(self.valid),
+                float(max_range),
+            )
+        return memo[key]
+
+    def has_finite_points(self) -> bool:
+        """Whether it has valid readings and each is a finite point: a point r (cos b, sin b) is
+        finite exactly when r and b are (|r cos b| <= |r|). Kept on the scan as its points are."""
+        memo = self.__dict__.setdefault("_memo", {})
+        if "finite" not in memo:
+            r, b = self.ranges[self.valid], self.bearings[self.valid]
+            memo["finite"] = bool(len(r)) and bool(np.isfinite(r).all() and np.isfinite(b).all())
+        return memo["finite"]
+
+    def __getstate__(self) -> dict:
+        """Pickled without what ``points_and_bearings`` keeps (a worker computes its own)."""
+        return {k: v for k, v in self.__dict__.items() if k != "_memo"}
 
     def valid_indices(self) -> np.ndarray:
         return np.flatnonzero(self.valid)

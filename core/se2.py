@@ -12,12 +12,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .pickled import by_value
+
 
 def wrap_angle(theta: float | np.ndarray) -> float | np.ndarray:
     """Angle(s) wrapped into [-pi, pi)."""
     return (theta + np.pi) % (2.0 * np.pi) - np.pi
 
 
+@by_value
 @dataclass(frozen=True, slots=True)
 class Pose2:
     """Rigid motion (x [m], y [m], theta [rad]) mapping child-frame points into the parent frame."""

@@ -4,6 +4,7 @@ memory."""
 
 import math
 import os
+import statistics
 import subprocess
 import sys
 from dataclasses import replace
@@ -17,6 +18,7 @@ from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
 from mbicp_viz.core import Pose2, pose_error
+from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation import pool
 from mbicp_viz.evaluation.bench import run_measured
 from mbicp_viz.readers import read_log
@@ -250,6 +252,48 @@ def test_bench_throughput_times_the_run_eval_sequence_makes(intel):
     line = t.line()
     assert "90 beams" in line and "(median of 3 runs)" in line
     assert f"{t.seconds / t.wall_s[1]:6.1f}x real time on 1 core" in line
+
+
+def test_bench_throughput_also_times_the_pairs_split_between_separate_processes(intel):
+    """How far the cores scale with nothing shared, beside the run's pool: each pair matched in
+    exactly one of the separate processes."""
+    from mbicp_viz.evaluation.throughput import replay_log, split, throughput
+    from mbicp_viz.readers.params_toml import make_params
+
+    run = replay_log(intel, 9, 90, 20.0)
+    shares = split(run, 2)
+    pairs = [(a.stamp, b.stamp) for log in shares for a, b in zip(log.scans, log.scans[1:])]
+    assert pairs == [(a.stamp, b.stamp) for a, b in zip(run.scans, run.scans[1:])]
+    t = throughput(intel, make_params("improved", None), 90, 9, 20.0, [1, 2], repeat=2)
+    assert len(t.apart_s) == 2 and min(t.apart_s) > 0.0
+    alone = t.wall_s[1] / statistics.median(t.apart_s)
+    assert f"scaling {t.wall_s[1] / t.wall_s[2]:.2f}x on 2" in t.line()
+    assert f"(separate processes, nothing shared: {alone:.2f}x)" in t.line()
+
+
+def test_bench_throughput_times_eval_sequence_itself_on_a_bag_of_the_same_run(intel):
+    """The second figure is `eval sequence`'s own pace on a bag written from the replayed run:
+    the recording's duration is the run's, and a failing run says why instead of a number."""
+    from mbicp_viz.evaluation.throughput import from_bag, replay_log
+
+    run = replay_log(intel, 6, 90, 20.0)
+    t = from_bag(intel, ["--algo", "improved"], 90, 6, 20.0, [1])
+    assert t.pairs == 6 and t.seconds == pytest.approx(run.scans[-1].stamp - run.scans[0].stamp)
+    assert len(t.walls_s[1]) == 1 and t.walls_s[1][0] > 0.0
+    assert "eval sequence on a ROS 1 bag" in t.line()
+    with pytest.raises(InputError, match="no-such-preset: no such file"):
+        from_bag(intel, ["--params", "no-such-preset"], 90, 6, 20.0, [1])
+
+
+def test_the_rows_of_a_pooled_run_share_one_parameters_object(intel):
+    """Each worker sends its rows back pickled, parameters and all: taken back, the run's rows hold
+    one parameters object, not a copy each (a day's run holds millions of rows)."""
+    from mbicp_viz.core import ImprovedParams
+    from mbicp_viz.evaluation.sequence import match_sequence
+
+    rows = match_sequence(intel, ImprovedParams(L=2.0), limit=40, workers=2)
+    assert len(rows) == 40 and len({id(r.params) for r in rows}) == 1
+    assert rows[0].params == ImprovedParams(L=2.0)
 
 
 def test_eval_sequence_says_its_pace(tmp_path):

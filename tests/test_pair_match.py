@@ -4,6 +4,7 @@ hold the same record, and it reads back as it was written."""
 import json
 import math
 
+import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 from typer.testing import CliRunner
@@ -91,3 +92,16 @@ def test_a_damaged_record_names_its_field(three_records, change, field):
     with pytest.raises(InputError) as e:
         parse_pair_match(printed, "match.json", 7)
     assert (e.value.line, e.value.field) == (7, field)
+
+
+def test_a_record_sent_between_processes_comes_back_whole(intel):
+    """A pool's rows are pickled by value (core/pickled.py): every field comes back."""
+    import pickle
+
+    from mbicp_viz.core import ImprovedParams
+    from mbicp_viz.evaluation.single import Setup, match_pair
+
+    m = match_pair(intel.scan(0), intel.scan(1), ImprovedParams(), Setup(), indices=(0, 1))
+    back = pickle.loads(pickle.dumps(m))
+    assert back.to_json() == m.to_json() and back.result.pose == m.result.pose
+    assert np.array_equal(back.result.covariance, m.result.covariance)

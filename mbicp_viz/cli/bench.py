@@ -415,6 +415,7 @@ def throughput(
 
     from mbicp_viz.errors import InputError
     from mbicp_viz.evaluation.bench import machine_line, probe_line, speed_probe_us
+    from mbicp_viz.evaluation.throughput import from_bag
     from mbicp_viz.evaluation.throughput import throughput as run_throughput
     from mbicp_viz.readers.params_toml import make_params
 
@@ -431,8 +432,10 @@ def throughput(
     cores = sorted({1, os.cpu_count() or 1})
     typer.echo(f"{matcher.value} on {source} played to and fro at {rate_hz:g} Hz; {machine_line()}")
     before = speed_probe_us()
+    cli_params = ["--algo", matcher.value] + (["--params", params] if params else [])
     for b in counts:
         typer.echo(run_throughput(lg, p, b, pairs, rate_hz, cores, repeat).line())
+        typer.echo(from_bag(lg, cli_params, b, pairs, rate_hz, cores, repeat).line())
     typer.echo(probe_line(before, speed_probe_us()))
 
 

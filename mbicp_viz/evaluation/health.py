@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from mbicp_viz.core import Pose2, pose_error
+from mbicp_viz.core import MatchResult, Pose2, pose_error
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
 
 from .criteria import CONSECUTIVE, Criteria
@@ -46,11 +46,11 @@ STEADY_SHARE = 0.5
 Flags = dict[Suspicion, tuple[float, ...]]
 
 
-def pair_flags(m: PairMatch, overlap: float, odometry_shown: Pose2 | None) -> Flags:
-    """The signs one pair shows by itself, each with its deciding numbers (a pose difference: [m],
-    [rad]). ``odometry_shown`` is the odometry's motion in the frame the record reports (None: the
-    log has none)."""
-    r, flags = m.result, {}
+def pair_flags(r: MatchResult, overlap: float, odometry_shown: Pose2 | None) -> Flags:
+    """The signs one pair's match ``r`` shows by itself, each with its deciding numbers (a pose
+    difference: [m], [rad]). ``odometry_shown`` is the odometry's motion in the frame ``r`` is
+    reported in (None: the log has none)."""
+    flags = {}
     if not r.converged:
         flags[Suspicion.STOPPED_EARLY] = (float(r.iterations),)
     if r.degeneracy is not None and r.degeneracy.condition_number > DEGENERATE_CONDITION:
@@ -67,13 +67,16 @@ def pair_flags(m: PairMatch, overlap: float, odometry_shown: Pose2 | None) -> Fl
     return flags
 
 
+_ODOMETRY_COVARIANCE = np.diag(np.square(ODOMETRY_SIGMA))
+
+
 def _mahalanobis2(pose: Pose2, odometry: Pose2, covariance: np.ndarray | None) -> float:
     """(match - odometry)' (C_match + C_odometry)^-1 (match - odometry), the difference taken in the
     reference frame as the covariance is."""
     e = np.array([pose.x - odometry.x, pose.y - odometry.y, 0.0])
     e[2] = math.remainder(pose.theta - odometry.theta, 2.0 * math.pi)
-    c = np.diag(np.square(ODOMETRY_SIGMA))
-    if covariance is not None and np.all(np.isfinite(covariance)):
+    c = _ODOMETRY_COVARIANCE
+    if covariance is not None and np.isfinite(covariance).all():
         c = c + covariance
     return float(e @ np.linalg.solve(c, e))
 
@@ -101,9 +104,13 @@ def out_of_place(
 
     predicted = scaled(p, da / dp if ok else 1.0)
     jump = beyond(a, predicted, p)
+    if jump <= 1.0:  # most pairs: the rest is not computed (a run's parent judges every row)
+        return None
     back = beyond(b, scaled(a, db / da if ok else 1.0), p)
+    if back <= 1.0:
+        return None
     both = beyond(a @ b, scaled(p, (da + db) / dp if ok else 2.0), p)
-    if min(jump, back) <= 1.0 or both >= 0.5 * min(jump, back):
+    if both >= 0.5 * min(jump, back):
         return None
     return pose_error(a, predicted)
 

@@ -100,9 +100,7 @@ def match_sequence(
             if keyframes.due(rows[-1]):
                 i, ref = j, obj
 
-    def take(m: PairMatch) -> None:
-        if m.params == params:  # one object for the run's rows, not one copy from each worker
-            m = replace(m, params=params)
+    def take(m: PairMatch) -> None:  # the rows share one parameters object (Params.__reduce__)
         rows.append(steady.amend(m))
         if on_row is not None:
             on_row(rows[-1])

@@ -5,7 +5,7 @@ error when the answer is known. Every command and front end that matches a pair 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from mbicp_viz.choices import MATCH_BUDGET_S, Guess
 from mbicp_viz.core import (
@@ -113,7 +113,7 @@ def match_pair(
         fields = {"odometry": odometry, "odometry_xy": et, "odometry_theta": er}
     i, j = indices if indices is not None else (ref.source.index, obj.source.index)
     on_ref, overlap = agreement(ref, obj, result.pose)
-    m = PairMatch(
+    return PairMatch(
         i,
         j,
         params,
@@ -130,6 +130,6 @@ def match_pair(
         score=scored(ref, obj, result.pose, s.truth) if s.truth is not None else None,
         events=rec,
         overlap=overlap,
+        flags=pair_flags(shown, overlap, odometry_shown),
         **fields,
     )
-    return replace(m, flags=pair_flags(m, overlap, odometry_shown))

@@ -34,6 +34,7 @@ from mbicp_viz.core import (
     StartEvent,
     Termination,
 )
+from mbicp_viz.core.pickled import by_value
 from mbicp_viz.errors import InputError
 
 from .params_toml import params_from_mapping
@@ -70,6 +71,7 @@ class Verdict(StrEnum):
     SET_ASIDE = "rejected by hand"
 
 
+@by_value
 @dataclass(frozen=True, slots=True)
 class Score:
     """The laser's motion against the known answer (the frame the paper's criteria are in)."""
@@ -87,6 +89,7 @@ class Score:
         return not self.success and self.inliers_match > self.inliers_truth
 
 
+@by_value
 @dataclass(frozen=True, slots=True)
 class PairMatch:
     """One pair's match."""
