@@ -285,6 +285,21 @@ def test_bench_throughput_times_eval_sequence_itself_on_a_bag_of_the_same_run(in
         from_bag(intel, ["--params", "no-such-preset"], 90, 6, 20.0, [1])
 
 
+def test_bench_throughput_prints_the_run_in_memory_and_eval_sequence_on_a_bag():
+    out = CliRunner().invoke(
+        app,
+        ["bench", "throughput", "--from", str(INTEL), "--beams", "90", "--pairs", "4"]
+        + ["--repeat", "1"],
+    )
+    assert out.exit_code == 0, out.output
+    lines = [ln for ln in out.output.splitlines() if ln.lstrip().startswith("90 beams")]
+    assert len(lines) == 2
+    assert "matched in memory" in lines[0] and "eval sequence on a ROS 1 bag" in lines[1]
+    assert all("x real time on 1 core" in ln for ln in lines)
+    if (os.cpu_count() or 1) > 1:
+        assert "separate processes, nothing shared" in lines[0]
+
+
 def test_the_rows_of_a_pooled_run_share_one_parameters_object(intel):
     """Each worker sends its rows back pickled, parameters and all: taken back, the run's rows hold
     one parameters object, not a copy each (a day's run holds millions of rows)."""

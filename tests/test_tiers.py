@@ -274,3 +274,29 @@ def test_a_cached_kernel_is_compiled_anew_when_a_constant_it_reads_from_another_
         outputs.append(_printed_on_import(tmp_path, "loops_of_a_package.loop"))
     assert outputs == ["4", "4", "12"]
     assert any((tmp_path / "cache").rglob("*.nbi"))  # the kernel was cached
+
+
+def test_a_runs_kernels_are_loaded_before_its_first_pair():
+    """``load_kernels`` loads, for each matcher, every kernel a real pair's match and record call
+    (so a pool's forked workers share them, and the run's pace leaves out loading them): matching
+    a real pair afterwards loads none."""
+    check = (
+        "from mbicp_viz.core import MATCHERS, tiers\n"
+        "from mbicp_viz.core.warmup import load_kernels\n"
+        "from mbicp_viz.evaluation.single import match_pair\n"
+        "from mbicp_viz.readers import read_log\n"
+        f"log = read_log({str(EXAMPLES / 'intel-excerpt.log.gz')!r})\n"
+        "def loaded():\n"
+        "    return {k.__name__: len(getattr(k, 'overloads', getattr(k, 'types', ())))\n"
+        "            for k in tiers._KERNELS}\n"
+        "for m in MATCHERS.values():\n"
+        "    load_kernels(m.params_type())\n"
+        "    before = loaded()\n"
+        "    match_pair(log.scan(0), log.scan(1), m.params_type())\n"
+        "    print(m.name, sorted(k for k, n in loaded().items() if n != before.get(k)))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", check], capture_output=True, text=True, timeout=300, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split("\n")[:-1] == [f"{name} []" for name in MATCHERS], done.stdout

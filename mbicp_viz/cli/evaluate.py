@@ -147,6 +147,7 @@ def sequence(
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else
     identity), or each scan against the last key frame (--keyframe-m)."""
     from mbicp_viz.core import Termination
+    from mbicp_viz.core.warmup import load_kernels
     from mbicp_viz.evaluation.keyframes import KeyFrames
     from mbicp_viz.evaluation.sequence import match_sequence
     from mbicp_viz.readers.pair_match import PairMatch, parse_pair_match
@@ -158,6 +159,7 @@ def sequence(
     p, search = pf.matchers[matcher.value], pf.search
     reading = read_options(topic, typestore, mount, upside_down, deskew)
     lg = read_log_saying(log, reading)
+    load_kernels(p)  # start-up, as reading the log: not the run's pace
     t0, resumed = time.perf_counter(), []  # the run's pace counts finding its pairs
     pairs = lg.consecutive_pairs(limit)
     keyframes = KeyFrames(keyframe_m, math.radians(keyframe_deg)) if keyframe_m > 0 else None

@@ -12,6 +12,7 @@ import numpy as np
 
 from mbicp_viz.choices import MATCH_BUDGET_S
 from mbicp_viz.core import Params, SearchParams, match
+from mbicp_viz.core.warmup import load_kernels
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
@@ -107,6 +108,7 @@ def match_sequence(
 
     if not pairs:
         return rows
+    load_kernels(params)  # once, before a pool forks its workers
     ordered_map(
         partial(match_row, stream=log.topic, budget_s=budget_s),
         consecutive() if keyframes is None else from_key_frames(),
