@@ -408,9 +408,11 @@ def throughput(
     params: ParamsOpt = None,
     topic: TopicOpt = None,
 ):
-    """A whole run's real-time factor (the recording's duration over the matching time, as `eval
-    sequence` matches it) per beam count, on one core and on every core: the median of
-    alternated runs."""
+    """A whole run's real-time factor (the recording's duration over the matching time) per beam
+    count, on one core and on every core, the median of alternated runs: matched in memory as
+    `eval sequence` matches it (with the pairs split between separate processes too: how far
+    the cores scale by themselves), then `eval sequence` itself on a bag of the same run (its own
+    pace: reading the bag, writing the rows)."""
     import os
 
     from mbicp_viz.errors import InputError
