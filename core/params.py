@@ -146,10 +146,7 @@ class Params:
     def __reduce__(self):
         # A pool's rows come back pickled, each with its parameters: unpickled as one object per
         # value (``_interned``), not a copy per row nor a comparison and a copy of each record.
-        return _interned, (
-            type(self),
-            tuple(getattr(self, f.name) for f in dataclasses.fields(self)),
-        )
+        return _interned, (type(self), tuple(self.as_dict().values()))
 
     def replace(self, **changes):
         unknown = set(changes) - {s.name for s in field_specs(type(self))}

@@ -60,11 +60,17 @@ class Throughput:
         return "   ".join(cells)
 
 
-def replay_log(log: ScanLog, pairs: int, beams: int, rate_hz: float) -> ScanLog:
-    """``pairs + 1`` scans of ``log`` played to and fro, resampled to ``beams``, at ``rate_hz``."""
+def _robot(log: ScanLog, pairs: int, beams: int, rate_hz: float):
+    """A robot driving to and fro along ``log``: ``pairs + 1`` scans resampled to ``beams``, at
+    ``rate_hz`` (``writers/replay.py``)."""
     from mbicp_viz.writers.replay import replayed
 
-    robot = replayed(log, (pairs + 1) / rate_hz, beams, rate_hz)
+    return replayed(log, (pairs + 1) / rate_hz, beams, rate_hz)
+
+
+def replay_log(log: ScanLog, pairs: int, beams: int, rate_hz: float) -> ScanLog:
+    """``pairs + 1`` scans of ``log`` played to and fro, resampled to ``beams``, at ``rate_hz``."""
+    robot = _robot(log, pairs, beams, rate_hz)
     scans, stamps = robot.topics[0].scans, robot.stamps
     mount = robot.mount
     odometry = robot.odometry
@@ -155,9 +161,8 @@ def from_bag(
     import tempfile
 
     from mbicp_viz.writers.bag import write
-    from mbicp_viz.writers.replay import replayed
 
-    robot = replayed(log, (pairs + 1) / rate_hz, beams, rate_hz)
+    robot = _robot(log, pairs, beams, rate_hz)
     walls: dict[int, list[float]] = {w: [] for w in workers}
     with tempfile.TemporaryDirectory(prefix="mbicp-viz-bench-") as tmp:
         bag = write(Path(tmp) / "run.bag", robot, "ros1")
