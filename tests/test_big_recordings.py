@@ -22,7 +22,9 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation import pool
 from mbicp_viz.evaluation.bench import run_measured
 from mbicp_viz.readers import read_log
+from mbicp_viz.readers.bag_index import bracket
 from mbicp_viz.readers.rosbag import _to_log, _walk_ros1
+from mbicp_viz.readers.tf import interpolate
 from mbicp_viz.writers.replay import Replay, replayed, resampled
 
 from .bags import intel_robot, write
@@ -56,6 +58,28 @@ def test_scans_read_through_the_index_equal_the_bag_read_whole(tmp_path, intel, 
     for r, s in streamed:
         b = whole.scan(r)
         assert same_scan(s, b) and np.allclose(s.odometry.as_array(), b.odometry.as_array())
+    # Python floats: numpy scalars would slow every step of a run that reads them
+    for s in (lazy.scan(5), streamed[5][1]):
+        assert {type(v) for v in (s.odometry.x, s.odometry.y, s.odometry.theta)} == {float}
+
+
+# stamps that repeat (two samples of one instant), in steps within ``interpolate``'s largest gap
+stamps = st.sampled_from([0.0, 0.25, 0.5, 0.75]) | st.floats(-0.5, 1.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.tuples(stamps, st.floats(-5, 5), st.floats(-5, 5), st.floats(-3, 3)), max_size=8),
+    stamps,
+)
+def test_the_odometry_a_scan_reads_is_interpolated_as_from_its_whole_window_sorted(samples, t):
+    """A scan's odometry interpolated from its window's two samples around it (``bracket``)
+    equals the window sorted by stamp (stable: equal stamps in arrival order) and interpolated
+    whole, at any stamp: repeated, unordered, before, on or after the samples."""
+    a = np.array(samples, dtype=float).reshape(-1, 4)
+    order = np.argsort(a[:, 0], kind="stable")
+    whole = interpolate(a[order, 0], a[order, 1:], t)
+    assert interpolate(*bracket(samples, t), t) == whole
 
 
 def recompressed(src: Path, dst: Path, compression: str) -> Path:

@@ -20,7 +20,7 @@ from __future__ import annotations
 import bisect
 import threading
 from collections import OrderedDict, deque
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -130,18 +130,24 @@ class BagScans:
             msgs = self._decoded(self.topic, t, t + 1)
             if not odometry:
                 return self._scan(k, msgs[k - first][1], None)
-            scan = self._scan(k, msgs[k - first][1], self._odometry_around(t))
+            msg = msgs[k - first][1]
+            scan = self._scan(k, msg, self._odometry_around(t, msg))
             self._cache[k] = scan
             if len(self._cache) > CACHED_SCANS:
                 self._cache.popitem(last=False)
             return scan
 
-    def _odometry_around(self, t_ns: int):
+    def _odometry_around(self, t_ns: int, msg):
+        """The odometry a scan (record stamp ``t_ns``, message ``msg``) reads: ``bracket`` of
+        the samples within the window around its record."""
+        from .rosbag import header_stamp
+
         if self.odometry is None:
             return None
         w = int(ODOMETRY_WINDOW_S * 1e9)
         msgs = self._decoded(self.odometry.topic, t_ns - w, t_ns + w)
-        return self._track([s for stamp, m in msgs for s in self._samples(stamp, m)])
+        samples = (s for stamp, m in msgs for s in self._samples(stamp, m))
+        return bracket(samples, header_stamp(msg))
 
     def _samples(self, stamp: float, msg) -> list[tuple[float, float, float, float]]:
         """The base's poses (stamp, x, y, theta) one odometry message (record ``stamp``) gives;
@@ -159,13 +165,6 @@ class BagScans:
         # the tree keeps the first value each moving edge had at opening: not this message's
         w = ODOMETRY_WINDOW_S
         return [(t, *p) for t, p in zip(track[1], track[2]) if abs(t - stamp) < w]
-
-    @staticmethod
-    def _track(samples: list) -> tuple[np.ndarray, np.ndarray]:
-        """(stamps, base poses) of odometry ``samples``, in stamp order."""
-        a = np.array(samples, dtype=float).reshape(-1, 4)
-        order = np.argsort(a[:, 0], kind="stable")
-        return a[order, 0], a[order, 1:]
 
     def _scan(self, k: int, msg, odometry) -> Scan | UnusableScan:
         from .rosbag import laser_scan
@@ -189,7 +188,7 @@ class BagScans:
     ) -> Iterator[tuple[int, Scan | UnusableScan]]:
         """Records ``start`` ... in order, read front to back once: each scan leaves once the
         odometry a window past it has been read (``odometry``: False, the scans without it)."""
-        from .rosbag import decoded_messages
+        from .rosbag import decoded_messages, header_stamp
 
         if start >= self.records:
             return
@@ -211,8 +210,8 @@ class BagScans:
         def ready(now: float) -> Iterator[tuple[int, Scan | UnusableScan]]:
             while waiting and waiting[0][1] + w < now:
                 r, t, msg = waiting.popleft()
-                near = [x for stamp, xs in odometry if t - w <= stamp < t + w for x in xs]
-                track = self._track(near) if with_odometry else None
+                near = (x for stamp, xs in odometry if t - w <= stamp < t + w for x in xs)
+                track = bracket(near, header_stamp(msg)) if with_odometry else None
                 yield r, self._scan(r, msg, track)
             horizon = (waiting[0][1] if waiting else now) - w
             while odometry and odometry[0][0] < horizon:
@@ -230,6 +229,23 @@ class BagScans:
                 odometry.append((stamp, self._samples(stamp, msg)))
             yield from ready(stamp)
         yield from ready(np.inf)
+
+
+def bracket(samples: Iterable, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps, base poses) of the odometry ``samples`` (stamp, x, y, theta) that ``interpolate``
+    reads at time ``t``: the last at or before it and the first after it, equal stamps taken in
+    arrival order as a stable sort by stamp leaves them. ``interpolate`` answers on them as on the
+    whole window sorted (no stamp is NaN: headers hold whole seconds and nanoseconds), and one pass
+    costs less than sorting the window's samples for every scan (a tenth of a bag's stream)."""
+    before = after = None
+    for s in samples:
+        if s[0] <= t:
+            if before is None or s[0] >= before[0]:
+                before = s
+        elif after is None or s[0] < after[0]:
+            after = s
+    a = np.array([s for s in (before, after) if s is not None], dtype=float).reshape(-1, 4)
+    return a[:, 0], a[:, 1:]
 
 
 def records_with_stamps(reader, connections) -> np.ndarray:
