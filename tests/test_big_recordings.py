@@ -4,6 +4,7 @@ memory."""
 
 import math
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -364,6 +365,62 @@ def test_a_run_over_a_bag_read_through_its_index_steps_over_an_unusable_scan(tmp
     assert res.exit_code == 0, res.output
     assert [(r["ref"], r["obj"]) for r in json_lines(out)] == [(0, 1), (1, 2), (2, 4), (4, 5)]
     assert "skipped 1 unusable scan(s) of 6 (first: scan 3" in res.output
+
+
+def bag_with_unusable_scans(tmp_path, intel, unusable: tuple[int, ...], n: int = 14) -> Path:
+    """A bag of ``n`` Intel scans with odometry, the scans of ``unusable`` all no-return codes."""
+    from mbicp_viz.core import make_scan
+
+    robot = intel_robot(intel, 0, n, MOUNT)
+    scans = robot.topics[0].scans
+    for k in unusable:
+        scans[k] = make_scan(np.full(180, 81.9), scans[k].bearings, valid=np.ones(180, bool))
+    return write(tmp_path / "u.bag", robot, "ros1")
+
+
+def test_a_run_finds_its_pairs_as_it_reads_a_bag_once(tmp_path, intel, monkeypatch):
+    """eval sequence on a bag read through its index does not read the bag a first time only to
+    list its pairs: each scan is read once as the run goes (its first two once before, which say
+    that the bag has a pair at all), and its rows are those of the pairs listed first."""
+    from mbicp_viz.readers.bag_index import BagScans
+
+    path = bag_with_unusable_scans(tmp_path, intel, (3, 8, 9))
+    listed = read_log(path).consecutive_pairs()
+    real, read = BagScans._scan, []
+    monkeypatch.setattr(BagScans, "_scan", lambda self, k, *a: read.append(k) or real(self, k, *a))
+    out = tmp_path / "r.json"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(path), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert [(r["ref"], r["obj"]) for r in json_lines(out)] == listed and len(listed) == 10
+    # the first two, then the run's one pass (then the run's first and last scan, for its pace)
+    assert read[:16] == [0, 1, *range(14)] and len(read) <= 18, read
+    assert "skipped 3 unusable scan(s) of 14 (first: scan 3" in res.output
+
+
+def test_a_stopped_run_over_a_bag_resumes_from_its_rows_as_a_whole_run_matches(
+    tmp_path, intel, monkeypatch
+):
+    """Stopped before the bag is read through, a run cannot know how many pairs it has: it
+    says how many at most; the same command then goes on from its rows, checked against the
+    bag's first pairs, to the rows of a run never stopped."""
+    from .test_nothing_lost import interrupt_the_fourth_match
+
+    path = bag_with_unusable_scans(tmp_path, intel, (2, 9))
+    whole, out = tmp_path / "whole.json", tmp_path / "r.json"
+    args = ["eval", "sequence", str(path), "--workers", "1", "--out"]
+    assert CliRunner().invoke(app, [*args, str(whole)]).exit_code == 0
+    with monkeypatch.context() as m:
+        interrupt_the_fourth_match(m)
+        res = CliRunner().invoke(app, [*args, str(out)])
+    assert res.exit_code == 130 and not out.exists(), res.output
+    assert re.search(r"interrupted after 4 of up to (\d+) pairs", res.stderr), res.stderr
+    assert int(re.search(r"up to (\d+)", res.stderr)[1]) >= 11  # 14 scans, 2 unusable
+    res = CliRunner().invoke(app, [*args, str(out)])
+    assert res.exit_code == 0 and re.search(r"4 of up to \d+ pairs already matched", res.stderr)
+    assert [(r["ref"], r["obj"], r["x"], r["theta"]) for r in json_lines(out)] == [
+        (r["ref"], r["obj"], r["x"], r["theta"]) for r in json_lines(whole)
+    ]
+    assert len(json_lines(out)) == 11
 
 
 def test_a_log_read_whole_is_cached_and_read_from_the_cache_alike(tmp_path, monkeypatch):

@@ -893,7 +893,10 @@ def test_a_run_matched_in_the_background_shows_its_progress_then_opens(browser, 
     try:
         page, session = open_tab(browser, application)  # a pair's result is on the page already
         page.get_by_text(f"0 of {len(rows)} pairs").wait_for(timeout=30000)
-        background.update(20, "40/s, 1 s left")
+        # a run reading its log as it goes knows how many pairs it has at most
+        background.update(10, len(rows) + 3, True, "40/s, 1 s left")
+        page.get_by_text(f"10 of up to {len(rows) + 3} pairs").wait_for(timeout=30000)
+        background.update(20, len(rows), False, "40/s, 1 s left")
         page.get_by_text(f"20 of {len(rows)} pairs (40/s, 1 s left)").wait_for(timeout=30000)
         bar = page.get_by_role("progressbar")
         assert wait_for(lambda: float(bar.get_attribute("aria-valuenow")) == 2000 / len(rows))

@@ -175,7 +175,8 @@ def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(t
     assert proc.returncode in ENDED_BY_CTRL_C, stderr
     rows = json_lines(out.with_name("seq.json.partial"))[1:]
     assert 0 < len(rows) < 359 and [r["ref"] for r in rows] == list(range(len(rows)))
-    assert f"interrupted after {len(rows)} of 359 pairs" in stderr and not out.exists()
+    # the bag is read as the run goes: stopped before its end, it may still hold unusable scans
+    assert f"interrupted after {len(rows)} of up to 359 pairs" in stderr and not out.exists()
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
     assert not [w for w in workers if Path(f"/proc/{w}").exists()]
 

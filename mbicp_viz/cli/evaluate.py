@@ -61,7 +61,7 @@ from .options import (
     say,
     user_errors,
 )
-from .resume import log_identity, matched_rows, settings_of
+from .resume import Plan, log_identity, matched_rows, settings_of
 from .serve import ServePortOpt, started_debugger, until_ctrl_c
 
 LogArg = Annotated[str, typer.Argument(help="scan log")]
@@ -161,7 +161,7 @@ def sequence(
     lg = read_log_saying(log, reading)
     load_kernels(p)  # start-up, as reading the log: not the run's pace
     t0, resumed = time.perf_counter(), []  # the run's pace counts finding its pairs
-    pairs = lg.consecutive_pairs(limit)
+    plan = Plan.consecutive(lg, limit)
     keyframes = KeyFrames(keyframe_m, math.radians(keyframe_deg)) if keyframe_m > 0 else None
     run = {
         "command": "eval sequence",
@@ -194,17 +194,17 @@ def sequence(
             keyframes=keyframes,
         )
 
-    # a key-frame run's references are decided as it goes: a resumed run is checked on its scans
-    plan = pairs if keyframes is None else [pairs[0], *((None, j) for _, j in pairs[1:])]
+    if keyframes is not None:  # its references are decided as it goes: checked on its scans
+        plan = replace(plan, first=lambda n, first=plan.first: _any_reference(first(n)))
     with ExitStack() as stack:
         background = follow = None
         if serve:  # the log opens at once, the run view once the run is matched
             background, application = _serving_meanwhile(
-                stack, log, lg, guess, reading, budget_s, len(plan), port
+                stack, log, lg, guess, reading, budget_s, plan, port
             )
 
             def follow(bar) -> None:
-                background.update(bar.done, bar.rate_text())
+                background.update(bar.done, bar.total, not plan.exact(), bar.rate_text())
 
         rows = matched_rows(out, run, plan, match, PairMatch.to_json, parse_pair_match, follow)
         say(_pace(lg, rows[resumed[0] :], time.perf_counter() - t0))
@@ -241,14 +241,20 @@ def sequence(
             until_ctrl_c(application.server.sleep_forever)
 
 
-def _serving_meanwhile(stack, log, lg, guess, reading, budget_s, pairs: int, port: int):
+def _any_reference(pairs: list[tuple[int, int]]) -> list[tuple[int | None, int]]:
+    """A key-frame run's pairs as its resumed rows are checked: the first as planned, each later
+    one by its second scan only (its reference is the key frame of its time)."""
+    return pairs[:1] + [(None, j) for _, j in pairs[1:]]
+
+
+def _serving_meanwhile(stack, log, lg, guess, reading, budget_s, plan, port: int):
     """The debugger on the log while its run is matched (``stack`` stops it): any pair opens at
     once, each tab follows the run's progress (the ``Background`` returned) and opens its run view
     when it is done."""
     from mbicp_viz.views.debugger.background import Background
     from mbicp_viz.views.debugger.sources import log_source
 
-    background = Background(pairs)
+    background = Background(plan.total(), at_most=not plan.exact())
     pending = replace(
         log_source(log, lg, guess=guess, options=reading), budget_s=budget_s, background=background
     )
@@ -641,7 +647,7 @@ def relations(
     rows = matched_rows(
         out,
         run,
-        pairs,
+        Plan.of(pairs),
         lambda on_row, done: match_relations(
             lg, found, p, guess, search, on_row=on_row, skip=len(done), workers=workers
         ),

@@ -434,8 +434,14 @@ class Progress:
         rate = done / spent
         return f"{rate:.3g}/s, {(self.total - self.done) / rate:.0f} s left"
 
-    def update(self, n: int = 1) -> None:
+    def update(self, n: int = 1, total: int | None = None) -> None:
+        """``n`` more items done; ``total``: the count there are, when it was not known exactly
+        (a run that finds its pairs as it reads its log)."""
         self.done += n
+        if total is not None and total != self.total:
+            self.total = total
+            if self.bar is not None:
+                self.bar.length = total
         if self.bar is not None:
             self.bar.update(n)
         elif (

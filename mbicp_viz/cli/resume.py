@@ -4,6 +4,7 @@ way, and the same command started again goes on from the rows already written.""
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,14 +31,55 @@ def settings_of(reading) -> dict:
     return {k: getattr(v, "value", v) for k, v in asdict(reading).items()}
 
 
-def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]], decode) -> PartialRows:
+@dataclass(frozen=True)
+class Plan:
+    """The pairs a run matches, in order. Given whole (``Plan.of``), or found by the run itself
+    as it reads a lazily read log front to back (``consecutive``): reading the whole log first
+    only to list them took as long as a tenth of the run. ``first(n)`` gives the first ``n``
+    (reading no further than they go: a resumed run's rows are checked against them);
+    ``total()`` is how many there are, or while the log has records not yet read, how many
+    there are at most; ``exact()`` says which."""
+
+    first: Callable[[int], list[tuple[int | None, int]]]
+    total: Callable[[], int]
+    exact: Callable[[], bool]
+
+    @staticmethod
+    def of(pairs: list[tuple[int | None, int]]) -> Plan:
+        """The pairs given; a pair whose reference is None takes any (a key-frame run decides it
+        as it goes)."""
+        return Plan(lambda n: pairs[:n], lambda: len(pairs), lambda: True)
+
+    @staticmethod
+    def consecutive(log, limit: int | None) -> Plan:
+        """Each usable scan of ``log`` with the next usable one (the first ``limit``), as
+        ``ScanLog.consecutive_pairs``: a log read whole lists them at once; a lazily read log
+        counts every record not known to be unusable until its run has read them all."""
+        if log.surveyed:
+            return Plan.of(log.consecutive_pairs(limit))
+        log.consecutive_pairs(1)  # its first two usable scans, or the error of a log without
+
+        def total() -> int:
+            n = log.records - 1 - len(log.known_unusable)
+            return n if limit is None else min(limit, n)
+
+        def first(n: int) -> list[tuple[int, int]]:
+            return log.consecutive_pairs(n if limit is None else min(n, limit)) if n else []
+
+        return Plan(first, total, lambda: log.surveyed)
+
+    def total_text(self) -> str:
+        return f"{self.total()}" if self.exact() else f"up to {self.total()}"
+
+
+def resumable_rows(out: Path, run: dict, plan: Plan, decode) -> PartialRows:
     """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left
-    (``decode``-d from the file, path and line). A pair of ``pairs`` whose reference is None
-    takes any (a key-frame run decides it as it goes)."""
+    (``decode``-d from the file, path and line), which must be the plan's first pairs."""
     from mbicp_viz.readers.rows import PartialRows
 
     rows = PartialRows(out, run, decode)
     done = rows.pairs
+    pairs = plan.first(len(done))
     if len(done) > len(pairs) or any(
         p[1] != d[1] or p[0] not in (None, d[0]) for p, d in zip(pairs, done)
     ):
@@ -45,15 +87,15 @@ def resumable_rows(out: Path, run: dict, pairs: list[tuple[int, int]], decode) -
             "its rows are not this run's first pairs: delete it to start afresh", str(rows.path)
         )
     if done:
-        say(f"resuming from {rows.path}: {len(done)} of {len(pairs)} pairs already matched")
+        say(f"resuming from {rows.path}: {len(done)} of {plan.total_text()} pairs already matched")
     return rows
 
 
-def stop_if_interrupted(rows: PartialRows, total: int) -> None:
+def stop_if_interrupted(rows: PartialRows, plan: Plan) -> None:
     """A run stopped before its last pair ends here: where its rows are and how to go on."""
-    if rows.count < total:
+    if rows.count < plan.total():
         say(
-            f"interrupted after {rows.count} of {total} pairs: the rows so far are in "
+            f"interrupted after {rows.count} of {plan.total_text()} pairs: the rows so far are in "
             f"{rows.path}; the same command goes on from them"
         )
         raise typer.Exit(INTERRUPTED_CODE)
@@ -62,28 +104,28 @@ def stop_if_interrupted(rows: PartialRows, total: int) -> None:
 def matched_rows(
     out: Path | None,
     run: dict,
-    pairs: list[tuple[int, int]],
+    plan: Plan,
     match: Callable[..., object],
     encode: Callable[[object], dict] = lambda row: row,
     decode: Callable[[dict, str, int], object] = lambda row, path, line: row,
     on_progress: Callable[[Progress], None] | None = None,
 ) -> list:
-    """Every pair's row, ``match(on_row, done)`` running the pairs after the rows ``done``. With
-    ``out``, each row is on disk as it is finished (``OUT.partial``, ``encode``-d to JSON), a
-    stopped run ends here with its rows kept and the same command resumes from them (``decode``-d
-    from the file, path and line), and ``out`` is written whole at the end; without, the rows stay
-    in memory (a Ctrl-C still ends the command, ``user_errors``). ``on_progress(bar)`` follows
-    the progress bar after each row (a page showing it too)."""
-    kept = resumable_rows(out, run, pairs, decode) if out is not None else None
+    """Every pair's row, ``match(on_row, done)`` running the pairs of ``plan`` after the rows
+    ``done``. With ``out``, each row is on disk as it is finished (``OUT.partial``, ``encode``-d
+    to JSON), a stopped run ends here with its rows kept and the same command resumes from them
+    (``decode``-d from the file, path and line), and ``out`` is written whole at the end;
+    without, the rows stay in memory (a Ctrl-C still ends the command, ``user_errors``).
+    ``on_progress(bar)`` follows the progress bar after each row (a page showing it too)."""
+    kept = resumable_rows(out, run, plan, decode) if out is not None else None
     rows = kept.rows if kept is not None else []
-    with Progress(len(pairs)) as bar:
+    with Progress(plan.total()) as bar:
         bar.resumed(len(rows))
 
         def take(row) -> None:
             rows.append(row)
             if kept is not None:
                 kept.add(encode(row))
-            bar.update(1)
+            bar.update(1, plan.total())
             if on_progress is not None:
                 on_progress(bar)
 
@@ -93,6 +135,6 @@ def matched_rows(
             with kept:
                 match(take, list(rows))
     if kept is not None:
-        stop_if_interrupted(kept, len(pairs))
+        stop_if_interrupted(kept, plan)
         kept.finish()
     return rows

@@ -70,34 +70,35 @@ def match_sequence(
             "odometry",
             field="--truth",
         )
-    pairs = log.consecutive_pairs(limit)[len(done) :]
+    # The pairs are found as the log is read, front to back once: a lazily read log is not read
+    # a first time only to list them. A resumed run goes on from its last row's second scan.
+    todo = log.records - 1 - len(done) if limit is None else limit - len(done)
+    last = done[-1].obj if done else 0
     stamps: dict[int, float | None] = {}  # of the scans sent and not yet seen back
     steady, rows = Steadiness(log, done, stamps), []
 
     def job(i: int, ref, j: int, obj) -> tuple:
         return (log.path, i, j, ref, obj, params, guess, truth, search, log.frames, base)
 
-    def consecutive():  # made as the workers need them: the log is read front to back once
-        scans = log.scans_from(pairs[0][0])
-        i, ref = next(scans)
-        for (j, obj), pair in zip(scans, pairs):
-            assert (i, j) == pair, "the log's usable scans changed under the run"
+    def consecutive():  # made as the workers need them
+        scans = log.scans_from(last)
+        i, ref = next(scans, (None, None))
+        for _, (j, obj) in zip(range(todo), scans):
             stamps[i], stamps[j] = ref.stamp, obj.stamp
             yield job(i, ref, j, obj)
             i, ref = j, obj
 
     def from_key_frames():  # one at a time: a scan's reference depends on the match before
-        key = keyframes.key_after(done) if done else pairs[0][0]
-        scans, todo = log.scans_from(key), iter(pairs)
-        i, ref = next(scans)
+        scans = log.scans_from(keyframes.key_after(done) if done else 0)
+        i, ref = next(scans, (None, None))
+        sent = 0
         for j, obj in scans:
-            if j <= pairs[0][0]:  # a resumed run's scans matched before
-                continue
-            pair = next(todo, None)
-            if pair is None:
+            if sent == todo:
                 return
-            assert j == pair[1], "the log's usable scans changed under the run"
+            if j <= last:  # a resumed run's scans matched before
+                continue
             yield job(i, ref, j, obj)
+            sent += 1
             if keyframes.due(rows[-1]):
                 i, ref = j, obj
 
@@ -106,7 +107,7 @@ def match_sequence(
         if on_row is not None:
             on_row(rows[-1])
 
-    if not pairs:
+    if todo <= 0:
         return rows
     load_kernels(params)  # once, before a pool forks its workers
     ordered_map(
@@ -114,7 +115,7 @@ def match_sequence(
         consecutive() if keyframes is None else from_key_frames(),
         workers if keyframes is None else 1,
         take,
-        len(pairs),
+        todo,
     )
     return rows
 

@@ -154,11 +154,15 @@ class ScanLog:
 
     def scans_from(self, record: int, odometry: bool = True) -> Iterator[tuple[int, Scan]]:
         """(record, scan) of each usable scan from ``record`` on, in file order (a lazily read log
-        is read front to back once; without ``odometry``, its scans' odometry is not read)."""
+        is read front to back once, and learns its unusable records on the way; without
+        ``odometry``, its scans' odometry is not read)."""
         if self.store is not None:
+            survey = self.unusable.survey if isinstance(self.unusable, _Unusable) else None
             for r, scan in self.store.stream(record, odometry):
                 if isinstance(scan, Scan):
                     yield r, scan
+                elif survey is not None:
+                    survey.saw(r, scan)
             return
         records = self.record_numbers()
         k = bisect.bisect_left(records, record)
@@ -210,6 +214,11 @@ class ScanLog:
         if len(records) < 2:
             raise InputError("needs at least two usable scans", self.path)
         return list(zip(records[:-1], records[1:]))
+
+    @property
+    def surveyed(self) -> bool:
+        """Whether the log knows its usable records without reading more of its file."""
+        return not isinstance(self.scans, _UsableScans) or self.scans.survey.complete
 
     @property
     def known_unusable(self) -> Mapping[int, UnusableScan]:
@@ -286,6 +295,14 @@ class Survey:
     def known(self) -> dict[int, UnusableScan]:
         """The unusable records found so far (all of them once surveyed)."""
         return self._unusable
+
+    @property
+    def complete(self) -> bool:
+        return self._usable is not None
+
+    def saw(self, r: int, scan: UnusableScan) -> None:
+        """Record ``r`` is unusable, as a pass over the log other than the survey's found."""
+        self._unusable[r] = scan
 
 
 class _UsableScans(Sequence):

@@ -21,17 +21,19 @@ class Background:
     done: int = 0
     pace: str = ""
     source: object | None = None
+    at_most: bool = False  # ``total`` bounds the pairs: the run finds them as it reads its log
 
-    def update(self, done: int, pace: str) -> None:
-        self.done, self.pace = done, pace
+    def update(self, done: int, total: int, at_most: bool, pace: str) -> None:
+        self.done, self.total, self.at_most, self.pace = done, total, at_most, pace
 
     def finish(self, source) -> None:
         self.done, self.source = self.total, source
 
     def text(self) -> str:
         pace = f" ({self.pace})" if self.pace else ""
+        total = f"up to {self.total}" if self.at_most else f"{self.total}"
         return (
-            f"matching the run in the background: {self.done} of {self.total} pairs{pace}; its "
+            f"matching the run in the background: {self.done} of {total} pairs{pace}; its "
             "run view opens here when it is done, and meanwhile any pair of the log can be opened"
         )
 
