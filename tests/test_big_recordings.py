@@ -23,7 +23,7 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation import pool
 from mbicp_viz.evaluation.bench import run_measured
 from mbicp_viz.readers import read_log
-from mbicp_viz.readers.bag_index import bracket
+from mbicp_viz.readers.bag_index import OdometryWindow, bracket
 from mbicp_viz.readers.rosbag import _to_log, _walk_ros1
 from mbicp_viz.readers.tf import interpolate
 from mbicp_viz.writers.replay import Replay, replayed, resampled
@@ -81,6 +81,46 @@ def test_the_odometry_a_scan_reads_is_interpolated_as_from_its_whole_window_sort
     order = np.argsort(a[:, 0], kind="stable")
     whole = interpolate(a[order, 0], a[order, 1:], t)
     assert interpolate(*bracket(samples, t), t) == whole
+
+
+@settings(max_examples=500, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(0, 0.05),  # each message's record stamp after the last one's
+            # its samples' stamps, each after the one before but now and then (or equal)
+            st.lists(st.tuples(st.sampled_from([0.0, 0.1, 0.1, 0.2, -0.3]), st.floats(-3, 3))),
+        ),
+        max_size=20,
+    ),
+    st.floats(0, 1),
+    st.floats(0, 1),
+    st.integers(0, 40) | st.floats(-0.5, 3.0),
+    st.integers(0, 40),
+    st.sampled_from([0, 3, 4096]),
+)
+def test_a_streams_odometry_window_finds_the_samples_a_scan_reads(
+    messages, a, b, at, drops, compact_after
+):
+    """``OdometryWindow.around`` answers as ``bracket`` over the samples of the messages
+    recorded within the window, whatever is left after dropping the earlier ones (still listed,
+    or dropped for good), whether the samples' own stamps increase (bisection) or not (a pass)."""
+    window, records, record, stamp = OdometryWindow(compact_after), [], 0.0, 0.0
+    for step, steps in messages:
+        record += step
+        samples = []
+        for d, theta in steps:
+            stamp = round(stamp + d, 6)
+            samples.append((stamp, 0.0, 0.0, theta))
+        window.add(record, samples)
+        records += [(record, x) for x in samples]
+    # at a sample's stamp (repeated stamps hold several) or anywhere
+    t = records[at % len(records)][1][0] if isinstance(at, int) and records else float(at)
+    lo, hi = min(a, b), max(a, b)
+    cut = records[min(drops, len(records) - 1)][0] if records else 0.0
+    window.drop_before(min(cut, lo))
+    near = [x for r, x in records if lo <= r < hi]
+    assert interpolate(*window.around(lo, hi, t), t) == interpolate(*bracket(near, t), t)
 
 
 def recompressed(src: Path, dst: Path, compression: str) -> Path:

@@ -152,11 +152,10 @@ class BagScans:
     def _samples(self, stamp: float, msg) -> list[tuple[float, float, float, float]]:
         """The base's poses (stamp, x, y, theta) one odometry message (record ``stamp``) gives;
         each message is turned into poses once, however many scans' windows it falls in."""
-        from .rosbag import odometry_track
+        from .rosbag import header_stamp, planar
 
         if self.odometry.topic != "/tf":
-            t, p = odometry_track([msg])
-            return [(t[0], *p[0])]
+            return [(header_stamp(msg), *planar(msg.pose.pose))]
         tree = self.static.frames_only()
         tree.add(msg, stamp, False)
         track = tree.odometry_track(self.odometry.base)
@@ -203,19 +202,16 @@ class BagScans:
         # records before ``start`` recorded at its very stamp, to pass over
         same = start - bisect.bisect_left(self.stamps_ns, first)
         w = ODOMETRY_WINDOW_S
-        odometry: deque = deque()  # (record stamp, its samples) within the waiting scans' window
+        odometry = OdometryWindow()  # the samples within the waiting scans' window
         waiting: deque = deque()  # (record, record stamp, message)
         k = start
 
         def ready(now: float) -> Iterator[tuple[int, Scan | UnusableScan]]:
             while waiting and waiting[0][1] + w < now:
                 r, t, msg = waiting.popleft()
-                near = (x for stamp, xs in odometry if t - w <= stamp < t + w for x in xs)
-                track = bracket(near, header_stamp(msg)) if with_odometry else None
+                track = odometry.around(t - w, t + w, header_stamp(msg)) if with_odometry else None
                 yield r, self._scan(r, msg, track)
-            horizon = (waiting[0][1] if waiting else now) - w
-            while odometry and odometry[0][0] < horizon:
-                odometry.popleft()
+            odometry.drop_before((waiting[0][1] if waiting else now) - w)
 
         for c, t, msg in self._locked(decoded_messages(reader, self.path, wanted, begin)):
             stamp = t * 1e-9
@@ -226,9 +222,60 @@ class BagScans:
                 waiting.append((k, stamp, msg))
                 k += 1
             else:
-                odometry.append((stamp, self._samples(stamp, msg)))
+                odometry.add(stamp, self._samples(stamp, msg))
             yield from ready(stamp)
         yield from ready(np.inf)
+
+
+class OdometryWindow:
+    """The odometry samples (stamp, x, y, theta) of a bag read front to back, with the record
+    stamps of their messages, kept while a waiting scan's window may hold them. The two around a
+    scan (``bracket``) are found by bisection where the samples' own stamps increase, as a
+    robot's odometry's do, else by a pass over the window's samples."""
+
+    def __init__(self, compact_after: int = 4096):
+        self.compact_after = compact_after  # dropped samples kept in the lists until this many
+        self.records: list[float] = []  # the record stamp of each sample's message
+        self.stamps: list[float] = []
+        self.samples: list[tuple] = []
+        # per sample, the first of the run of non-decreasing sample stamps that ends at it
+        self.runs: list[int] = []
+        self.first = 0  # the samples before it are dropped
+        self.in_order = True  # the messages' record stamps never decrease
+
+    def add(self, record: float, samples: list[tuple]) -> None:
+        self.in_order = self.in_order and (not self.records or record >= self.records[-1])
+        for x in samples:
+            k = len(self.samples)
+            rising = k > 0 and x[0] >= self.stamps[-1]
+            self.runs.append(self.runs[-1] if rising else k)
+            self.records.append(record)
+            self.stamps.append(x[0])
+            self.samples.append(x)
+
+    def drop_before(self, record: float) -> None:
+        """The samples of messages recorded before ``record`` are no longer needed."""
+        while self.first < len(self.records) and self.records[self.first] < record:
+            self.first += 1
+        if self.first > self.compact_after and self.first > len(self.records) // 2:
+            f = self.first  # the dropped samples leave the lists once they are most of them
+            del self.records[:f], self.stamps[:f], self.samples[:f], self.runs[:f]
+            self.runs = [max(r - f, 0) for r in self.runs]
+            self.first = 0
+
+    def around(self, lo_record: float, hi_record: float, t: float):
+        """``bracket`` at time ``t`` of the samples whose messages were recorded within
+        [``lo_record``, ``hi_record``)."""
+        if not self.in_order:
+            kept = range(self.first, len(self.samples))
+            near = (self.samples[k] for k in kept if lo_record <= self.records[k] < hi_record)
+            return bracket(near, t)
+        lo = bisect.bisect_left(self.records, lo_record, self.first)
+        hi = bisect.bisect_left(self.records, hi_record, lo)
+        if hi == lo or self.runs[hi - 1] > lo:  # none, or their stamps do not increase
+            return bracket(self.samples[lo:hi], t)
+        k = bisect.bisect_right(self.stamps, t, lo, hi)  # the first after t
+        return bracket(self.samples[max(k - 1, lo) : min(k + 1, hi)], t)
 
 
 def bracket(samples: Iterable, t: float) -> tuple[np.ndarray, np.ndarray]:

@@ -404,12 +404,12 @@ def header_stamp(msg) -> float:
 def odometry_track(msgs: list) -> tuple[np.ndarray, np.ndarray]:
     """(stamps, base poses (N, 3)) of Odometry messages, in stamp order."""
     stamps = np.array([header_stamp(o) for o in msgs])
-    poses = np.array([_planar(o.pose.pose) for o in msgs]).reshape(-1, 3)
+    poses = np.array([planar(o.pose.pose) for o in msgs]).reshape(-1, 3)
     order = np.argsort(stamps, kind="stable")
     return stamps[order], poses[order]
 
 
-def _planar(pose) -> tuple[float, float, float]:
+def planar(pose) -> tuple[float, float, float]:
     q = pose.orientation
     return (
         pose.position.x,
