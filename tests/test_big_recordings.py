@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.core import Pose2, pose_error
+from mbicp_viz.core import ImprovedParams, Pose2, pose_error
 from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation import pool
 from mbicp_viz.evaluation.bench import run_measured
@@ -435,6 +435,20 @@ def test_a_run_finds_its_pairs_as_it_reads_a_bag_once(tmp_path, intel, monkeypat
     # the first two, then the run's one pass (then the run's first and last scan, for its pace)
     assert read[:16] == [0, 1, *range(14)] and len(read) <= 18, read
     assert "skipped 3 unusable scan(s) of 14 (first: scan 3" in res.output
+
+
+def test_a_run_over_a_bag_with_one_usable_scan_says_so_and_writes_nothing(tmp_path, intel):
+    """Finding its pairs as it reads, a run still refuses a bag without a pair before it starts:
+    one line, no rows file begun; a script calling the run gets the same error."""
+    from mbicp_viz.evaluation.sequence import match_sequence
+
+    path = bag_with_unusable_scans(tmp_path, intel, (0, 2, 3), n=4)
+    with pytest.raises(InputError, match="needs at least two usable scans"):
+        match_sequence(read_log(path), ImprovedParams())
+    out = tmp_path / "r.json"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(path), "--out", str(out)])
+    assert res.exit_code == 2 and "needs at least two usable scans" in res.stderr, res.output
+    assert "Traceback" not in res.output and sorted(os.listdir(tmp_path)) == ["u.bag"]
 
 
 def test_a_stopped_run_over_a_bag_resumes_from_its_rows_as_a_whole_run_matches(

@@ -70,6 +70,8 @@ def match_sequence(
             "odometry",
             field="--truth",
         )
+    if not done:
+        log.consecutive_pairs(1)  # its first two usable scans, or the error of a log without
     # The pairs are found as the log is read, front to back once: a lazily read log is not read
     # a first time only to list them. A resumed run goes on from its last row's second scan.
     todo = log.records - 1 - len(done) if limit is None else limit - len(done)
