@@ -70,8 +70,6 @@ def match_sequence(
             "odometry",
             field="--truth",
         )
-    if not done:
-        log.consecutive_pairs(1)  # its first two usable scans, or the error of a log without
     # The pairs are found as the log is read, front to back once: a lazily read log is not read
     # a first time only to list them. A resumed run goes on from its last row's second scan.
     todo = log.records - 1 - len(done) if limit is None else limit - len(done)
@@ -109,16 +107,17 @@ def match_sequence(
         if on_row is not None:
             on_row(rows[-1])
 
-    if todo <= 0:
-        return rows
-    load_kernels(params)  # once, before a pool forks its workers
-    ordered_map(
-        partial(match_row, stream=log.topic, budget_s=budget_s),
-        consecutive() if keyframes is None else from_key_frames(),
-        workers if keyframes is None else 1,
-        take,
-        todo,
-    )
+    if todo > 0:
+        load_kernels(params)  # once, before a pool forks its workers
+        ordered_map(
+            partial(match_row, stream=log.topic, budget_s=budget_s),
+            consecutive() if keyframes is None else from_key_frames(),
+            workers if keyframes is None else 1,
+            take,
+            todo,
+        )
+    if not rows and not done:  # no pair found: the error of a log without two usable scans
+        log.consecutive_pairs(1)
     return rows
 
 
