@@ -26,7 +26,7 @@ from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene
 from mbicp_viz.views.debugger.run_model import MapAt, RunModel
 
-from .conftest import INTEL
+from .conftest import HOKUYO_BAG, INTEL
 
 
 @pytest.mark.parametrize("chunks", [100, 7])
@@ -81,8 +81,10 @@ def test_the_map_is_the_scans_up_to_the_pair_at_the_chained_poses(chunks, monkey
         assert [style for _, _, style in at.maps] == styles
 
 
-def test_eval_sequence_serve_opens_the_log_at_once_then_its_run_and_stops_on_ctrl_c(tmp_path):
-    cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(INTEL)]
+# a log read whole (its pairs listed first), and a bag read as the run goes
+@pytest.mark.parametrize("log", [INTEL, HOKUYO_BAG], ids=["carmen", "bag"])
+def test_eval_sequence_serve_opens_the_log_at_once_then_its_run_and_stops_on_ctrl_c(tmp_path, log):
+    cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(log)]
     cmd += ["--out", str(tmp_path / "rows.jsonl"), "--serve", "--port", "0", "--workers", "1"]
     proc = subprocess.Popen(
         cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True
