@@ -71,8 +71,8 @@ def match_sequence(
             field="--truth",
         )
     # The pairs are found as the log is read, front to back once: a lazily read log is not read
-    # a first time only to list them. A resumed run goes on from its last row's second scan.
-    # at most this many pairs remain: a lazily read log's unusable records are not known yet
+    # a first time only to list them (so ``todo`` bounds the pairs left: its unusable records are
+    # not known yet). A resumed run goes on from its last row's second scan.
     todo = log.records - 1 - len(done) if limit is None else limit - len(done)
     last = done[-1].obj if done else 0
     stamps: dict[int, float | None] = {}  # of the scans sent and not yet seen back

@@ -229,28 +229,25 @@ class BagScans:
 
 class OdometryWindow:
     """The odometry samples (stamp, x, y, theta) of a bag read front to back, with the record
-    stamps of their messages, kept while a waiting scan's window may hold them. The two around a
-    scan (``bracket``) are found by bisection where the samples' own stamps increase, as a
-    robot's odometry's do, else by a pass over the window's samples."""
+    stamps of their messages (which every reader yields in record order), kept while a waiting
+    scan's window may hold them. The two around a scan (``bracket``) are found by bisection where
+    the samples' own stamps increase, as a robot's odometry's do, else by a pass over the
+    window's samples."""
 
     def __init__(self, compact_after: int = 4096):
         self.compact_after = compact_after  # dropped samples kept in the lists until this many
         self.records: list[float] = []  # the record stamp of each sample's message
-        self.stamps: list[float] = []
         self.samples: list[tuple] = []
         # per sample, the first of the run of non-decreasing sample stamps that ends at it
         self.runs: list[int] = []
         self.first = 0  # the samples before it are dropped
-        self.in_order = True  # the messages' record stamps never decrease
 
     def add(self, record: float, samples: list[tuple]) -> None:
-        self.in_order = self.in_order and (not self.records or record >= self.records[-1])
         for x in samples:
             k = len(self.samples)
-            rising = k > 0 and x[0] >= self.stamps[-1]
+            rising = k > 0 and x[0] >= self.samples[-1][0]
             self.runs.append(self.runs[-1] if rising else k)
             self.records.append(record)
-            self.stamps.append(x[0])
             self.samples.append(x)
 
     def drop_before(self, record: float) -> None:
@@ -259,23 +256,23 @@ class OdometryWindow:
             self.first += 1
         if self.first > self.compact_after and self.first > len(self.records) // 2:
             f = self.first  # the dropped samples leave the lists once they are most of them
-            del self.records[:f], self.stamps[:f], self.samples[:f], self.runs[:f]
+            del self.records[:f], self.samples[:f], self.runs[:f]
             self.runs = [max(r - f, 0) for r in self.runs]
             self.first = 0
 
     def around(self, lo_record: float, hi_record: float, t: float):
         """``bracket`` at time ``t`` of the samples whose messages were recorded within
         [``lo_record``, ``hi_record``)."""
-        if not self.in_order:
-            kept = range(self.first, len(self.samples))
-            near = (self.samples[k] for k in kept if lo_record <= self.records[k] < hi_record)
-            return bracket(near, t)
         lo = bisect.bisect_left(self.records, lo_record, self.first)
         hi = bisect.bisect_left(self.records, hi_record, lo)
         if hi == lo or self.runs[hi - 1] > lo:  # none, or their stamps do not increase
             return bracket(self.samples[lo:hi], t)
-        k = bisect.bisect_right(self.stamps, t, lo, hi)  # the first after t
+        k = bisect.bisect_right(self.samples, t, lo, hi, key=_stamp)  # the first after t
         return bracket(self.samples[max(k - 1, lo) : min(k + 1, hi)], t)
+
+
+def _stamp(sample: tuple) -> float:
+    return sample[0]
 
 
 def bracket(samples: Iterable, t: float) -> tuple[np.ndarray, np.ndarray]:
