@@ -896,6 +896,7 @@ def test_a_run_matched_in_the_background_shows_its_progress_then_opens(browser, 
         # a run reading its log as it goes knows how many pairs it has at most
         background.update(10, len(rows) + 3, True, "40/s, 1 s left")
         page.get_by_text(f"10 of up to {len(rows) + 3} pairs").wait_for(timeout=30000)
+        page.screenshot(path=str(tmp_path / "matching-up-to.png"))
         background.update(20, len(rows), False, "40/s, 1 s left")
         page.get_by_text(f"20 of {len(rows)} pairs (40/s, 1 s left)").wait_for(timeout=30000)
         bar = page.get_by_role("progressbar")
