@@ -649,3 +649,48 @@ def test_the_cache_removes_its_least_recently_used_entries_beyond_its_size(tmp_p
     read_log(logs[2])  # a third entry: the least recently used one goes
     kept = [log_cache.entry(str(p), "carmen", (None,)).is_dir() for p in logs]
     assert kept == [True, False, True]
+
+
+def test_a_run_keeps_no_record_in_memory_as_it_goes(tmp_path, intel, monkeypatch):
+    """eval sequence holds none of its records (an hour's 144,000 took 260 MB): each is written
+    as it arrives and its columns kept; what it says at its end, it reads from them and from the
+    rows file, as the records read back from the file say it."""
+    import gc
+
+    from mbicp_viz.cli import evaluate
+    from mbicp_viz.evaluation.failures import failure_summary
+    from mbicp_viz.evaluation.health import suspect_summary
+    from mbicp_viz.evaluation.sequence import odometry_summary
+    from mbicp_viz.readers.pair_match import PairMatch
+    from mbicp_viz.readers.rows import PartialRows, read_rows
+
+    n = len(intel.scans) - 1
+    held, pace, add = {}, evaluate._pace, PartialRows.add
+
+    def records() -> int:
+        gc.collect()
+        return sum(isinstance(o, PairMatch) for o in gc.get_objects())
+
+    def adding(self, row):  # the last row as it arrives, and once the run is over
+        if self.count == n - 1:
+            held["last row"] = records()
+        return add(self, row)
+
+    def counted(lg, rows, resumed, seconds):
+        held["run over"] = records()
+        return pace(lg, rows, resumed, seconds)
+
+    monkeypatch.setattr(PartialRows, "add", adding)
+    monkeypatch.setattr(evaluate, "_pace", counted)
+    bag = write(tmp_path / "i.bag", intel_robot(intel, 0, len(intel.scans), MOUNT), "ros1")
+    out = tmp_path / "r.jsonl"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(bag), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert held.keys() == {"last row", "run over"} and max(held.values()) <= 3, held
+    rows = read_rows(out)
+    assert len(rows) == n and any(r.flags for r in rows)
+    assert odometry_summary(rows) is not None and odometry_summary(rows) in res.output
+    for line in failure_summary(rows) + suspect_summary(rows):
+        assert line in res.output
+    converged = sum(r.result.converged for r in rows)
+    assert f"{n} pairs matched with improved: {converged} converged" in res.output

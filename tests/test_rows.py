@@ -347,3 +347,26 @@ def test_a_long_run_keeps_its_columns_not_its_records(rows_file, tmp_path, monke
         assert len(kept) == n
         del kept
     assert held["columns"] < held["records"] / 10, held
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 40), block=st.integers(1, 9))
+def test_a_runs_columns_made_as_its_rows_arrive_are_its_records_columns(rows_file, n, block):
+    """RunColumns, a block of arrays at a time: every column as the records make it, whatever the
+    blocks; of the records, the last two kept and no other."""
+    from mbicp_viz.evaluation.run_rows import COLUMNS, RunColumns, RunRows
+
+    records = read_rows(rows_file)
+    rows = [records[k % len(records)] for k in range(n)]
+    made = RunColumns(numbered=True)
+    made.BLOCK = block
+    for r in rows:
+        made.append(r)
+    columns, whole = made.columns(), RunRows.of(rows)
+    for name in COLUMNS:
+        expected = np.arange(1, n + 1) if name == "line" else whole.column(name)
+        np.testing.assert_array_equal(columns[name], expected, err_msg=name)
+    assert len(made) == n and made[-1] is rows[-1] and made[-2:] == rows[-2:]
+    if n > 2:
+        with pytest.raises(IndexError):
+            made[n - 3]

@@ -146,7 +146,6 @@ def sequence(
 ):
     """Match every consecutive pair of a log (initial guess from its poses or odometry, else
     identity), or each scan against the last key frame (--keyframe-m)."""
-    from mbicp_viz.core import Termination
     from mbicp_viz.core.warmup import load_kernels
     from mbicp_viz.evaluation.keyframes import KeyFrames
     from mbicp_viz.evaluation.sequence import match_sequence
@@ -192,6 +191,7 @@ def sequence(
             done=done,
             budget_s=budget_s,
             keyframes=keyframes,
+            keep=False,
         )
 
     if keyframes is not None:  # its references are decided as it goes: checked on its scans
@@ -206,12 +206,14 @@ def sequence(
             def follow(bar) -> None:
                 background.update(bar.done, bar.total, not plan.exact(), bar.rate_text())
 
-        rows = matched_rows(out, run, plan, match, PairMatch.to_json, parse_pair_match, follow)
-        say(_pace(lg, rows[resumed[0] :], time.perf_counter() - t0))
-        halted = sum(r.result.reason is Termination.HALTED for r in rows)
+        rows = matched_rows(
+            out, run, plan, match, PairMatch.to_json, parse_pair_match, follow, columns=True
+        )
+        say(_pace(lg, rows, resumed[0], time.perf_counter() - t0))
+        halted = int(rows.column("halted").sum())
         typer.echo(
             f"{len(rows)} pairs matched with {matcher.value}: "
-            f"{sum(r.result.converged for r in rows)} converged"
+            f"{int(rows.column('converged').sum())} converged"
             + (
                 f", {halted} stopped by the time budget of {budget_s:g} s (--budget-s)"
                 if halted
@@ -222,13 +224,17 @@ def sequence(
         _sequence_notes(lg, rows, truth, guess, frame)
         if png or tum or tum_ref or kalman:
             _trajectories(lg, rows, png, tum, tum_ref, kalman)
-        loops = closed_run(lg, rows, loop_gap_m, keyframes) if close_loops else None
+        if close_loops or rrd:  # they read every record: read back from the rows file once
+            from mbicp_viz.readers.rows import read_rows
+
+            records = read_rows(out)
+        loops = closed_run(lg, records, loop_gap_m, keyframes) if close_loops else None
         if rrd:
             from mbicp_viz.views.rrd import record_sequence
 
             # each pair is matched again to record its correspondences
             with Progress(len(rows), "recording") as bar:
-                record_sequence(lg, rows, str(rrd), loops=loops, on_pair=lambda: bar.update(1))
+                record_sequence(lg, records, str(rrd), loops=loops, on_pair=lambda: bar.update(1))
             say(f"sequence recording written to {rrd}")
         _failures(log, out, rows)
         if background is not None:
@@ -261,24 +267,26 @@ def _serving_meanwhile(stack, log, lg, guess, reading, budget_s, plan, port: int
     return background, stack.enter_context(started_debugger(pending, "127.0.0.1", port))
 
 
-def _pace(lg, rows: list, seconds: float) -> str:
-    """How fast this run matched: pairs a second, and against the recording's own time when its
-    scans are stamped (the real-time factor `bench throughput` measures)."""
-    text = f"{len(rows)} pairs matched in {seconds:.1f} s ({len(rows) / max(seconds, 1e-9):.1f}/s"
-    if rows:
-        a, b = lg.scan(rows[0].ref).stamp, lg.scan(rows[-1].obj).stamp
+def _pace(lg, rows, resumed: int, seconds: float) -> str:
+    """How fast this run matched the rows after the first ``resumed``: pairs a second, and against
+    the recording's own time when its scans are stamped (the real-time factor `bench throughput`
+    measures)."""
+    n = len(rows) - resumed
+    text = f"{n} pairs matched in {seconds:.1f} s ({n / max(seconds, 1e-9):.1f}/s"
+    if n:
+        ref, obj = rows.column("ref")[resumed], rows.column("obj")[-1]
+        a, b = lg.scan(int(ref)).stamp, lg.scan(int(obj)).stamp
         if a is not None and b is not None and b > a:
             text += f"; the recording's {b - a:.1f} s at {(b - a) / seconds:.1f}x real time"
     return text + ")"
 
 
-def _failures(log: str, out: Path, rows: list) -> None:
-    """The rows' failures and suspicious pairs, named by their lines in ``out`` (one row a line),
-    as ``serve --rows`` will open them."""
+def _failures(log: str, out: Path, rows) -> None:
+    """The rows' failures and suspicious pairs, named by their lines in ``out`` (a ``RunRows``
+    over it), as ``serve --rows`` will open them."""
     from mbicp_viz.evaluation.failures import failure_summary
     from mbicp_viz.evaluation.health import ranked, suspect_summary
 
-    rows = [replace(r, line=k) for k, r in enumerate(rows, 1)]
     failures = failure_summary(rows)
     typer.echo("\n".join(failures + suspect_summary(rows)))
     if failures or ranked(rows):
@@ -298,7 +306,7 @@ def _sequence_notes(lg, rows, truth, guess: Guess, frame: Frame) -> None:
     if odometry := odometry_summary(rows):
         typer.echo(odometry)
     say(f"poses: motions of {lg.frames.frame_text(frame is Frame.base)}")
-    if without := sum(r.guess_source == MISSING.format(guess.value) for r in rows):
+    if without := int(rows.column("guess_missing").sum()):
         say(
             f"{without} pair(s) with no {guess.value} at one of their scans: matched from the "
             f"identity (their rows' guess says '{MISSING.format(guess.value)}')"

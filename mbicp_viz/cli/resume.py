@@ -72,12 +72,13 @@ class Plan:
         return f"{self.total()}" if self.exact() else f"up to {self.total()}"
 
 
-def resumable_rows(out: Path, run: dict, plan: Plan, decode) -> PartialRows:
+def resumable_rows(out: Path, run: dict, plan: Plan, decode, kept=None) -> PartialRows:
     """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left
-    (``decode``-d from the file, path and line), which must be the plan's first pairs."""
+    (``decode``-d from the file, path and line, appended to ``kept``), which must be the plan's
+    first pairs."""
     from mbicp_viz.readers.rows import PartialRows
 
-    rows = PartialRows(out, run, decode)
+    rows = PartialRows(out, run, decode, kept)
     done = rows.pairs
     pairs = plan.first(len(done))
     if len(done) > len(pairs) or any(
@@ -109,14 +110,25 @@ def matched_rows(
     encode: Callable[[object], dict] = lambda row: row,
     decode: Callable[[dict, str, int], object] = lambda row, path, line: row,
     on_progress: Callable[[Progress], None] | None = None,
-) -> list:
+    columns: bool = False,
+):
     """Every pair's row, ``match(on_row, done)`` running the pairs of ``plan`` after the rows
     ``done``. With ``out``, each row is on disk as it is finished (``OUT.partial``, ``encode``-d
     to JSON), a stopped run ends here with its rows kept and the same command resumes from them
     (``decode``-d from the file, path and line), and ``out`` is written whole at the end;
     without, the rows stay in memory (a Ctrl-C still ends the command, ``user_errors``).
-    ``on_progress(bar)`` follows the progress bar after each row (a page showing it too)."""
-    kept = resumable_rows(out, run, plan, decode) if out is not None else None
+    ``on_progress(bar)`` follows the progress bar after each row (a page showing it too).
+    With ``columns`` and ``out``, the rows are not kept: their columns are made as they arrive
+    (``run_rows.RunColumns``, ``done`` then holds only the last two) and the run is returned as a
+    ``RunRows`` over ``out``, its records read from it when asked for (an hour-long run's
+    records took 260 MB)."""
+    if columns and out is not None:
+        from mbicp_viz.evaluation.run_rows import RunColumns
+
+        sink = RunColumns(numbered=True)
+    else:
+        sink = None
+    kept = resumable_rows(out, run, plan, decode, sink) if out is not None else None
     rows = kept.rows if kept is not None else []
     with Progress(plan.total()) as bar:
         bar.resumed(len(rows))
@@ -133,8 +145,10 @@ def matched_rows(
             match(take, [])
         else:
             with kept:
-                match(take, list(rows))
+                match(take, rows if sink is not None else list(rows))
     if kept is not None:
         stop_if_interrupted(kept, plan)
         kept.finish()
+        if sink is not None:
+            return sink.over(out, kept.offsets())
     return rows

@@ -12,6 +12,7 @@ The reasons, checked in this order:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from enum import StrEnum
 
 from mbicp_viz.readers.pair_match import PairMatch
@@ -62,11 +63,12 @@ def failure_reason(row: PairMatch) -> str:
     return f"{kind} (converged elsewhere)"
 
 
-def worst_first(rows: list[PairMatch]) -> list[PairMatch]:
-    """The failed rows: the largest translation error first, then rotation error, then order."""
+def worst_first(rows: Sequence[PairMatch]) -> Sequence[PairMatch]:
+    """The failed rows: the largest translation error first, then rotation error, then order
+    (each made when read: a run over a rows file may have thousands)."""
     from .run_rows import RunRows  # it ranks with this module's ``failed``
 
-    return list(RunRows.of(rows).worst_first()) if rows else []
+    return RunRows.of(rows).worst_first() if len(rows) else []
 
 
 def failure_label(rank: int, row: PairMatch) -> str:

@@ -24,6 +24,7 @@ quotes how often a flagged pair is a real failure and how many failures go unfla
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -141,11 +142,12 @@ def _beyond(name: Suspicion, value: tuple[float, ...]) -> float:
     return value[0] / limit[name]
 
 
-def ranked(rows: list[PairMatch]) -> list[PairMatch]:
-    """The flagged rows, the most suspicious first (then by their records)."""
+def ranked(rows: Sequence[PairMatch]) -> Sequence[PairMatch]:
+    """The flagged rows, the most suspicious first (then by their records; each made when read:
+    a run over a rows file may have thousands)."""
     from .run_rows import RunRows  # it ranks with this module's ``severity``
 
-    return list(RunRows.of(rows).ranked()) if rows else []
+    return RunRows.of(rows).ranked() if len(rows) else []
 
 
 def flag_text(name: Suspicion, value: tuple[float, ...]) -> str:

@@ -34,13 +34,10 @@ class KeyFrames:
         """Whether ``row``'s scan is the next key frame."""
         return not row.result.converged or self.moved(row.result.pose)
 
-    def key_after(self, rows: list[PairMatch]) -> int:
-        """The key frame after a run's ``rows`` (its first scan when there are none)."""
-        key = rows[0].ref
-        for r in rows:
-            if self.due(r):
-                key = r.obj
-        return key
+    def key_after(self, last: PairMatch) -> int:
+        """The key frame after a key-frame run's ``last`` row: its scan when it is due, else the
+        key frame it was matched against (its reference)."""
+        return last.obj if self.due(last) else last.ref
 
     def as_dict(self) -> dict:
         return {"distance_m": self.distance_m, "angle_deg": math.degrees(self.angle)}

@@ -68,6 +68,12 @@ def stored_guess(ref: Scan, obj: Scan) -> tuple[Pose2, str]:
 MISSING = "identity: no {} at one of the scans"
 
 
+def missing_guess(source: str) -> bool:
+    """Whether a row's guess came from the identity for want of the one asked for (``MISSING``)."""
+    head, tail = MISSING.split("{}")
+    return source.startswith(head) and source.endswith(tail)
+
+
 def pair_guess(
     ref: Scan,
     obj: Scan,

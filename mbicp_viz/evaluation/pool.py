@@ -129,12 +129,14 @@ def ordered_map(
     workers: int | None = None,
     on_result: Callable | None = None,
     total: int | None = None,
+    keep: bool = True,
 ) -> list:
     """``[fn(job) for job in jobs]``, in order, over ``workers`` processes (default: every core).
 
     ``jobs`` may be a generator (its ``total`` length, when known, sizes the chunks sent to a
     worker): a few chunks per worker are under way at a time, so a long run's jobs are made as
-    they are needed, never all at once. ``on_result`` sees each result as it arrives (progress).
+    they are needed, never all at once. ``on_result`` sees each result as it arrives (progress);
+    without ``keep`` it alone takes them, none is kept and ``[]`` returned (a run of any length).
     Ctrl-C stops the run within one job (one process) or ``POLL_S`` (a pool, whose workers are
     ended) and returns the results finished so far, in order; ``fn`` and the jobs must pickle
     (module-level function, plain data).
@@ -144,7 +146,8 @@ def ordered_map(
     out: list = []
 
     def take(r) -> None:
-        out.append(r)
+        if keep:
+            out.append(r)
         if on_result is not None:
             on_result(r)
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mbicp_viz.core import Pose2
+from mbicp_viz.core import Pose2, Termination
 from mbicp_viz.errors import InputError
 from mbicp_viz.readers import log_cache
 from mbicp_viz.readers.pair_match import PairMatch, Suspicion
@@ -34,6 +34,7 @@ from mbicp_viz.readers.rows import belong, file_rows, gc_paused, parse_row
 
 from .failures import failed
 from .health import severity
+from .pairs import missing_guess
 
 NONE3 = (math.nan,) * 3
 
@@ -54,6 +55,13 @@ COLUMNS: dict[str, Callable[[PairMatch], object]] = {
     # a failed row's translation and rotation error against the truth (0: not scored)
     "error_xy": lambda r: r.score.error_xy if r.score is not None else 0.0,
     "error_theta": lambda r: r.score.error_theta if r.score is not None else 0.0,
+    # what `eval sequence` sums up at its end
+    "converged": lambda r: r.result.converged,
+    "halted": lambda r: r.result.reason is Termination.HALTED,
+    "success": lambda r: r.score is not None and r.score.success,
+    "doubted": lambda r: r.score is not None and r.score.truth_doubted,
+    "odometry_theta": lambda r: math.nan if r.odometry_theta is None else r.odometry_theta,  # [rad]
+    "guess_missing": lambda r: missing_guess(r.guess_source),
 }
 CACHED_ROWS = 256  # records made again from the file, kept (a slider's neighbourhood)
 
@@ -175,24 +183,87 @@ CACHED_FROM = 5_000  # rows files with fewer rows are read each time: well under
 
 def _read(path: str) -> tuple[RunRows, np.ndarray | None]:
     """The rows file read once: its RunRows, and each row's offset in it (None: a JSON array)."""
-    columns = {name: [] for name in COLUMNS}
-    offsets, rows, first = [], [], None
+    columns, offsets, rows = RunColumns(), [], []
     with gc_paused():
         for _, offset, row in file_rows(path):
-            first = first or row
             if offset is None:  # a JSON array's row has no line of its own
                 rows.append(row)
                 continue
             offsets.append(offset)
-            for name, value in COLUMNS.items():
-                columns[name].append(value(row))
-    if first is None:
-        raise InputError("no rows", path)
+            columns.append(row)
     if rows:
-        return RunRows(first, rows), None
-    arrays = {name: np.array(v) for name, v in columns.items()}
+        return RunRows(rows[0], rows), None
+    if not len(columns):
+        raise InputError("no rows", path)
     offsets = np.array(offsets, dtype=np.int64)
-    return RunRows(first, None, _FileRows(path, offsets, arrays["line"]), arrays), offsets
+    return columns.over(path, offsets), offsets
+
+
+class RunColumns:
+    """A run's columns (``COLUMNS``) made as its rows arrive, a block of arrays at a time; of
+    the records only the first and the last two are kept (a resumed run goes on from them: its
+    ``done``). An hour's 144,000 records took 261 MB as objects and about 700 bytes each as
+    lists of values; as arrays about 20 MB. ``numbered``: each row's line is its place in the
+    rows file to come (one row a line), not the line it was read from."""
+
+    BLOCK = 4096  # rows a block
+
+    def __init__(self, numbered: bool = False):
+        self.numbered = numbered
+        self._blocks: dict[str, list[np.ndarray]] = {name: [] for name in COLUMNS}
+        self._open: dict[str, list] = {name: [] for name in COLUMNS}
+        self._n, self.first, self._last = 0, None, []
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, k):
+        """The last two rows (``done[-1]``, ``done[-2:]``); no other is kept."""
+        kept = self._n - len(self._last)
+        if isinstance(k, slice):
+            start, stop, step = k.indices(self._n)
+            if step != 1 or start < kept:
+                raise IndexError("only the last two rows are kept")
+            return self._last[start - kept : stop - kept]
+        i = k + self._n if k < 0 else k
+        if not kept <= i < self._n:
+            raise IndexError("only the last two rows are kept")
+        return self._last[i - kept]
+
+    def append(self, row: PairMatch) -> None:
+        for name, value in COLUMNS.items():
+            self._open[name].append(value(row))
+        if self.numbered:
+            self._open["line"][-1] = self._n + 1
+        self._n += 1
+        self.first = self.first or row
+        self._last = [*self._last[-1:], row]
+        if len(self._open["ref"]) == self.BLOCK:
+            self._close()
+
+    def _close(self) -> None:
+        for name, values in self._open.items():
+            if values:
+                self._blocks[name].append(np.array(values))
+            self._open[name] = []
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Each column whole: its blocks joined one column at a time (all joined at once took
+        twice the columns' memory)."""
+        self._close()
+        for blocks in self._blocks.values():
+            if len(blocks) > 1:
+                blocks[:] = [np.concatenate(blocks)]
+        return {name: blocks[0] for name, blocks in self._blocks.items()}
+
+    def over(self, path: str | Path, offsets: np.ndarray) -> RunRows:
+        """The run as a RunRows whose records are made again from the rows file ``path``, row k
+        at byte ``offsets[k]``."""
+        if not self._n:
+            raise ValueError("a run has rows")
+        columns = self.columns()
+        first = replace(self.first, line=int(columns["line"][0]))
+        return RunRows(first, None, _FileRows(str(path), offsets, columns["line"]), columns)
 
 
 def _code_digest() -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 from functools import partial
 
@@ -25,12 +26,15 @@ from .pool import ordered_map
 from .single import Setup, match_pair, scored
 
 
-def truth_summary(rows: list[PairMatch]) -> list[str]:
-    """How many scored rows succeeded, and of the failures how many the points side with."""
+def truth_summary(rows: Sequence[PairMatch]) -> list[str]:
+    """How many scored rows succeeded, and of the failures how many the points side with (a
+    list, or a ``RunRows``' columns)."""
     from mbicp_viz.core.agreement import INLIER_RADIUS_M
 
-    ok = sum(r.score.success for r in rows)
-    doubted = sum(r.score.truth_doubted for r in rows)
+    from .run_rows import RunRows
+
+    run = RunRows.of(rows)
+    ok, doubted = int(run.column("success").sum()), int(run.column("doubted").sum())
     return [
         f"against the scan poses: {ok}/{len(rows)} within {CONSECUTIVE.text()} "
         f"({100.0 * ok / len(rows):.1f} %)",
@@ -50,9 +54,10 @@ def match_sequence(
     workers: int | None = None,
     search: SearchParams | None = None,
     base: bool = True,
-    done: list[PairMatch] = (),
+    done: Sequence[PairMatch] = (),
     budget_s: float | None = MATCH_BUDGET_S,
     keyframes: KeyFrames | None = None,
+    keep: bool = True,
 ) -> list[PairMatch]:
     """One record per consecutive pair of usable scans, in order (with ``keyframes``, per scan
     against the last key frame, evaluation/keyframes.py, on one process): the match's motion (of
@@ -60,9 +65,11 @@ def match_sequence(
     on each other, its distance from the log's odometry when the log has some, and with
     ``truth="pose"`` its error against the log's scan poses, and the signs that it went wrong
     (evaluation/health.py: a pair's own, and whether its first scan is out of place). The pairs of
-    ``done`` are left out (a run resumed from its rows). Each match stops after ``budget_s``
-    (core/budget.py). Pairs are spread over ``workers`` processes (default: every core);
-    ``on_row`` sees each row as it arrives, and Ctrl-C keeps the rows so far."""
+    ``done`` are left out (a run resumed from its rows: only their count and the last two are
+    read, before the run). Each match stops after ``budget_s`` (core/budget.py). Pairs are spread
+    over ``workers`` processes (default: every core); ``on_row`` sees each row as it arrives, and
+    Ctrl-C keeps the rows so far. Without ``keep`` no row is kept and none returned: ``on_row``
+    takes them (a run of any length in bounded memory)."""
     guess = Guess(guess)
     if truth == "pose" and guess in (Guess.pose, Guess.stored):
         raise InputError(
@@ -73,10 +80,12 @@ def match_sequence(
     # The pairs are found as the log is read, front to back once: a lazily read log is not read
     # a first time only to list them (so ``todo`` bounds the pairs left: its unusable records are
     # not known yet). A resumed run goes on from its last row's second scan.
-    todo = log.records - 1 - len(done) if limit is None else limit - len(done)
-    last = done[-1].obj if done else 0
+    resumed = len(done)
+    todo = log.records - 1 - resumed if limit is None else limit - resumed
+    last = done[-1].obj if resumed else 0
+    key = keyframes.key_after(done[-1]) if keyframes is not None and resumed else 0
     stamps: dict[int, float | None] = {}  # of the scans sent and not yet seen back
-    steady, rows = Steadiness(log, done, stamps), []
+    steady, rows, newest = Steadiness(log, done[-2:], stamps), [], None
 
     def job(i: int, ref, j: int, obj) -> tuple:
         return (log.path, i, j, ref, obj, params, guess, truth, search, log.frames, base)
@@ -90,7 +99,7 @@ def match_sequence(
             i, ref = j, obj
 
     def from_key_frames():  # one at a time: a scan's reference depends on the match before
-        scans = log.scans_from(keyframes.key_after(done) if done else 0)
+        scans = log.scans_from(key)
         i, ref = next(scans, (None, None))
         sent = 0
         for j, obj in scans:
@@ -100,13 +109,16 @@ def match_sequence(
                 continue
             yield job(i, ref, j, obj)
             sent += 1
-            if keyframes.due(rows[-1]):
+            if keyframes.due(newest):
                 i, ref = j, obj
 
     def take(m: PairMatch) -> None:  # the rows share one parameters object (Params.__reduce__)
-        rows.append(steady.amend(m))
+        nonlocal newest
+        newest = steady.amend(m)
+        if keep:
+            rows.append(newest)
         if on_row is not None:
-            on_row(rows[-1])
+            on_row(newest)
 
     if todo > 0:
         load_kernels(params)  # once, before a pool forks its workers
@@ -116,8 +128,9 @@ def match_sequence(
             workers if keyframes is None else 1,
             take,
             todo,
+            keep=False,
         )
-    if not rows and not done:  # no pair found: the error of a log without two usable scans
+    if newest is None and not resumed:  # no pair found: the error of a log without two usable scans
         log.consecutive_pairs(1)
     return rows
 
@@ -147,7 +160,7 @@ class Steadiness:
 
     def __init__(self, log: ScanLog, done: list[PairMatch], stamps: dict[int, float | None]):
         self.stamps = stamps
-        self.last = [(m, self._dt(log.scan(m.ref).stamp, log.scan(m.obj).stamp)) for m in done[-2:]]
+        self.last = [(m, self._dt(log.scan(m.ref).stamp, log.scan(m.obj).stamp)) for m in done]
 
     @staticmethod
     def _dt(a: float | None, b: float | None) -> float | None:
@@ -168,17 +181,25 @@ class Steadiness:
 ODOMETRY_AGREEMENT = Criteria("odometry agreement", 0.05, math.radians(1.0))
 
 
-def odometry_summary(rows: list[PairMatch]) -> str | None:
-    """How far the matches are from the log's odometry, when it has some."""
-    near = [r for r in rows if r.odometry_xy is not None]
-    if not near:
+def odometry_summary(rows: Sequence[PairMatch]) -> str | None:
+    """How far the matches are from the log's odometry, when it has some (a list, or a
+    ``RunRows``' columns)."""
+    from .run_rows import RunRows
+
+    if not len(rows):
         return None
-    ok = sum(ODOMETRY_AGREEMENT.correct(r.odometry_xy, r.odometry_theta) for r in near)
-    med_xy = float(np.median([r.odometry_xy for r in near]))
-    med_th = math.degrees(float(np.median([r.odometry_theta for r in near])))
+    run = RunRows.of(rows)
+    xy = run.column("odometry_xy")
+    near = ~np.isnan(xy)
+    if not near.any():
+        return None
+    xy, theta = xy[near], run.column("odometry_theta")[near]
+    ok = sum(map(ODOMETRY_AGREEMENT.correct, xy.tolist(), theta.tolist()))
+    med_xy = float(np.median(xy))
+    med_th = math.degrees(float(np.median(theta)))
     return (
-        f"against the odometry: {ok}/{len(near)} within {ODOMETRY_AGREEMENT.text()} "
-        f"({100.0 * ok / len(near):.1f} %); median difference {1000 * med_xy:.1f} mm, {med_th:.3f} "
+        f"against the odometry: {ok}/{len(xy)} within {ODOMETRY_AGREEMENT.text()} "
+        f"({100.0 * ok / len(xy):.1f} %); median difference {1000 * med_xy:.1f} mm, {med_th:.3f} "
         "deg"
     )
 

@@ -30,14 +30,21 @@ STORED = "log poses"
 
 def accumulate(rows: list[PairMatch]) -> list[Pose2]:
     """Poses of scans rows[0].ref, rows[k].obj ... composed from the matched motions."""
-    return placed(*_pairs(rows), [r.result.pose for r in rows])
+    return placed(*_pairs(rows), _columns(rows).poses("motion"))
+
+
+def _columns(rows: Sequence[PairMatch]):
+    """The rows as a ``run_rows.RunRows`` (itself when it is one): what is read of them, read from
+    its columns, no record made again from a rows file."""
+    from .run_rows import RunRows  # it ranks with health.py, which imports this module
+
+    return RunRows.of(rows)
 
 
 def _pairs(rows: list[PairMatch]) -> tuple[list[int], list[int]]:
-    """(refs, objs) of the rows (a ``run_rows.RunRows``' columns, its records not made)."""
-    if hasattr(rows, "column"):
-        return rows.column("ref").tolist(), rows.column("obj").tolist()
-    return [r.ref for r in rows], [r.obj for r in rows]
+    """(refs, objs) of the rows."""
+    run = _columns(rows)
+    return run.column("ref").tolist(), run.column("obj").tolist()
 
 
 def placed(refs: Sequence[int], objs: Sequence[int], motions: Sequence[Pose2]) -> list[Pose2]:
@@ -72,7 +79,8 @@ def odometry_chain(log: ScanLog, rows: list[PairMatch]) -> list[Pose2] | None:
     """The odometry's track over the scans the rows visit, from the first, in the frame the rows
     report (the base's when they do): each row's odometry motion chained, no scan read again.
     None when a row has no odometry."""
-    return odometry_placed(log, *_pairs(rows), [r.odometry for r in rows], rows[0].frame)
+    run = _columns(rows)
+    return odometry_placed(log, *_pairs(run), run.poses("odometry"), run.first.frame)
 
 
 def odometry_placed(
@@ -163,13 +171,18 @@ def kalman(
     left out, as a filter over the newest pose alone must)."""
     Q, R = np.diag(np.square(q_sigma)), np.diag(np.square(r_sigma))
     x, P = Pose2(), np.zeros((3, 3))
-    out, at = [x], {rows[0].ref: x} if rows else {}
-    for k, row in enumerate(rows):
+    if not len(rows):
+        return [x]
+    run = _columns(rows)
+    refs, objs = _pairs(run)
+    out, at = [x], {refs[0]: x}
+    steps = zip(refs, objs, run.column("converged").tolist(), run.poses("motion"))
+    for k, (ref, obj, converged, m) in enumerate(steps):
         u = relative(odometry[k], odometry[k + 1])
         Jx, Ju = _jacobians(x, u)
         prior, Pp = x @ u, Jx @ P @ Jx.T + Ju @ Q @ Ju.T
-        if row.result.converged:
-            m, start = row.result.pose, at[row.ref]
+        if converged:
+            start = at[ref]
             _, Ju_m = _jacobians(start, m)
             z = start @ m
             Rz = Ju_m @ R @ Ju_m.T
@@ -185,7 +198,7 @@ def kalman(
             Pp = (np.eye(3) - K) @ Pp
         x, P = prior, Pp
         out.append(x)
-        at[row.obj] = x
+        at[obj] = x
     return out
 
 

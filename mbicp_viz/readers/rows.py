@@ -15,6 +15,7 @@ import gc
 import json
 import os
 import shutil
+from array import array
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -190,16 +191,19 @@ class PartialRows:
     """A run's rows as they finish: JSON lines in ``OUT.partial`` beside ``out`` (never over a
     complete earlier file), whose first line names the run; ``finish`` writes ``out`` whole and
     removes them. A stopped or killed run leaves them, and the same run started again resumes
-    from them (``rows``); the rows of another run are refused, never mixed in."""
+    from them (``rows``: a list, or what ``rows`` given is, each appended); the rows of another
+    run are refused, never mixed in. ``offsets()`` says where each row is in ``out``."""
 
-    def __init__(self, out: Path, run: dict, decode=lambda row, path, line: row):
+    def __init__(self, out: Path, run: dict, decode=lambda row, path, line: row, rows=None):
         self.out = Path(out)
         self.path = self.out.with_name(self.out.name + PARTIAL)
         self.run = json.loads(json.dumps(run))  # as it reads back
         # the rows a stopped run left (``decode``-d from the file, path and line) and their pairs
-        self.rows: list = []
+        self.rows = [] if rows is None else rows
         self.pairs: list[tuple] = []
         self._good = 0  # bytes of the file up to its last whole row
+        self._header = 0  # bytes of its first line, naming the run
+        self._offsets = array("q")  # of each row's line in the file
         if self.path.exists():
             self._resume(decode)
         self.count = len(self.rows)
@@ -230,7 +234,8 @@ class PartialRows:
                         1,
                         key,
                     )
-            self._good, cut = len(first.encode()), None
+            self._good = self._header = len(first.encode())
+            cut = None
             for n, line in enumerate(lines, 2):
                 if cut is not None:
                     raise InputError("invalid JSON: not a row this tool wrote", path, cut)
@@ -243,6 +248,7 @@ class PartialRows:
                 if cut is None and row is not None:
                     self.pairs.append((row.get("ref"), row.get("obj")))
                     self.rows.append(decode(row, path, n))
+                    self._offsets.append(self._good)
                 if cut is None:
                     self._good += len(line.encode())
 
@@ -250,15 +256,20 @@ class PartialRows:
         if self.path.exists():
             os.truncate(self.path, self._good)  # without a line a kill cut short
         else:
+            header = json.dumps({"partial": self.run}) + "\n"
             with written(self.path, say=False) as tmp:
-                tmp.write_text(json.dumps({"partial": self.run}) + "\n")
-        self._file = open(self.path, "a")
+                tmp.write_text(header)
+            self._good = self._header = len(header.encode())
+        self._file = open(self.path, "ab")
         return self
 
     def add(self, row: dict) -> None:
         """Append ``row``, on disk at once (a kill loses at most the row being written)."""
-        self._file.write(json.dumps(row) + "\n")
+        line = (json.dumps(row) + "\n").encode()
+        self._file.write(line)
         self._file.flush()
+        self._offsets.append(self._good)
+        self._good += len(line)
         self.count += 1
 
     def __exit__(self, *exc) -> None:
@@ -271,6 +282,10 @@ class PartialRows:
             src.readline()  # the line naming the run
             shutil.copyfileobj(src, dst)
         self.path.unlink()
+
+    def offsets(self) -> np.ndarray:
+        """The byte offset of each row's line in ``out`` once it is written (``finish``)."""
+        return np.frombuffer(self._offsets, dtype=np.int64) - self._header
 
 
 def rows_of_log(path: str | Path, log) -> list[PairMatch]:

@@ -438,10 +438,9 @@ def sequence_blueprint(rows: list[PairMatch], loops: bool = False) -> rrb.Bluepr
     flagged pair showing its iterations, the most suspicious first), the health plots and the
     per-pair log; with ``loops``, the run with its loops closed under the run. Time panel on
     ``pair``."""
-    from mbicp_viz.evaluation.health import ranked
+    from mbicp_viz.evaluation.run_rows import RunRows
 
-    number = {id(r): n for n, r in enumerate(rows, start=1)}
-    flagged = [number[id(r)] for r in ranked(rows)]
+    flagged = (RunRows.of(rows).ranked().index + 1).tolist()  # their numbers on the timeline
     root = SEQUENCE_ROOT
     so_far = rrb.VisibleTimeRange(
         "pair", start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.cursor_relative()
