@@ -5,9 +5,9 @@ and each pair's whole record made only when it is asked for.
 A rows file is read once, every row checked as ``read_rows`` checks it, and only its columns and
 each row's place in the file are kept: an hour-long run's 144,000 records as objects took 261 MB,
 its columns take about 20 MB. A long file's columns are kept in the cache folder, so its next
-opening reads no row (``log_cache``'s folder and size limit). A run already in memory (``eval
-sequence --serve``, a live buffer) is wrapped as it is, its columns made from its records when
-first asked for.
+opening reads no row (``log_cache``'s folder and size limit). ``eval sequence`` makes the columns
+as its rows arrive (``RunColumns``) and keeps none of its records. A run already in memory (a live
+buffer) is wrapped as it is, its columns made from its records when first asked for.
 """
 
 from __future__ import annotations
