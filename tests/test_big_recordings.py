@@ -694,3 +694,26 @@ def test_a_run_keeps_no_record_in_memory_as_it_goes(tmp_path, intel, monkeypatch
         assert line in res.output
     converged = sum(r.result.converged for r in rows)
     assert f"{n} pairs matched with improved: {converged} converged" in res.output
+
+
+def test_a_runs_columns_are_kept_for_the_run_views_first_opening(tmp_path, intel, monkeypatch):
+    """A long run's columns, made as its rows arrived, are cached for its rows file: the run view's
+    first opening (``serve --rows``) reads no row, and they equal those of the file read afresh."""
+    from mbicp_viz.evaluation import run_rows
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(run_rows, "CACHED_FROM", 20)  # a long run: 59 rows here
+    bag = write(tmp_path / "i.bag", intel_robot(intel, 0, len(intel.scans), MOUNT), "ros1")
+    out = tmp_path / "r.jsonl"
+    res = CliRunner().invoke(app, ["eval", "sequence", str(bag), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    log = read_log(bag)
+    with monkeypatch.context() as m:
+        m.setattr(run_rows, "file_rows", None)  # no row read: the cache's columns
+        cached = run_rows.run_of_log(out, log)
+    fresh = run_rows._read(str(out))
+    assert len(cached) == len(fresh) == len(intel.scans) - 1
+    for name in run_rows.COLUMNS:
+        np.testing.assert_array_equal(cached.column(name), fresh.column(name), err_msg=name)
+    for k in (0, 17, -1):
+        assert cached[k].to_json() == fresh[k].to_json() and cached[k].line == fresh[k].line

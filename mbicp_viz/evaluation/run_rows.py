@@ -168,12 +168,9 @@ def run_of_log(path: str | Path, log) -> RunRows:
     opening (``log_cache``: by its path, size and modification time, and the code that made
     them)."""
     path = str(path)
-    folder = log_cache.entry(path, "rows", (_code_digest(),))
-    run = _cached(folder, path)
+    run = _cached(_folder(path), path)
     if run is None:
-        run, offsets = _read(path)
-        if offsets is not None and len(run) >= CACHED_FROM:
-            _save(folder, run, offsets)
+        run = _read(path)
     belong(path, log, run.column("ref"), run.column("obj"), run.column("line"), run.first)
     return run
 
@@ -181,8 +178,14 @@ def run_of_log(path: str | Path, log) -> RunRows:
 CACHED_FROM = 5_000  # rows files with fewer rows are read each time: well under a second
 
 
-def _read(path: str) -> tuple[RunRows, np.ndarray | None]:
-    """The rows file read once: its RunRows, and each row's offset in it (None: a JSON array)."""
+def _folder(path: str) -> Path:
+    """Where the columns of the rows file ``path`` are cached (by its path, size and modification
+    time, and the code that made them)."""
+    return log_cache.entry(path, "rows", (_code_digest(),))
+
+
+def _read(path: str) -> RunRows:
+    """The rows file read once: its RunRows (its columns cached: ``RunColumns.over``)."""
     columns, offsets, rows = RunColumns(), [], []
     with gc_paused():
         for _, offset, row in file_rows(path):
@@ -192,11 +195,10 @@ def _read(path: str) -> tuple[RunRows, np.ndarray | None]:
             offsets.append(offset)
             columns.append(row)
     if rows:
-        return RunRows(rows[0], rows), None
+        return RunRows(rows[0], rows)
     if not len(columns):
         raise InputError("no rows", path)
-    offsets = np.array(offsets, dtype=np.int64)
-    return columns.over(path, offsets), offsets
+    return columns.over(path, np.array(offsets, dtype=np.int64))
 
 
 class RunColumns:
@@ -257,13 +259,18 @@ class RunColumns:
         return {name: blocks[0] for name, blocks in self._blocks.items()}
 
     def over(self, path: str | Path, offsets: np.ndarray) -> RunRows:
-        """The run as a RunRows whose records are made again from the rows file ``path``, row k
-        at byte ``offsets[k]``."""
+        """The run as a RunRows whose records are made again from the complete rows file ``path``,
+        row k at byte ``offsets[k]``; with ``CACHED_FROM`` rows or more its columns are kept in
+        the cache for the file's next opening (``run_of_log``: ``serve --rows`` after ``eval
+        sequence`` reads no row)."""
         if not self._n:
             raise ValueError("a run has rows")
-        columns = self.columns()
+        path, columns = str(path), self.columns()
         first = replace(self.first, line=int(columns["line"][0]))
-        return RunRows(first, None, _FileRows(str(path), offsets, columns["line"]), columns)
+        run = RunRows(first, None, _FileRows(path, offsets, columns["line"]), columns)
+        if self._n >= CACHED_FROM:
+            _save(_folder(path), run, offsets)
+        return run
 
 
 def _code_digest() -> str:
