@@ -370,3 +370,26 @@ def test_a_runs_columns_made_as_its_rows_arrive_are_its_records_columns(rows_fil
     if n > 2:
         with pytest.raises(IndexError):
             made[n - 3]
+
+
+def test_each_row_of_a_resumed_run_is_found_at_its_offset_in_the_finished_file(tmp_path):
+    """PartialRows says where each row's line starts in OUT (the run view reads a record from
+    there): the rows a stopped run left, past a line a kill cut short, and those added after."""
+    from mbicp_viz.readers.rows import PartialRows
+
+    out, run = tmp_path / "r.jsonl", {"command": "test", "log": "é"}
+    with PartialRows(out, run) as rows:
+        for k in range(3):
+            rows.add({"k": k, "name": "ü" * k})
+    rows.path.write_bytes(rows.path.read_bytes() + b'{"k": 3, "na')  # a kill while writing
+    again = PartialRows(out, run)
+    assert again.count == 3
+    with again:
+        for k in range(3, 6):
+            again.add({"k": k})
+    again.finish()
+    data = out.read_bytes()
+    offsets = again.offsets()
+    assert len(offsets) == 6 and offsets[0] == 0
+    for k, at in enumerate(offsets.tolist()):
+        assert data[at - 1 : at] in (b"", b"\n") and json.loads(data[at:].split(b"\n")[0])["k"] == k
