@@ -668,8 +668,8 @@ def test_a_run_keeps_no_record_in_memory_as_it_goes(tmp_path, intel, monkeypatch
     held, pace, add = {}, evaluate._pace, PartialRows.add
 
     def records() -> int:
-        gc.collect()
-        return sum(type(o) is PairMatch for o in gc.get_objects())  # no proxy asked
+        gc.collect()  # by type(): isinstance asks a weak proxy, an error once its object is gone
+        return sum(type(o) is PairMatch for o in gc.get_objects())
 
     def adding(self, row):  # the last row as it arrives, and once the run is over
         if self.count == n - 1:
