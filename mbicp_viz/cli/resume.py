@@ -72,13 +72,13 @@ class Plan:
         return f"{self.total()}" if self.exact() else f"up to {self.total()}"
 
 
-def resumable_rows(out: Path, run: dict, plan: Plan, decode, kept=None) -> PartialRows:
+def resumable_rows(out: Path, run: dict, plan: Plan, decode, sink=None) -> PartialRows:
     """The rows ``out`` will hold, resumed from those a stopped run of the same ``run`` left
-    (``decode``-d from the file, path and line, appended to ``kept``), which must be the plan's
-    first pairs."""
+    (``decode``-d from the file, path and line, appended to ``sink``: a list when None), which
+    must be the plan's first pairs."""
     from mbicp_viz.readers.rows import PartialRows
 
-    rows = PartialRows(out, run, decode, kept)
+    rows = PartialRows(out, run, decode, sink)
     done = rows.pairs
     pairs = plan.first(len(done))
     if len(done) > len(pairs) or any(

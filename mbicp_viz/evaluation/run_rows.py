@@ -146,7 +146,8 @@ class RunRows(Sequence[PairMatch]):
 
 
 class _Picked(Sequence[PairMatch]):
-    """Some of a run's rows, in an order of their own, each made when read."""
+    """Some of a run's rows, in an order of their own, each made when read; ``index`` holds their
+    places in the run."""
 
     def __init__(self, rows: RunRows, index: np.ndarray):
         self.rows, self.index = rows, index
