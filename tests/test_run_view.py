@@ -184,8 +184,9 @@ def test_bench_run_times_the_run_view(tmp_path):
 def test_bench_page_times_the_run_view_from_the_command_to_the_page(tmp_path):
     """bench page starts `serve LOG --rows ROWS` as a command and loads its page in a headless
     Chromium: listening, page loaded and run view shown come in that order, then steps of the
-    run's slider are timed, and the server is ended after each opening (Ctrl-C); a server that
-    cannot open says why in one line."""
+    run's slider are timed, and as many on a bare viser page (this browser's floor), under the
+    name of the renderer that drew; the server is ended after each opening (Ctrl-C); a server
+    that cannot open says why in one line."""
     from typer.testing import CliRunner
 
     from mbicp_viz.cli import app as cli
@@ -198,12 +199,21 @@ def test_bench_page_times_the_run_view_from_the_command_to_the_page(tmp_path):
     assert res.exit_code == 0, res.output
     medians = {
         name: float(re.search(rf"^{name}\s+mean\s+\S+ ms\s+median\s+(\S+) ms", res.output, re.M)[1])
-        for name in ("listening", "page loaded", "run view shown", "slider step shown")
+        for name in (
+            "listening",
+            "page loaded",
+            "run view shown",
+            "slider step shown",
+            "bare viser page's step",
+        )
     }
     assert 0 < medians["listening"] < medians["page loaded"] < medians["run view shown"]
     assert "(2 opens)" in res.output
-    # three steps of the run's slider at each opening, each to its pair's words on the page
-    assert "(6 steps)" in res.output and medians["slider step shown"] > 0
+    # three steps of the run's slider at each opening, each to its pair's words on the page, and
+    # three of the bare page's
+    assert res.output.count("(6 steps)") == 2 and medians["slider step shown"] > 0
+    assert medians["bare viser page's step"] > 0
+    assert re.search(r"^WebGL drawn by \S", res.output, re.M)  # the renderer's name
     left = subprocess.run(["pgrep", "-f", str(rows)], capture_output=True, text=True).stdout
     assert left == "", left  # no server left behind
     res = CliRunner().invoke(cli, ["bench", "page", str(INTEL), str(tmp_path / "none.jsonl")])

@@ -198,12 +198,15 @@ def page(
 ):
     """How soon the run view shows: `serve LOG --rows ROWS` started as a command, its page in a
     headless Chromium already running (Playwright, the test extra), until the run's legend shows;
-    then how long a step of its slider takes on the page."""
+    then how long a step of its slider takes on the page, and on a bare viser page (this
+    browser's floor)."""
     from mbicp_viz.evaluation.bench import machine_line
     from mbicp_viz.views.debugger.page_timing import page_timings
 
     typer.echo(f"run view of {rows} on {log}, command to page; {machine_line()}")
-    for t in page_timings(log, rows, repeat, browser, topic, steps):
+    renderer, timings = page_timings(log, rows, repeat, browser, topic, steps)
+    typer.echo(f"WebGL drawn by {renderer}")
+    for t in timings:
         typer.echo(t.line())
 
 

@@ -2,7 +2,12 @@
 LOG --rows ROWS`` started as a command, its page loaded in a browser already running (a headless
 Chromium driven by Playwright, the test extra's), until the page shows the run's legend — and how
 long a step of its slider takes there, from the key to the pair's numbers and the scene drawn.
-The server side alone is ``bench run``."""
+The server side alone is ``bench run``.
+
+Without a GPU the browser draws WebGL in software, and viser's page draws every frame of the quarter
+second after a change: a step's time is then mostly frames. So the bench says which renderer drew
+(the fastest found, ``launch_drawing``) and times the same step on a bare viser page, a slider and
+one small cloud (``bare_page_steps``): what no run view can go below in this browser."""
 
 from __future__ import annotations
 
@@ -24,12 +29,21 @@ from mbicp_viz.errors import InputError
 from mbicp_viz.evaluation.bench import Timing
 from mbicp_viz.views import scene
 
-# what Chromium needs here to draw WebGL without a GPU (the browser tests' flags start with them)
+# what Chromium needs here to draw WebGL without a GPU (the browser tests' flags start with them):
+# its own SwiftShader, which every Chromium has
 CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"]
+# Mesa's llvmpipe through EGL, where the machine has Mesa's EGL (Debian's libegl-mesa0): a run
+# view's slider step 0.28 s against SwiftShader's 0.56 s here, both in software
+MESA_ARGS = ["--use-gl=angle", "--use-angle=gl-egl", "--ignore-gpu-blocklist", "--no-sandbox"]
+# the renderer's own name, empty where the page gets no WebGL 2
+RENDERER = """() => { const gl = document.createElement('canvas').getContext('webgl2');
+  if (!gl) return ''; const info = gl.getExtension('WEBGL_debug_renderer_info');
+  return gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER); }"""
 URL = re.compile(r"open (http://\S+)")
 FIRST_PAIR = re.compile(r"pair 1 of (\d+)")  # the run view's words on its first pair (run_model)
 # resolves once the page has drawn two frames: the one a change was made in, and the next
 TWO_FRAMES = "() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))"
+VIEWPORT = {"width": 1400, "height": 900}
 
 
 def find_chromium(path: str | None) -> str:
@@ -88,6 +102,49 @@ def serving(args: list[str], timeout_s: float) -> Iterator[tuple[str, float]]:
                 proc.wait()
 
 
+def launch_drawing(playwright, exe: str):
+    """Chromium at ``exe`` drawing WebGL with the fastest software renderer it has here (Mesa's,
+    else SwiftShader), and that renderer's name."""
+    for args in (MESA_ARGS, CHROMIUM_ARGS):
+        browser = playwright.chromium.launch(executable_path=exe, args=args)
+        page = browser.new_page()
+        name = page.evaluate(RENDERER)
+        page.close()
+        if name:
+            return browser, name
+        browser.close()
+    raise InputError(
+        f"{exe} draws no WebGL here, neither with Mesa nor SwiftShader", field="--browser"
+    )
+
+
+def bare_page_steps(chromium, steps: int, timeout_s: float) -> list[float]:
+    """``slider_steps`` on a bare viser page: a slider whose step redraws one cloud of 200 points
+    and says the pair it is on, as the run view's does, lit as the run view is. Its steps are
+    this browser's floor."""
+    from .app import stop_server, viser_server
+
+    server = viser_server("127.0.0.1", 0)
+    try:
+        n, rng = steps + 1, np.random.default_rng(0)
+        slider = server.gui.add_slider("pair", min=1, max=n, step=1, initial_value=1)
+        words = server.gui.add_markdown(f"pair 1 of {n}")
+        cloud = server.scene.add_point_cloud("/pair", rng.random((200, 3)), colors=(255, 0, 0))
+
+        @slider.on_update
+        def _(_) -> None:
+            cloud.points = rng.random((200, 3))
+            words.content = f"pair {slider.value} of {n}"
+
+        page = chromium.new_page(viewport=VIEWPORT)
+        page.goto(f"http://127.0.0.1:{server.get_port()}", timeout=1000 * timeout_s)
+        took = slider_steps(page, steps, timeout_s)
+        page.close()
+        return took
+    finally:
+        stop_server(server)
+
+
 def slider_steps(page, steps: int, timeout_s: float) -> list[float]:
     """Up to ``steps`` steps of the run view's slider, as a person makes them (the right arrow on
     it): each from the key to the page showing its pair's numbers and drawing the scene [s]."""
@@ -114,11 +171,12 @@ def page_timings(
     topic: str | None = None,
     steps: int = 10,
     timeout_s: float = 120.0,
-) -> list[Timing]:
-    """From the command to the run view on the page, ``repeat`` times: the server listening, the
-    page loaded, the run view shown (its legend's run trajectory entry) [ms], then ``steps``
-    slider steps each time (``slider_steps``); and the browser's own start, once. ``topic``: the
-    scan stream of a log with several (``serve --topic``)."""
+) -> tuple[str, list[Timing]]:
+    """The renderer that drew (``launch_drawing``) and, from the command to the run view on the
+    page, ``repeat`` times: the server listening, the page loaded, the run view shown (its
+    legend's run trajectory entry) [ms], then ``steps`` slider steps each time (``slider_steps``)
+    and as many on a bare viser page (``bare_page_steps``); and the browser's own start, once.
+    ``topic``: the scan stream of a log with several (``serve --topic``)."""
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
@@ -128,16 +186,17 @@ def page_timings(
     exe = find_chromium(browser)
     parts: dict[str, list[float]] = {"listening": [], "page loaded": [], "run view shown": []}
     stepped: list[float] = []
+    bare: list[float] = []
     with sync_playwright() as p:
         t0 = time.perf_counter()
-        chromium = p.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
+        chromium, renderer = launch_drawing(p, exe)
         started = 1000.0 * (time.perf_counter() - t0)
         args = ["serve", log, "--rows", rows, "--port", "0"] + (["--topic", topic] if topic else [])
         try:
             for _ in range(repeat):
                 with serving(args, timeout_s) as (url, listening):
                     t0 = time.perf_counter() - listening
-                    page = chromium.new_page(viewport={"width": 1400, "height": 900})
+                    page = chromium.new_page(viewport=VIEWPORT)
                     page.goto(url, timeout=1000 * timeout_s)
                     loaded = time.perf_counter() - t0
                     legend = page.locator(".mbicp-legend")
@@ -149,10 +208,13 @@ def page_timings(
                     page.close()
                 for name, t in zip(parts, (listening, loaded, shown), strict=True):
                     parts[name].append(1000.0 * t)
+                if steps:  # alternated with the run view's: a drift in speed falls on both
+                    bare += bare_page_steps(chromium, steps, timeout_s)
         finally:
             chromium.close()
-    return (
-        [Timing("browser started", np.array([started]), "starts")]
-        + [Timing(name, np.array(t), "opens") for name, t in parts.items()]
-        + ([Timing("slider step shown", 1000.0 * np.array(stepped), "steps")] if stepped else [])
-    )
+    timings = [Timing("browser started", np.array([started]), "starts")]
+    timings += [Timing(name, np.array(t), "opens") for name, t in parts.items()]
+    if stepped:  # a run of one pair has no step to make
+        timings.append(Timing("slider step shown", 1000.0 * np.array(stepped), "steps"))
+        timings.append(Timing("bare viser page's step", 1000.0 * np.array(bare), "steps"))
+    return renderer, timings
