@@ -193,13 +193,15 @@ def page(
     ] = None,
     topic: TopicOpt = None,
     steps: Annotated[
-        int, typer.Option("--steps", min=0, help="slider steps to time at each opening")
+        int,
+        typer.Option("--steps", min=0, help="slider steps of each kind to time at each opening"),
     ] = 10,
 ):
     """How soon the run view shows: `serve LOG --rows ROWS` started as a command, its page in a
     headless Chromium already running (Playwright, the test extra), until the run's legend shows;
-    then how long a step of its slider takes on the page, and on a bare viser page (this
-    browser's floor)."""
+    then how long a step of its slider takes, timed by the page from the key to the pair's words
+    and two frames drawn: steps one right after another, and from the page at rest; and the same
+    on a bare viser page (this browser's floor)."""
     from mbicp_viz.evaluation.bench import machine_line
     from mbicp_viz.views.debugger.page_timing import page_timings
 

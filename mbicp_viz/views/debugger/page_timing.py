@@ -1,13 +1,15 @@
 """``bench page``: how soon a person sees the run view, the way they open it — ``mbicp-viz serve
 LOG --rows ROWS`` started as a command, its page loaded in a browser already running (a headless
 Chromium driven by Playwright, the test extra's), until the page shows the run's legend — and how
-long a step of its slider takes there, from the key to the pair's numbers and the scene drawn.
-The server side alone is ``bench run``.
+long a step of its slider takes there, timed by the page itself from the key to the pair's
+numbers shown and the scene drawn (``STEP_TIMER``). The server side alone is ``bench run``.
 
 Without a GPU the browser draws WebGL in software, and viser's page draws every frame of the quarter
-second after a change: a step's time is then mostly frames. So the bench says which renderer drew
-(the fastest found, ``launch_drawing``) and times the same step on a bare viser page, a slider and
-one small cloud (``bare_page_steps``): what no run view can go below in this browser."""
+second after a change: a step's time is then mostly frames, and a step made while the frames of the
+one before are still drawn waits for them. So steps are timed two ways, one right after another
+(scrubbing) and from a page at rest (``REST_S``); the bench says which renderer drew (the fastest
+found, ``launch_drawing``) and times the same steps on a bare viser page, a slider and one small
+cloud (``bare_page_steps``): what no run view can go below in this browser."""
 
 from __future__ import annotations
 
@@ -41,8 +43,28 @@ RENDERER = """() => { const gl = document.createElement('canvas').getContext('we
   return gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER); }"""
 URL = re.compile(r"open (http://\S+)")
 FIRST_PAIR = re.compile(r"pair 1 of (\d+)")  # the run view's words on its first pair (run_model)
-# resolves once the page has drawn two frames: the one a change was made in, and the next
-TWO_FRAMES = "() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))"
+# Arms the page's own timer of the next step: from the key's keydown to the step's words in the
+# page and two frames drawn after them (the one they are painted in, and the next: the scene's
+# messages come before the words), in ms; null when the words do not come within the timeout.
+# Timed in the page, so the driver's own round trips (Playwright's, about 10-40 ms a step) are
+# not counted: a person has none.
+STEP_TIMER = """([words, timeoutMs]) => { window.mbicpStep = new Promise((resolve) => {
+  let t0 = null;
+  const key = () => { if (t0 === null) t0 = performance.now(); };
+  const end = (took) => { clearTimeout(timer); observer.disconnect();
+    document.removeEventListener('keydown', key, true); resolve(took); };
+  const observer = new MutationObserver(() => {
+    if (t0 === null || !document.body.textContent.includes(words)) return;
+    observer.disconnect();
+    requestAnimationFrame(() => requestAnimationFrame(() => end(performance.now() - t0)));
+  });
+  document.addEventListener('keydown', key, true);
+  observer.observe(document.body, { subtree: true, childList: true, characterData: true });
+  const timer = setTimeout(() => end(null), timeoutMs);
+}); }"""
+STEP_TAKEN = "() => window.mbicpStep"
+# A page at rest: longer than the quarter second of frames viser's page draws after a change
+REST_S = 0.5
 VIEWPORT = {"width": 1400, "height": 900}
 
 
@@ -118,7 +140,7 @@ def launch_drawing(playwright, exe: str):
     )
 
 
-def bare_page_steps(chromium, steps: int, timeout_s: float) -> list[float]:
+def bare_page_steps(chromium, steps: int, timeout_s: float) -> tuple[list[float], list[float]]:
     """``slider_steps`` on a bare viser page: a slider whose step redraws one cloud of 200 points
     and says the pair it is on, as the run view's does, lit as the run view is. Its steps are
     this browser's floor."""
@@ -126,7 +148,7 @@ def bare_page_steps(chromium, steps: int, timeout_s: float) -> list[float]:
 
     server = viser_server("127.0.0.1", 0)
     try:
-        n, rng = steps + 1, np.random.default_rng(0)
+        n, rng = 2 * steps + 1, np.random.default_rng(0)
         slider = server.gui.add_slider("pair", min=1, max=n, step=1, initial_value=1)
         words = server.gui.add_markdown(f"pair 1 of {n}")
         cloud = server.scene.add_point_cloud("/pair", rng.random((200, 3)), colors=(255, 0, 0))
@@ -145,22 +167,30 @@ def bare_page_steps(chromium, steps: int, timeout_s: float) -> list[float]:
         stop_server(server)
 
 
-def slider_steps(page, steps: int, timeout_s: float) -> list[float]:
-    """Up to ``steps`` steps of the run view's slider, as a person makes them (the right arrow on
-    it): each from the key to the page showing its pair's numbers and drawing the scene [s]."""
+def slider_steps(page, steps: int, timeout_s: float) -> tuple[list[float], list[float]]:
+    """Steps of the run view's slider as a person makes them (the right arrow on it), each timed
+    by the page (``STEP_TIMER``) [s]: up to ``steps`` one right after another, then as many from
+    the page at rest."""
     first = page.get_by_text(FIRST_PAIR).first
     first.wait_for(timeout=1000 * timeout_s)
     n = int(FIRST_PAIR.search(first.inner_text())[1])
     slider = page.locator(f'[role=slider][aria-valuemin="1"][aria-valuemax="{n}"]').first
     slider.focus()
-    took = []
-    for k in range(2, min(steps + 1, n) + 1):
-        t0 = time.perf_counter()
+    at = 1
+
+    def step(rest_s: float) -> float:
+        nonlocal at
+        at += 1
+        page.wait_for_timeout(1000 * rest_s)  # pacing, as a person's: never waited on
+        page.evaluate(STEP_TIMER, [f"pair {at} of {n}", 1000 * timeout_s])
         slider.press("ArrowRight")
-        page.get_by_text(f"pair {k} of {n}").first.wait_for(timeout=1000 * timeout_s)
-        page.evaluate(TWO_FRAMES)
-        took.append(time.perf_counter() - t0)
-    return took
+        took = page.evaluate(STEP_TAKEN)
+        if took is None:
+            raise InputError(f"the page did not show pair {at} of {n} within {timeout_s} s")
+        return took / 1000.0
+
+    scrubbed = [step(0.0) for _ in range(min(steps, (n - 1) // 2))]
+    return scrubbed, [step(REST_S) for _ in scrubbed]
 
 
 def page_timings(
@@ -174,8 +204,9 @@ def page_timings(
 ) -> tuple[str, list[Timing]]:
     """The renderer that drew (``launch_drawing``) and, from the command to the run view on the
     page, ``repeat`` times: the server listening, the page loaded, the run view shown (its
-    legend's run trajectory entry) [ms], then ``steps`` slider steps each time (``slider_steps``)
-    and as many on a bare viser page (``bare_page_steps``); and the browser's own start, once.
+    legend's run trajectory entry) [ms], then ``steps`` slider steps one after another and as
+    many from the page at rest each time (``slider_steps``), and as many on a bare viser page
+    (``bare_page_steps``); and the browser's own start, once.
     ``topic``: the scan stream of a log with several (``serve --topic``)."""
     try:
         from playwright.sync_api import sync_playwright
@@ -185,8 +216,14 @@ def page_timings(
         ) from None
     exe = find_chromium(browser)
     parts: dict[str, list[float]] = {"listening": [], "page loaded": [], "run view shown": []}
-    stepped: list[float] = []
-    bare: list[float] = []
+    # run view's and bare page's steps, one after another and from the page at rest
+    stepped: dict[str, list[float]] = {
+        "run view step, in a row": [],
+        "run view step, at rest": [],
+        "bare page step, in a row": [],
+        "bare page step, at rest": [],
+    }
+    lists = list(stepped.values())
     with sync_playwright() as p:
         t0 = time.perf_counter()
         chromium, renderer = launch_drawing(p, exe)
@@ -204,17 +241,19 @@ def page_timings(
                         timeout=1000 * timeout_s
                     )
                     shown = time.perf_counter() - t0
-                    stepped += slider_steps(page, steps, timeout_s)
+                    for kept, got in zip(lists[:2], slider_steps(page, steps, timeout_s)):
+                        kept += got
                     page.close()
                 for name, t in zip(parts, (listening, loaded, shown), strict=True):
                     parts[name].append(1000.0 * t)
                 if steps:  # alternated with the run view's: a drift in speed falls on both
-                    bare += bare_page_steps(chromium, steps, timeout_s)
+                    for kept, got in zip(lists[2:], bare_page_steps(chromium, steps, timeout_s)):
+                        kept += got
         finally:
             chromium.close()
     timings = [Timing("browser started", np.array([started]), "starts")]
     timings += [Timing(name, np.array(t), "opens") for name, t in parts.items()]
-    if stepped:  # a run of one pair has no step to make
-        timings.append(Timing("slider step shown", 1000.0 * np.array(stepped), "steps"))
-        timings.append(Timing("bare viser page's step", 1000.0 * np.array(bare), "steps"))
+    timings += [  # a run of one pair has no step to make
+        Timing(name, 1000.0 * np.array(t), "steps") for name, t in stepped.items() if t
+    ]
     return renderer, timings

@@ -191,10 +191,14 @@ class RunPanel:
 
     def draw(self) -> None:
         """The run at the slider's pair: the map's chunks it has passed shown (only those that
-        change), its own layers sent, its health in words."""
+        change), its own layers sent, then its health in words (so the words on the page come
+        with the scene they describe: ``bench page`` times a step to them)."""
+        if self.active:
+            self._draw_scene()
         self.text.content = self.model.health(self.n)
-        if not self.active:
-            return
+
+    def _draw_scene(self) -> None:
+        """The pair's layers, the map's chunks up to it and the legend of what is drawn."""
         layers = scene.run_pair_layers(self.model.pair_at(self.n, self.relation), self.scale)
         whole = self.model.whole_chunks(self.n)
         with self.s.client.atomic():
