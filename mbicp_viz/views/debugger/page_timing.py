@@ -181,7 +181,8 @@ def slider_steps(page, steps: int, timeout_s: float) -> tuple[list[float], list[
     def step(rest_s: float) -> float:
         nonlocal at
         at += 1
-        page.wait_for_timeout(1000 * rest_s)  # pacing, as a person's: never waited on
+        # the pause a step from rest needs (not a wait for a result)
+        page.wait_for_timeout(1000 * rest_s)
         page.evaluate(STEP_TIMER, [f"pair {at} of {n}", 1000 * timeout_s])
         slider.press("ArrowRight")
         took = page.evaluate(STEP_TAKEN)
