@@ -312,6 +312,25 @@ def test_a_ros2_bag_without_laser_scans_says_so_and_lists_its_topics(tmp_path, p
     )
 
 
+@pytest.mark.parametrize("plugin", ["SQLITE3", "MCAP"])
+def test_a_ros2_bag_whose_laser_scan_topic_holds_no_message_says_so(tmp_path, plugin):
+    """A LaserScan topic declared but empty (a recording stopped before the laser spoke, or a
+    damaged index that lists none of its messages): one line, not a traceback."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    string = ts.types["std_msgs/msg/String"]
+    path = tmp_path / "silent"
+    with Writer(path, version=8, storage_plugin=getattr(StoragePlugin, plugin)) as w:
+        w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=ts)
+        conn = w.add_connection("/chatter", "std_msgs/msg/String", typestore=ts)
+        w.write(conn, 1, ts.serialize_cdr(string(data="hi"), "std_msgs/msg/String"))
+    res = CliRunner().invoke(app, ["match", str(path), "--pair", "0", "1"])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert f"{path}: no message on its sensor_msgs/msg/LaserScan topics: /scan" in res.stderr
+
+
 def test_a_bag_whose_odometry_starts_after_its_first_scan_is_matched_whole(tmp_path, intel):
     """The first scan precedes the first odometry message (a driver that starts late): that pair
     is matched from the identity and said so, the others from the odometry."""

@@ -24,7 +24,8 @@ from mbicp_viz.evaluation import pool
 from mbicp_viz.evaluation.bench import run_measured
 from mbicp_viz.readers import read_log
 from mbicp_viz.readers.bag_index import OdometryWindow, bracket
-from mbicp_viz.readers.rosbag import _to_log, _walk_ros1
+from mbicp_viz.readers.ros2_index import topic_stamps
+from mbicp_viz.readers.rosbag import DEFAULT_TYPESTORE, _to_log, _walk_ros1, open_bag
 from mbicp_viz.readers.tf import interpolate
 from mbicp_viz.writers.replay import Replay, replayed, resampled
 
@@ -173,6 +174,42 @@ def test_ros2_bags_read_through_their_index_like_ros1(tmp_path, intel, kind):
     for k in (11, 0, 5):
         assert same_scan(ros2.scan(k), ros1.scan(k))
         assert np.allclose(ros2.scan(k).odometry.as_array(), ros1.scan(k).odometry.as_array())
+
+
+@pytest.mark.parametrize("kind", ["humble", "mcap"])
+def test_a_ros2_bags_scan_stamps_are_read_from_its_storage_index(tmp_path, intel, kind):
+    """A ROS 2 bag's scan stamps come from its storage's own index (sqlite3's timestamp column,
+    the message indexes after MCAP's chunks), equal to what one pass over its messages gives,
+    and its odometry's are not among them."""
+    path = write(tmp_path / "r2", intel_robot(intel, 0, 40, MOUNT), kind)
+    reader = open_bag(path, DEFAULT_TYPESTORE)
+    try:
+        scans = [c for c in reader.connections if c.topic == "/scan"]
+        stamps = topic_stamps(reader, "/scan", str(path))
+        passed = np.fromiter((t for _, t, _ in reader.messages(scans)), dtype=np.int64)
+        assert stamps is not None and len(stamps) == 40 and np.array_equal(stamps, passed)
+    finally:
+        reader.close()
+
+
+def test_an_mcap_chunk_index_pointing_past_its_message_index_is_said(tmp_path, intel):
+    """An MCAP bag whose chunk index points where no message index is (a damaged file) is refused
+    in one line naming the bag and the byte, not read wrongly."""
+    from rosbags.rosbag2.storage_mcap import McapReader
+
+    path = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), "mcap")
+    (mcap,) = path.glob("*.mcap")
+    storage = McapReader(mcap)
+    storage.open()
+    (scans,) = [c.id for c in storage.connections if c.topic == "/scan"]
+    at = storage.chunks[0].message_index_offsets[scans]
+    storage.close()
+    data = bytearray(mcap.read_bytes())
+    data[at] ^= 0xFF  # the message index record's opcode
+    mcap.write_bytes(bytes(data))
+    with pytest.raises(InputError) as e:
+        read_log(path)
+    assert str(path) in str(e.value) and f"byte {at}" in str(e.value)
 
 
 def test_a_long_bag_opens_without_reading_its_scans(tmp_path, intel):

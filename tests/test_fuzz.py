@@ -6,6 +6,7 @@ the invariants; a record whose field count a mutation changed is always an error
 import gzip
 import io
 import math
+import shutil
 import zipfile
 
 import numpy as np
@@ -209,6 +210,43 @@ def test_damaged_bags(tmp_path, small_bag, cut, flips):
     path.write_bytes(bytes(b))
     log = read(path)
     if log is not None and len(log.scans) >= 2:  # what survives still matches without a traceback
+        MATCHERS["improved"].run(
+            log.scans[0], log.scans[1], Pose2(), MATCHERS["improved"].params_type()
+        )
+
+
+@pytest.fixture(scope="module", params=["mcap", "humble"])
+def small_ros2(tmp_path_factory, intel, request):
+    """A ROS 2 bag folder (MCAP, sqlite3), its storage file's name and bytes."""
+    folder = write(
+        tmp_path_factory.mktemp(request.param) / "small",
+        intel_robot(intel, 10, 12, Pose2(0.1, 0.0, 0.0)),
+        request.param,
+    )
+    (file,) = (f for f in folder.iterdir() if f.suffix in (".mcap", ".db3"))
+    return folder, file.name, file.read_bytes()
+
+
+@FUZZ
+@given(
+    cut=st.floats(0.0, 1.0),
+    flips=st.lists(st.tuples(st.floats(0, 0.999), st.integers(0, 255)), max_size=8),
+    near_end=st.booleans(),
+)
+def test_damaged_ros2_bags(tmp_path, small_ros2, cut, flips, near_end):
+    """A ROS 2 bag's storage file cut short or with bytes flipped, anywhere or in its last
+    kilobyte (MCAP's summary: chunk indexes, channels; its message indexes sit after each
+    chunk): one clean error or scans that keep the invariants and still match."""
+    folder, name, data = small_ros2
+    b = bytearray(data[: int(cut * len(data))] if not flips else data)
+    start = max(len(b) - 1024, 0) if near_end else 0
+    for at, v in flips:
+        b[start + int(at * (len(b) - start))] = v
+    damaged = tmp_path / "damaged"
+    shutil.copytree(folder, damaged, dirs_exist_ok=True)
+    (damaged / name).write_bytes(bytes(b))
+    log = read(damaged)
+    if log is not None and len(log.scans) >= 2:
         MATCHERS["improved"].run(
             log.scans[0], log.scans[1], Pose2(), MATCHERS["improved"].params_type()
         )

@@ -292,9 +292,14 @@ def bracket(samples: Iterable, t: float) -> tuple[np.ndarray, np.ndarray]:
     return a[:, 0], a[:, 1:]
 
 
-def records_with_stamps(reader, connections) -> np.ndarray:
-    """The record stamps [ns] of ``connections``' messages in recording order: from a ROS 1 bag's
-    index, else one pass over the raw messages (nothing decoded)."""
+def records_with_stamps(reader, topic: str, connections, path: str) -> np.ndarray:
+    """The record stamps [ns] of ``topic``'s messages (its ``connections``) in recording order:
+    from a ROS 1 bag's index, a ROS 2 bag's storage index (``ros2_index``), else one pass over
+    the raw messages (nothing decoded)."""
+    from .ros2_index import topic_stamps
+
     if hasattr(reader, "stamps"):
         return reader.stamps(connections)
+    if (stamps := topic_stamps(reader, topic, path)) is not None:
+        return stamps
     return np.fromiter((t for _, t, _ in reader.messages(connections)), dtype=np.int64)

@@ -75,9 +75,9 @@ def read_rosbag(
 ) -> ScanLog:
     """The scans of one LaserScan topic, with the laser's mount from tf (``mount``, --mount, wins)
     and the odometry of the robot's base moved onto the laser through that mount. A bag is read
-    through its index (a ROS 1 bag's by ``ros1_index.py``, a ROS 2 bag's by rosbags), each scan
-    when it is asked for (``bag_index.py``); a ROS 1 bag whose index is damaged or missing is
-    walked and read whole."""
+    through its index (a ROS 1 bag's by ``ros1_index.py``, a ROS 2 bag's by rosbags, its scans'
+    stamps from its storage's own by ``ros2_index.py``), each scan when it is asked for
+    (``bag_index.py``); a ROS 1 bag whose index is damaged or missing is walked and read whole."""
     p = Path(path)
     if not p.exists():
         raise InputError("no such file or folder", str(path))
@@ -494,9 +494,15 @@ def _indexed_log(
     kinds = {t: ros2_type(cs[0].msgtype) for t, cs in by_topic.items()}
 
     def first(t: str):
-        return next(decoded_messages(reader, path, by_topic[t]))[2]
+        """The topic's first message; None when it has none."""
+        return next((m for _, _, m in decoded_messages(reader, path, by_topic[t])), None)
 
-    frames_of = {t: first(t).header.frame_id for t, k in kinds.items() if k == LASER_SCAN}
+    firsts = {t: first(t) for t, k in kinds.items() if k == LASER_SCAN}
+    frames_of = {t: m.header.frame_id for t, m in firsts.items() if m is not None}
+    if not frames_of:
+        raise InputError(
+            f"no message on its {LASER_SCAN} topics: {', '.join(sorted(firsts))}", path
+        )
     topics = {
         t: _describe(sum(c.msgcount for c in by_topic[t]), frames_of[t]) for t in sorted(frames_of)
     }
@@ -520,7 +526,7 @@ def _indexed_log(
         path,
         typestore,
         chosen,
-        records_with_stamps(reader, by_topic[chosen]),
+        records_with_stamps(reader, chosen, by_topic[chosen], path),
         tf,
         odometry,
         mount is not None and mount.upside_down,
