@@ -721,7 +721,10 @@ def test_a_run_keeps_no_record_in_memory_as_it_goes(tmp_path, intel, monkeypatch
     monkeypatch.setattr(evaluate, "_pace", counted)
     bag = write(tmp_path / "i.bag", intel_robot(intel, 0, len(intel.scans), MOUNT), "ros1")
     out = tmp_path / "r.jsonl"
-    res = CliRunner().invoke(app, ["eval", "sequence", str(bag), "--out", str(out)])
+    # one process: a pool's finished chunks wait in its result queue, a few records each, as
+    # many as the machine's load lets pile up (6 once under a parallel test run)
+    args = ["eval", "sequence", str(bag), "--out", str(out), "--workers", "1"]
+    res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     assert held.keys() == {"last row", "run over"} and max(held.values()) <= 3, held
     rows = read_rows(out)
