@@ -212,6 +212,34 @@ def test_an_mcap_chunk_index_pointing_past_its_message_index_is_said(tmp_path, i
     assert str(path) in str(e.value) and f"byte {at}" in str(e.value)
 
 
+@pytest.mark.parametrize("shift_s", [0.25, 1e6])
+def test_an_mcap_message_index_at_odds_with_its_messages_is_said(tmp_path, intel, shift_s):
+    """A scan's time in the message index changed (within its chunk's time, or far outside it):
+    the stamps come from that index, so reading that scan, or the run that reads every message,
+    is refused in one line naming the bag, exit 2; never a scan that is not there."""
+    from rosbags.rosbag2.storage_mcap import McapReader
+
+    path = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), "mcap")
+    (mcap,) = path.glob("*.mcap")
+    storage = McapReader(mcap)
+    storage.open()
+    (scans,) = [c.id for c in storage.connections if c.topic == "/scan"]
+    at = storage.chunks[0].message_index_offsets[scans] + 15  # its first (log time, offset)
+    storage.close()
+    data = bytearray(mcap.read_bytes())
+    first = int.from_bytes(data[at : at + 8], "little")
+    data[at : at + 8] = (first + int(shift_s * 1e9)).to_bytes(8, "little")
+    mcap.write_bytes(bytes(data))
+    out = str(tmp_path / "out.json")
+    for args in (
+        ["match", str(path), "--pair", "0", "1"],
+        ["eval", "sequence", str(path), "--out", out],
+    ):
+        res = CliRunner().invoke(app, args)
+        assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+        assert f"{path}: " in res.stderr and "index" in res.stderr, res.stderr
+
+
 def test_a_long_bag_opens_without_reading_its_scans(tmp_path, intel):
     """The index is read, not the messages: a scan near the end is read alone, and the log does
     not look at every record until a command needs them."""

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from mbicp_viz.core import Pose2, Scan, UnusableScan
+from mbicp_viz.errors import InputError
 
 from .tf import TfTree
 
@@ -128,6 +129,8 @@ class BagScans:
             t = int(self.stamps_ns[k])
             first = bisect.bisect_left(self.stamps_ns, t)  # records sharing this stamp
             msgs = self._decoded(self.topic, t, t + 1)
+            if k - first >= len(msgs):  # the index lists a message the bag does not hold
+                raise InputError(f"its index lists a scan at {t} ns, where it has none", self.path)
             if not odometry:
                 return self._scan(k, msgs[k - first][1], None)
             msg = msgs[k - first][1]
@@ -219,6 +222,12 @@ class BagScans:
                 if t < first or (t == first and same > 0):
                     same -= t == first
                     continue
+                if k >= self.records or t != self.stamps_ns[k]:  # a damaged index
+                    raise InputError(
+                        f"its index lists its scans otherwise than its messages hold them "
+                        f"(scan {k} recorded at {t} ns)",
+                        self.path,
+                    )
                 waiting.append((k, stamp, msg))
                 k += 1
             else:
