@@ -65,6 +65,7 @@ STEP_TIMER = """([words, timeoutMs]) => { window.mbicpStep = new Promise((resolv
 STEP_TAKEN = "() => window.mbicpStep"
 # A page at rest: longer than the quarter second of frames viser's page draws after a change
 REST_S = 0.5
+STEP_KINDS = ("in a row", "at rest")  # ``slider_steps``' two lists, in order
 VIEWPORT = {"width": 1400, "height": 900}
 
 
@@ -219,12 +220,8 @@ def page_timings(
     parts: dict[str, list[float]] = {"listening": [], "page loaded": [], "run view shown": []}
     # run view's and bare page's steps, one after another and from the page at rest
     stepped: dict[str, list[float]] = {
-        "run view step, in a row": [],
-        "run view step, at rest": [],
-        "bare page step, in a row": [],
-        "bare page step, at rest": [],
+        f"{view} step, {how}": [] for view in ("run view", "bare page") for how in STEP_KINDS
     }
-    lists = list(stepped.values())
     with sync_playwright() as p:
         t0 = time.perf_counter()
         chromium, renderer = launch_drawing(p, exe)
@@ -242,14 +239,14 @@ def page_timings(
                         timeout=1000 * timeout_s
                     )
                     shown = time.perf_counter() - t0
-                    for kept, got in zip(lists[:2], slider_steps(page, steps, timeout_s)):
-                        kept += got
+                    for how, took in zip(STEP_KINDS, slider_steps(page, steps, timeout_s)):
+                        stepped[f"run view step, {how}"] += took
                     page.close()
                 for name, t in zip(parts, (listening, loaded, shown), strict=True):
                     parts[name].append(1000.0 * t)
                 if steps:  # alternated with the run view's: a drift in speed falls on both
-                    for kept, got in zip(lists[2:], bare_page_steps(chromium, steps, timeout_s)):
-                        kept += got
+                    for how, took in zip(STEP_KINDS, bare_page_steps(chromium, steps, timeout_s)):
+                        stepped[f"bare page step, {how}"] += took
         finally:
             chromium.close()
     timings = [Timing("browser started", np.array([started]), "starts")]
