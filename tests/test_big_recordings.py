@@ -347,6 +347,34 @@ def test_memory_does_not_grow_with_the_bag(tmp_path):
     ]
 
 
+def test_a_process_is_timed_to_the_moment_it_printed_or_to_its_end():
+    """A server's first result is timed from the launch to the moment it printed, not to its stop:
+    the work after the stamp is in the wall time to the end, not in the time to the stamp."""
+    after_s = 0.4
+    script = (
+        "import time; t = time.monotonic(); print(t, flush=True)\n"
+        f"while time.monotonic() < t + {after_s}: pass\n"
+    )
+    args = [sys.executable, "-c", script]
+    to_stamp, _ = run_measured(args, until_printed=True)
+    to_end, peak = run_measured(args)
+    assert 0.0 < to_stamp < to_end - after_s and peak > 1.0
+    with pytest.raises(RuntimeError, match="failed"):
+        run_measured([sys.executable, "-c", "raise SystemExit(3)"], until_printed=True)
+
+
+def test_bench_open_times_a_recordings_match_and_the_debuggers_first_result():
+    out = CliRunner().invoke(
+        app, ["bench", "open", str(HOKUYO_BAG), "--pair", "3", "4", "--repeat", "1"]
+    )
+    assert out.exit_code == 0, out.output
+    times = dict(
+        re.findall(r"^(match --pair 3 4|debugger first result) +([\d.]+) s", out.output, re.M)
+    )
+    assert set(times) == {"match --pair 3 4", "debugger first result"}, out.output
+    assert all(0.1 < float(t) < 60.0 for t in times.values())
+
+
 def test_a_run_makes_its_jobs_as_the_workers_need_them():
     made = []
 

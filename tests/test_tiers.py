@@ -153,9 +153,9 @@ def test_the_debugger_after_an_install_compiles_nothing_in_its_own_process(tmp_p
     }
     script = (
         "from numba.core import event\n"
-        "from mbicp_viz.views.debugger.latency import first_result_ms\n"
+        "from mbicp_viz.views.debugger.latency import first_result_at\n"
         "with event.install_recorder('numba:compile') as rec:\n"
-        f"    first_result_ms({str(HOKUYO)!r})\n"
+        f"    first_result_at({str(HOKUYO)!r})\n"
         "print(len(rec.buffer))\n"
     )
     try:

@@ -227,8 +227,8 @@ def startup(repeat: Annotated[int, typer.Option("--repeat", min=3, help="runs of
     debugger = [
         sys.executable,
         "-c",
-        "import sys; from mbicp_viz.views.debugger.latency import first_result_ms; "
-        f"print(first_result_ms({str(DEMO_PAIR)!r}))",
+        "from mbicp_viz.views.debugger.latency import first_result_at; "
+        f"print(first_result_at({str(DEMO_PAIR)!r}))",
     ]
     typer.echo(f"start-up; {machine_line()}")
     for t in startup_times(commands, match, debugger, repeat):

@@ -205,22 +205,22 @@ class Opening:
 def opening(
     path: str, pair: tuple[int, int], repeat: int, topic: str | None = None
 ) -> list[Opening]:
-    """Each a fresh process, best of ``repeat``: ``match PATH --pair I J``, and the debugger on
-    ``PATH`` to its first tab's result."""
+    """Each a fresh process, best of ``repeat``: ``match PATH --pair I J`` to its end, and the
+    debugger on ``PATH`` from its launch to its first tab's result."""
     exe = [sys.executable, "-m", "mbicp_viz"]
     match = exe + ["match", path, "--pair", str(pair[0]), str(pair[1]), "--json"]
     match += ["--topic", topic] if topic is not None else []
     debugger = [
         sys.executable,
         "-c",
-        "from mbicp_viz.views.debugger.latency import first_result_ms; "
-        f"first_result_ms({path!r}, {pair!r}, {topic!r})",
+        "from mbicp_viz.views.debugger.latency import first_result_at; "
+        f"print(first_result_at({path!r}, {pair!r}, {topic!r}))",
     ]
     out = []
     for label, args in (
         (f"match --pair {pair[0]} {pair[1]}", match),
         ("debugger first result", debugger),
     ):
-        runs = [run_measured(args) for _ in range(repeat)]
+        runs = [run_measured(args, until_printed=args is debugger) for _ in range(repeat)]
         out.append(Opening(label, min(w for w, _ in runs), max(m for _, m in runs)))
     return out
