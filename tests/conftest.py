@@ -1,6 +1,8 @@
+import atexit
 import contextlib
 import json
 import os
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -14,8 +16,11 @@ from mbicp_viz.readers import read_log
 # The suite's numbers must not depend on how far a background compile has come: every process it
 # starts compiles its kernels itself (core/tiers.py; tests/test_tiers.py starts the quick tier).
 os.environ["MBICP_VIZ_JIT"] = "eager"
-# Logs read whole are cached (readers/log_cache.py): the suite's own cache, never the user's.
-os.environ.setdefault("MBICP_VIZ_CACHE", tempfile.mkdtemp(prefix="mbicp-viz-cache-"))
+# Logs read whole are cached (readers/log_cache.py): the suite's own cache, never the user's,
+# removed when the process that made it ends (xdist's workers inherit it from the controller).
+if "MBICP_VIZ_CACHE" not in os.environ:
+    os.environ["MBICP_VIZ_CACHE"] = tempfile.mkdtemp(prefix="mbicp-viz-cache-")
+    atexit.register(shutil.rmtree, os.environ["MBICP_VIZ_CACHE"], ignore_errors=True)
 
 # No deadline: a test's first example may compile a matcher's kernels (numba), which takes
 # seconds on a cold cache; a deadline there measures the compiler, not the code.
