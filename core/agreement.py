@@ -18,23 +18,6 @@ INLIER_RADIUS_M = 0.05
 SURFACE_GAP_BEAMS = 3.0
 
 
-def _distances(ref: Scan, obj: Scan, pose: Pose2, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Each object point's distance, once moved by ``pose``, to its nearest reference point and
-    to the reference surface (``_nearest_and_surface``); inf where the nearest point is too far
-    for either to be within ``radius``."""
-    q = pose.apply(obj.points())
-    idx = ref.valid_indices()
-    return run(
-        _nearest_and_surface,
-        ref.points(),
-        ref.ranges[idx],
-        ref.bearings[idx],
-        q,
-        float(radius),
-        SURFACE_GAP_BEAMS,
-    )
-
-
 def inlier_fraction(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M) -> float:
     """Fraction of the object's valid points within ``radius`` [m] of a reference point once moved
     by ``pose`` (object frame -> reference frame). Lets a user compare two candidate poses — a
@@ -45,12 +28,22 @@ def inlier_fraction(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RA
 def agreement(
     ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M
 ) -> tuple[float, float]:
-    """(``inlier_fraction``, ``surface_overlap``) from one nearest-point search."""
-    to_point, to_surface = _distances(ref, obj, pose, radius)
-    if not len(to_point):
+    """(``inlier_fraction``, ``surface_overlap``) from one search (``_agreeing``)."""
+    q = pose.apply(obj.points())
+    if not len(q):
         return 0.0, 0.0
-    n = len(to_point)  # counted: np.mean's per-call cost was a tenth of a run's glue per pair
-    return np.count_nonzero(to_point <= radius) / n, np.count_nonzero(to_surface <= radius) / n
+    idx = ref.valid_indices()
+    on_point, on_surface = run(
+        _agreeing,
+        ref.points(),
+        ref.ranges[idx],
+        ref.bearings[idx],
+        q,
+        float(radius),
+        SURFACE_GAP_BEAMS,
+    )
+    n = len(q)
+    return on_point / n, on_surface / n
 
 
 def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RADIUS_M) -> float:
@@ -63,25 +56,29 @@ def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RA
 
 
 @kernel
-def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
-    """Each point of ``q``'s distance to its nearest point of ``p`` (the reference's valid points
-    in scan order, of ranges ``r`` and increasing bearings ``b``) and to the reference surface:
-    the nearest point's two segments where they are surface (``SURFACE_GAP_BEAMS``), else the
-    point itself.
+def _agreeing(p, r, b, q, radius: float, gap_beams: float):
+    """How many points of ``q`` lie within ``radius`` of a point of ``p`` (the reference's valid
+    points in scan order, of ranges ``r`` and increasing bearings ``b``), and how many within
+    ``radius`` of the reference surface: the nearest point's two segments where they are surface
+    (``SURFACE_GAP_BEAMS``), else the point itself.
 
-    Exact wherever either distance is within ``radius``; inf where the nearest point lies beyond
-    ``reach``: a segment of length l whose ends are both farther than d from q passes no nearer
-    than sqrt(d^2 - l^2 / 4), so with reach^2 = radius^2 + l_max^2 / 4 such a point is within
-    ``radius`` of neither. The search walks the reference's bearings outwards from q's, both
-    ways round, and stops each way where the bearings left cannot hold a nearer point: a point
-    at bearing difference D from q lies at least |q| sin D from it (|q| past 90 degrees). A k-d
-    tree's build and query took a third of a run's time per pair at 1081 beams; a sine and a
-    modulo at each step of the walk, 0.44 ms a pair against 0.25 ms. Equal distances go to the
-    lower index."""
+    A point within ``radius`` of any reference point is within it of its nearest and of the
+    surface: it is counted at once, its nearest never sought (most points of a good match). With
+    the directions taken from the points instead of their bearings' cosines, a pair's agreement
+    at 1081 beams takes 99 us against 135 us when every nearest was sought.
+
+    Else its nearest is sought within ``reach``: a segment of length l whose ends are both farther
+    than d from q passes no nearer than sqrt(d^2 - l^2 / 4), so with reach^2 = radius^2 + l_max^2
+    / 4 a point farther is within ``radius`` of neither. The search walks the reference's bearings
+    outwards from q's, both ways round, and stops each way where the bearings left cannot hold a
+    nearer point: a point at bearing difference D from q lies at least |q| sin D from it (|q| past
+    90 degrees). A k-d tree's build and query took a third of a run's time per pair at 1081 beams;
+    a sine and a modulo at each step of the walk, 0.44 ms a pair against 0.25 ms. Equal distances
+    go to the lower index."""
     n, m = len(p), max(len(p) - 1, 0)
-    to_point, to_surface = np.full(len(q), np.inf), np.full(len(q), np.inf)
+    on_point, on_surface = 0, 0
     if n == 0:
-        return to_point, to_surface
+        return on_point, on_surface
     surface = np.zeros(m, dtype=np.bool_)
     longest = 0.0
     for i in range(m):
@@ -91,7 +88,8 @@ def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
             longest = max(longest, length)
     reach2 = radius * radius + 0.25 * longest * longest
     turn = 2.0 * math.pi
-    ux, uy = np.cos(b), np.sin(b)  # each bearing's direction: |q x u| = |q| sin(D), no sine a step
+    # each bearing's direction, from its point (p = r u; no cosine): |q x u| = |q| sin(D)
+    ux, uy = p[:, 0] / r, p[:, 1] / r
     bins = bearing_bins(b)
     for i in range(len(q)):
         qx, qy = q[i, 0], q[i, 1]
@@ -101,7 +99,7 @@ def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
         # q's bearing as one of the reference's turn [b[0], b[0] + 2 pi), and where it falls
         a = b[0] + (math.atan2(qy, qx) - b[0]) % turn
         s = first_at_least(b, bins, a, False)
-        best, j = reach2, -1
+        best, j, near = reach2, -1, False
         for way in (1, -1):
             for step in range(n):
                 # the next point this way round and its bearing difference, 0 to 2 pi (a turn
@@ -125,16 +123,26 @@ def _nearest_and_surface(p, r, b, q, radius: float, gap_beams: float):
                 if low2 > best:
                     break
                 d = (qx - p[kk, 0]) ** 2 + (qy - p[kk, 1]) ** 2
+                if math.sqrt(d) <= radius:
+                    near = True
+                    break
                 if d < best or (d == best and (j < 0 or kk < j)):
                     best, j = d, kk
+            if near:
+                break
+        if near:
+            on_point += 1
+            on_surface += 1
+            continue
         if j < 0:
             continue
-        to_point[i] = to_surface[i] = math.sqrt(best)
         for s in (j - 1, j):  # the nearest point's two segments hold the surface's nearest point
             if 0 <= s < m and surface[s]:
                 ax, ay = p[s, 0], p[s, 1]
                 abx, aby = p[s + 1, 0] - ax, p[s + 1, 1] - ay
                 t = ((qx - ax) * abx + (qy - ay) * aby) / max(abx * abx + aby * aby, 1e-12)
                 t = min(max(t, 0.0), 1.0)
-                to_surface[i] = min(to_surface[i], math.hypot(qx - ax - t * abx, qy - ay - t * aby))
-    return to_point, to_surface
+                if math.hypot(qx - ax - t * abx, qy - ay - t * aby) <= radius:
+                    on_surface += 1
+                    break
+    return on_point, on_surface
