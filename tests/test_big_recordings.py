@@ -176,6 +176,84 @@ def test_ros2_bags_read_through_their_index_like_ros1(tmp_path, intel, kind):
         assert np.allclose(ros2.scan(k).odometry.as_array(), ros1.scan(k).odometry.as_array())
 
 
+def file_compressed(src: Path, dst: Path, kind: str) -> Path:
+    """The ROS 2 bag ``src`` written again by rosbags' own writer (as MCAP or sqlite3), each
+    storage file compressed whole with zstd (``ros2 bag record --compression-mode file``)."""
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
+    with Reader(src) as r:
+        w = Writer(dst, version=8, storage_plugin=plugin)
+        w.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+        with w:
+            ts = get_typestore(Stores.ROS2_HUMBLE)  # a Humble bag stores no definitions
+            conns = {
+                c.id: w.add_connection(c.topic, c.msgtype, typestore=ts) for c in r.connections
+            }
+            for c, t, raw in r.messages():
+                w.write(conns[c.id], t, raw)
+    return dst
+
+
+@pytest.mark.parametrize("kind", ["humble", "mcap"])
+def test_a_ros2_bag_compressed_file_by_file_is_decompressed_once_into_the_cache(
+    tmp_path, intel, kind, monkeypatch
+):
+    """Its zstd files are decompressed the first time into the cache, never beside the bag, and
+    read from there the next times (rosbags would decompress them at each opening); its scans
+    equal the uncompressed bag's, and it says so."""
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), kind)
+    path = file_compressed(plain, tmp_path / "z", kind)
+    beside = sorted(p.name for p in path.iterdir())
+    assert all(n == "metadata.yaml" or n.endswith(".zstd") for n in beside)
+    first, again, whole = read_log(path), read_log(path), read_log(plain)
+    assert any("decompressed once into" in n for n in first.notes), first.notes
+    assert any("read from their decompressed copy" in n for n in again.notes), again.notes
+    assert sorted(p.name for p in path.iterdir()) == beside
+    (entry,) = (tmp_path / "cache" / "logs").iterdir()
+    made = {f.name: f.stat().st_mtime_ns for f in entry.iterdir()}
+    for log in (first, again):
+        assert log.store is not None and log.records == 12
+        for k in (11, 0, 5):
+            assert same_scan(log.scan(k), whole.scan(k))
+            assert np.allclose(log.scan(k).odometry.as_array(), whole.scan(k).odometry.as_array())
+    assert {f.name: f.stat().st_mtime_ns for f in entry.iterdir() if f.name != "meta.json"} == {
+        n: t for n, t in made.items() if n != "meta.json"
+    }
+
+
+def test_a_ros2_bag_that_decompresses_past_the_cache_is_left_to_rosbags(
+    tmp_path, intel, monkeypatch
+):
+    """A few compressed bytes may decompress to many: past what the whole cache may hold, the
+    copy is abandoned (nothing left in the cache) and rosbags decompresses at each opening."""
+    from mbicp_viz.readers import ros2_decompressed
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(ros2_decompressed, "CACHE_BYTES", 10_000)
+    plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), "mcap")
+    log = read_log(file_compressed(plain, tmp_path / "z", "mcap"))
+    assert any("decompress to more than the cache holds" in n for n in log.notes), log.notes
+    assert log.records == 12 and same_scan(log.scan(11), read_log(plain).scan(11))
+    assert not any((tmp_path / "cache" / "logs").iterdir())
+
+
+def test_a_truncated_zstd_file_of_a_ros2_bag_is_said_and_leaves_no_cache_entry(
+    tmp_path, intel, monkeypatch
+):
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), "mcap")
+    path = file_compressed(plain, tmp_path / "z", "mcap")
+    (z,) = path.glob("*.zstd")
+    z.write_bytes(z.read_bytes()[: z.stat().st_size // 2])
+    with pytest.raises(InputError, match="not a whole zstd stream") as e:
+        read_log(path)
+    assert e.value.path == str(z)
+    assert not any((tmp_path / "cache" / "logs").iterdir())
+
+
 @pytest.mark.parametrize("kind", ["humble", "mcap"])
 def test_a_ros2_bags_scan_stamps_are_read_from_its_storage_index(tmp_path, intel, kind):
     """A ROS 2 bag's scan stamps come from its storage's own index (sqlite3's timestamp column,

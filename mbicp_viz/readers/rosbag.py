@@ -83,7 +83,7 @@ def read_rosbag(
         raise InputError("no such file or folder", str(path))
     notes: list[str] = []
     try:
-        reader = open_bag(p, typestore)
+        reader = open_bag(p, typestore, notes)
     except InputError:
         raise
     except Exception as e:  # a damaged ROS 1 index, or rosbags refusing a ROS 2 bag
@@ -101,9 +101,11 @@ def _is_ros1(p: Path) -> bool:
         return f.read(len(MAGIC)) == MAGIC
 
 
-def open_bag(p: Path, typestore: str):
+def open_bag(p: Path, typestore: str, notes: list[str] | None = None):
     """A reader on ``p``, its index read: the project's own for a ROS 1 bag, rosbags' for a ROS 2
-    one. A bag without a LaserScan topic is refused here, before any message is decoded."""
+    one (a ROS 2 bag whose files are compressed whole: their copy decompressed once into the
+    cache, ``ros2_decompressed.py``, which ``notes`` is told of). A bag without a LaserScan topic
+    is refused here, before any message is decoded."""
     if _is_ros1(p):
         from .ros1_index import Ros1Bag
 
@@ -111,7 +113,12 @@ def open_bag(p: Path, typestore: str):
     else:
         from rosbags.highlevel import AnyReader
 
-        reader = AnyReader([p], default_typestore=typestore_named(typestore))
+        from .ros2_decompressed import decompressed
+
+        folder, said = decompressed(p)
+        if said is not None and notes is not None:
+            notes.append(said)
+        reader = AnyReader([folder], default_typestore=typestore_named(typestore))
         reader.open()
     if not any(ros2_type(c.msgtype) == LASER_SCAN for c in reader.connections):
         has = "; ".join(
