@@ -176,16 +176,17 @@ def test_ros2_bags_read_through_their_index_like_ros1(tmp_path, intel, kind):
         assert np.allclose(ros2.scan(k).odometry.as_array(), ros1.scan(k).odometry.as_array())
 
 
-def file_compressed(src: Path, dst: Path, kind: str) -> Path:
+def zstd_compressed(src: Path, dst: Path, kind: str, mode: str = "file") -> Path:
     """The ROS 2 bag ``src`` written again by rosbags' own writer (as MCAP or sqlite3), each
-    storage file compressed whole with zstd (``ros2 bag record --compression-mode file``)."""
+    storage file or each message compressed with zstd (``ros2 bag record --compression-mode
+    file`` or ``message``)."""
     from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
     plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
     with Reader(src) as r:
         w = Writer(dst, version=8, storage_plugin=plugin)
-        w.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+        w.set_compression(CompressionMode[mode.upper()], CompressionFormat.ZSTD)
         with w:
             ts = get_typestore(Stores.ROS2_HUMBLE)  # a Humble bag stores no definitions
             conns = {
@@ -205,7 +206,7 @@ def test_a_ros2_bag_compressed_file_by_file_is_decompressed_once_into_the_cache(
     equal the uncompressed bag's, and it says so."""
     monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
     plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), kind)
-    path = file_compressed(plain, tmp_path / "z", kind)
+    path = zstd_compressed(plain, tmp_path / "z", kind)
     beside = sorted(p.name for p in path.iterdir())
     assert all(n == "metadata.yaml" or n.endswith(".zstd") for n in beside)
     first, again, whole = read_log(path), read_log(path), read_log(plain)
@@ -234,10 +235,24 @@ def test_a_ros2_bag_that_decompresses_past_the_cache_is_left_to_rosbags(
     monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
     monkeypatch.setattr(ros2_decompressed, "CACHE_BYTES", 10_000)
     plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), "mcap")
-    log = read_log(file_compressed(plain, tmp_path / "z", "mcap"))
+    log = read_log(zstd_compressed(plain, tmp_path / "z", "mcap"))
     assert any("decompress to more than the cache holds" in n for n in log.notes), log.notes
     assert log.records == 12 and same_scan(log.scan(11), read_log(plain).scan(11))
     assert not any((tmp_path / "cache" / "logs").iterdir())
+
+
+@pytest.mark.parametrize("kind", ["humble", "mcap"])
+def test_a_storage_file_of_a_bag_of_compressed_messages_is_read_through_its_folder(
+    tmp_path, intel, kind
+):
+    """Only the folder's metadata says that each message is compressed: the file opened alone
+    (read as undecodable messages before) is read through its folder, and says so."""
+    plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), kind)
+    path = zstd_compressed(plain, tmp_path / "z", kind, "message")
+    (storage,) = (f for f in path.iterdir() if f.suffix in (".db3", ".mcap"))
+    log, whole = read_log(storage), read_log(plain)
+    assert any("read through its folder" in n for n in log.notes), log.notes
+    assert log.records == 12 and all(same_scan(log.scan(k), whole.scan(k)) for k in (0, 11))
 
 
 def test_a_truncated_zstd_file_of_a_ros2_bag_is_said_and_leaves_no_cache_entry(
@@ -245,7 +260,7 @@ def test_a_truncated_zstd_file_of_a_ros2_bag_is_said_and_leaves_no_cache_entry(
 ):
     monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
     plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), "mcap")
-    path = file_compressed(plain, tmp_path / "z", "mcap")
+    path = zstd_compressed(plain, tmp_path / "z", "mcap")
     (z,) = path.glob("*.zstd")
     z.write_bytes(z.read_bytes()[: z.stat().st_size // 2])
     with pytest.raises(InputError, match="not a whole zstd stream") as e:

@@ -1,7 +1,7 @@
-"""A ROS 2 bag compressed file by file (``ros2 bag record --compression-mode file``), decompressed
-once into the cache.
+"""A ROS 2 bag compressed by ``ros2 bag record --compression-mode file`` (or ``message``): what
+to open for it.
 
-Such a bag's storage files are zstd streams (``x.db3.zstd``, ``x.mcap.zstd``) with no index a
+With ``file``, its storage files are zstd streams (``x.db3.zstd``, ``x.mcap.zstd``) with no index a
 reader can seek in. rosbags decompresses every one of them into a temporary folder at each
 opening, and removes it at the close: on an hour of 1081-beam scans at 40 Hz (about 800 MB) every
 ``match --pair`` and every worker of a run would wait for the whole file. Here they are
@@ -10,6 +10,9 @@ read-only), with a metadata file that names them uncompressed, and that folder i
 opens from then on: the stamps from the storage's own index (``ros2_index.py``), each scan read
 when asked for. The entry is named by every compressed file's path, size and modification time,
 and is removed least recently used first with the cache's other entries (``log_cache.prune``).
+
+With ``message``, each message is compressed and only the folder's metadata says so: one of its
+storage files opened alone reads as undecodable messages, so its folder is opened instead.
 """
 
 from __future__ import annotations
@@ -26,12 +29,21 @@ _INFO = "rosbag2_bagfile_information"
 
 
 def decompressed(bag: Path) -> tuple[Path, str | None]:
-    """The folder to open for the ROS 2 bag ``bag``: itself, unless its files are compressed
-    whole (then the cache's copy, decompressed here the first time), and what to say of it."""
-    info = _file_compressed(bag)
-    if info is None:
+    """The bag to open for the ROS 2 bag ``bag`` (a folder, or a storage file), and what to say
+    of it: itself, its folder when its messages are compressed, or the cache's copy of a folder
+    whose files are compressed whole (decompressed here the first time)."""
+    if bag.is_file():
+        info = _metadata(bag.parent)
+        if info is None or _mode(info) != "message" or bag.name not in _names(info):
+            return bag, None
+        return bag.parent, (
+            f"{bag}: its messages are zstd-compressed, as its folder's {_METADATA} says: read "
+            f"through its folder {bag.parent}"
+        )
+    info = _metadata(bag)
+    if info is None or _mode(info) != "file":
         return bag, None
-    parts = [bag / Path(name).name for name in info["relative_file_paths"]]
+    parts = [bag / name for name in _names(info)]
     if any(not p.is_file() or p.suffix != ".zstd" for p in parts):
         return bag, None  # rosbags says what is missing or unknown
     stats = tuple((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in parts)
@@ -51,22 +63,33 @@ def decompressed(bag: Path) -> tuple[Path, str | None]:
     )
 
 
-def _file_compressed(bag: Path) -> dict | None:
-    """The bag's metadata when it says its files are compressed whole, else None (a bag that is
-    not a folder, or whose metadata cannot be read: rosbags says why)."""
-    if not (bag / _METADATA).is_file():
+def _metadata(folder: Path) -> dict | None:
+    """The bag information of ``folder``'s metadata file; None without one, or when it cannot be
+    read (rosbags says why)."""
+    if not (folder / _METADATA).is_file():
         return None
     from ruamel.yaml import YAML, YAMLError
 
     try:
-        info = YAML(typ="safe").load((bag / _METADATA).read_text())[_INFO]
-        mode = str(info.get("compression_mode") or "").lower()
+        info = YAML(typ="safe").load((folder / _METADATA).read_text())[_INFO]
         names = info["relative_file_paths"]
-    except (OSError, YAMLError, KeyError, TypeError, AttributeError, UnicodeDecodeError):
+    except (OSError, YAMLError, KeyError, TypeError, UnicodeDecodeError):
         return None
-    if mode != "file" or not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-        return None
-    return info
+    ok = (
+        isinstance(info, dict)
+        and isinstance(names, list)
+        and all(isinstance(n, str) for n in names)
+    )
+    return info if ok else None
+
+
+def _mode(info: dict) -> str:
+    return str(info.get("compression_mode") or "").lower()
+
+
+def _names(info: dict) -> list[str]:
+    """The storage files' names (a name only: never a path out of the folder)."""
+    return [Path(n).name for n in info["relative_file_paths"]]
 
 
 class _TooLarge(Exception):
