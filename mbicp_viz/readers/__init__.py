@@ -75,7 +75,7 @@ def read_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
     suffix = ".bag" if p.is_dir() else format_suffix(p)
     reader = _READERS.get(suffix)
     if reader is None:
-        known = ", ".join(FORMATS + [f"(any){c}" for c in COMPRESSED])
+        known = ", ".join(FORMATS + [f"(any){c}" for c in COMPRESSED] + ["a ROS 2 bag's folder"])
         raise InputError(f"unknown file type {''.join(p.suffixes)[-20:]!r}; known: {known}", str(p))
     module, name = reader.split(":")
     fn = getattr(importlib.import_module(f".{module}", __name__), name)
