@@ -22,6 +22,8 @@ import json
 import shutil
 from pathlib import Path
 
+from mbicp_viz.errors import InputError
+
 from .log_cache import CACHE_BYTES, entry, prune
 
 _METADATA = "metadata.yaml"
@@ -48,10 +50,16 @@ def decompressed(bag: Path) -> tuple[Path, str | None]:
         return bag, None  # rosbags says what is missing or unknown
     stats = tuple((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in parts)
     folder = entry(str(bag / _METADATA), "ros2 file-compressed bag", stats)
-    if (folder / _METADATA).is_file() and (folder / "meta.json").is_file():
+    if _complete(folder):
         (folder / "meta.json").touch()  # used: the last to be removed
         return folder, f"{bag}: its zstd files read from their decompressed copy in {folder}"
-    if not _write(bag, folder, info, parts):
+    try:
+        whole = _write(bag, folder, info, parts)
+    except InputError:
+        if _complete(folder):  # another process wrote the same copy meanwhile
+            return folder, f"{bag}: its zstd files read from their decompressed copy in {folder}"
+        raise
+    if not whole:
         return bag, (
             f"{bag}: its zstd files decompress to more than the cache holds "
             f"({CACHE_BYTES / 1e9:g} GB): decompressed again at each opening, by rosbags"
@@ -61,6 +69,12 @@ def decompressed(bag: Path) -> tuple[Path, str | None]:
         f"{bag}: its files are zstd-compressed whole; decompressed once into {folder}: the next "
         "opening reads them from there"
     )
+
+
+def _complete(folder: Path) -> bool:
+    """Whether the cache holds a whole copy in ``folder`` (its last file, written last, is there:
+    a copy is moved in whole, ``outputs.written_folder``)."""
+    return (folder / "meta.json").is_file()
 
 
 def _metadata(folder: Path) -> dict | None:
@@ -101,7 +115,6 @@ def _write(bag: Path, folder: Path, info: dict, parts: list[Path]) -> bool:
     they would hold more than the whole cache may (nothing written)."""
     from ruamel.yaml import YAML
 
-    from mbicp_viz.errors import InputError
     from mbicp_viz.outputs import written_folder
 
     try:
