@@ -255,6 +255,60 @@ def test_a_storage_file_of_a_bag_of_compressed_messages_is_read_through_its_fold
     assert log.records == 12 and all(same_scan(log.scan(k), whole.scan(k)) for k in (0, 11))
 
 
+@pytest.fixture(scope="module")
+def chunked_mcap(tmp_path_factory) -> Path:
+    """An MCAP bag of 1,200 real scans of 1081 beams, in several chunks (rosbags closes one past
+    1 MB)."""
+    out = tmp_path_factory.mktemp("mcap") / "m"
+    args = ["bench", "bag", str(out), "--from", str(INTEL), "--minutes", "0.5", "--kind", "mcap"]
+    result = CliRunner().invoke(app, args + ["--rate-hz", "40", "--beams", "1081"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@settings(max_examples=8, deadline=None)
+@given(fraction=st.floats(0.5, 0.999))
+def test_an_mcap_file_cut_short_is_read_to_its_cut(tmp_path_factory, chunked_mcap, fraction):
+    """A recording cut short (no summary, no footer: rosbags refuses it) is read up to its last
+    whole record from a closed copy in the cache: its scans are the whole bag's first ones, the
+    command says how many bytes were lost, the next opening reads the copy, and the file itself is
+    left as it was."""
+    tmp = tmp_path_factory.mktemp("cut")
+    (whole_file,) = chunked_mcap.glob("*.mcap")
+    data = whole_file.read_bytes()
+    cut = tmp / "cut.mcap"
+    cut.write_bytes(data[: int(len(data) * fraction)])
+    os.environ["MBICP_VIZ_CACHE"], before = str(tmp / "cache"), os.environ["MBICP_VIZ_CACHE"]
+    try:
+        first, again, whole = read_log(cut), read_log(cut), read_log(chunked_mcap)
+    finally:
+        os.environ["MBICP_VIZ_CACHE"] = before
+    (said,) = [n for n in first.notes if "cut short (no MCAP footer" in n]
+    lost = int(re.search(r"the (\d+) bytes after them lost", said)[1])
+    assert 0 <= lost < 1_100_000  # at most the chunk the cut went through (rosbags: 1 MB each)
+    assert any("read from its closed copy" in n for n in again.notes), again.notes
+    assert cut.read_bytes() == data[: int(len(data) * fraction)]
+    assert 0 < first.records <= whole.records  # all of them when the cut is in the summary
+    for k in (0, first.records - 1):
+        a, b = first.scan(k), whole.scan(k)
+        assert same_scan(a, b) and a.stamp == b.stamp and same_scan(again.scan(k), b)
+
+
+@pytest.mark.parametrize("size", [20, 100_000])
+def test_an_mcap_file_cut_before_its_first_chunk_ended_is_said(
+    tmp_path, chunked_mcap, monkeypatch, size
+):
+    """Cut inside its header, or inside its first chunk: no message to read, said in one line
+    naming the file, and no copy made."""
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    (whole_file,) = chunked_mcap.glob("*.mcap")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole_file.read_bytes()[:size])
+    with pytest.raises(InputError, match="cut short .* no message to read") as e:
+        read_log(cut)
+    assert e.value.path == str(cut) and not (tmp_path / "cache").exists()
+
+
 def test_a_truncated_zstd_file_of_a_ros2_bag_is_said_and_leaves_no_cache_entry(
     tmp_path, intel, monkeypatch
 ):

@@ -104,8 +104,9 @@ def _is_ros1(p: Path) -> bool:
 def open_bag(p: Path, typestore: str, notes: list[str] | None = None):
     """A reader on ``p``, its index read: the project's own for a ROS 1 bag, rosbags' for a ROS 2
     one (a ROS 2 bag whose files are compressed whole: their copy decompressed once into the
-    cache, ``ros2_decompressed.py``, which ``notes`` is told of). A bag without a LaserScan topic
-    is refused here, before any message is decoded."""
+    cache, ``ros2_decompressed.py``; an MCAP file cut short: a closed copy of its whole records,
+    ``mcap_recovered.py``; ``notes`` is told of either). A bag without a LaserScan topic is
+    refused here, before any message is decoded."""
     if _is_ros1(p):
         from .ros1_index import Ros1Bag
 
@@ -115,11 +116,20 @@ def open_bag(p: Path, typestore: str, notes: list[str] | None = None):
 
         from .ros2_decompressed import decompressed
 
-        folder, said = decompressed(p)
+        bag, said = decompressed(p)
+        reader = AnyReader([bag], default_typestore=typestore_named(typestore))
+        try:
+            reader.open()
+        except Exception:  # rosbags refuses it: an MCAP file cut short is read to its cut
+            from .mcap_recovered import cut_short, recovered
+
+            if (cut := cut_short(bag)) is None:
+                raise
+            bag, said = recovered(cut)
+            reader = AnyReader([bag], default_typestore=typestore_named(typestore))
+            reader.open()
         if said is not None and notes is not None:
             notes.append(said)
-        reader = AnyReader([folder], default_typestore=typestore_named(typestore))
-        reader.open()
     if not any(ros2_type(c.msgtype) == LASER_SCAN for c in reader.connections):
         has = "; ".join(
             f"{c.topic} ({c.msgtype}, {c.msgcount} messages)" for c in reader.connections
