@@ -5,6 +5,7 @@ memory."""
 import math
 import os
 import re
+import shutil
 import statistics
 import subprocess
 import sys
@@ -230,10 +231,10 @@ def test_a_ros2_bag_that_decompresses_past_the_cache_is_left_to_rosbags(
 ):
     """A few compressed bytes may decompress to many: past what the whole cache may hold, the
     copy is abandoned (nothing left in the cache) and rosbags decompresses at each opening."""
-    from mbicp_viz.readers import ros2_decompressed
+    from mbicp_viz.readers import ros2_storage
 
     monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(ros2_decompressed, "CACHE_BYTES", 10_000)
+    monkeypatch.setattr(ros2_storage, "CACHE_BYTES", 10_000)
     plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), "mcap")
     log = read_log(zstd_compressed(plain, tmp_path / "z", "mcap"))
     assert any("decompress to more than the cache holds" in n for n in log.notes), log.notes
@@ -307,6 +308,31 @@ def test_an_mcap_file_cut_before_its_first_chunk_ended_is_said(
     with pytest.raises(InputError, match="cut short .* no message to read") as e:
         read_log(cut)
     assert e.value.path == str(cut) and not (tmp_path / "cache").exists()
+
+
+@pytest.mark.parametrize("kind", ["humble", "mcap"])
+def test_a_recording_stopped_before_its_metadata_was_written_is_read(
+    tmp_path, intel, kind, chunked_mcap, monkeypatch
+):
+    """A recorder killed leaves a folder of one storage file and no metadata.yaml (rosbags refuses
+    the folder): the file is read alone, and said; an MCAP one is also cut short (no footer) and
+    read to its cut."""
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    plain = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), kind)
+    killed = tmp_path / "killed"
+    killed.mkdir()
+    (storage,) = (f for f in plain.iterdir() if f.suffix in (".db3", ".mcap"))
+    shutil.copy(storage, killed / storage.name)
+    log, whole = read_log(killed), read_log(plain)
+    assert any("no metadata.yaml" in n and "read alone" in n for n in log.notes), log.notes
+    assert log.records == 12 and all(same_scan(log.scan(k), whole.scan(k)) for k in (0, 11))
+    (mcap,) = chunked_mcap.glob("*.mcap")
+    cut = tmp_path / "killed-mcap"
+    cut.mkdir()
+    (cut / mcap.name).write_bytes(mcap.read_bytes()[: mcap.stat().st_size * 3 // 4])
+    log, whole = read_log(cut), read_log(chunked_mcap)
+    assert any("read alone" in n for n in log.notes) and any("cut short" in n for n in log.notes)
+    assert same_scan(log.scan(log.records - 1), whole.scan(log.records - 1))
 
 
 def test_a_truncated_zstd_file_of_a_ros2_bag_is_said_and_leaves_no_cache_entry(

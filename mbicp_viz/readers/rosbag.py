@@ -104,7 +104,7 @@ def _is_ros1(p: Path) -> bool:
 def open_bag(p: Path, typestore: str, notes: list[str] | None = None):
     """A reader on ``p``, its index read: the project's own for a ROS 1 bag, rosbags' for a ROS 2
     one (a ROS 2 bag whose files are compressed whole: their copy decompressed once into the
-    cache, ``ros2_decompressed.py``; an MCAP file cut short: a closed copy of its whole records,
+    cache, ``ros2_storage.py``; an MCAP file cut short: a closed copy of its whole records,
     ``mcap_recovered.py``; ``notes`` is told of either). A bag without a LaserScan topic is
     refused here, before any message is decoded."""
     if _is_ros1(p):
@@ -114,9 +114,9 @@ def open_bag(p: Path, typestore: str, notes: list[str] | None = None):
     else:
         from rosbags.highlevel import AnyReader
 
-        from .ros2_decompressed import decompressed
+        from .ros2_storage import storage_to_open
 
-        bag, said = decompressed(p)
+        bag, said = storage_to_open(p)
         reader = AnyReader([bag], default_typestore=typestore_named(typestore))
         try:
             reader.open()
@@ -125,7 +125,8 @@ def open_bag(p: Path, typestore: str, notes: list[str] | None = None):
 
             if (cut := cut_short(bag)) is None:
                 raise
-            bag, said = recovered(cut)
+            bag, also = recovered(cut)
+            said = also if said is None else f"{said}; {also}"
             reader = AnyReader([bag], default_typestore=typestore_named(typestore))
             reader.open()
         if said is not None and notes is not None:

@@ -1,18 +1,20 @@
-"""A ROS 2 bag compressed by ``ros2 bag record --compression-mode file`` (or ``message``): what
-to open for it.
+"""Which storage a ROS 2 bag is read from: its folder, one of its files, or a copy in the cache.
 
-With ``file``, its storage files are zstd streams (``x.db3.zstd``, ``x.mcap.zstd``) with no index a
-reader can seek in. rosbags decompresses every one of them into a temporary folder at each
-opening, and removes it at the close: on an hour of 1081-beam scans at 40 Hz (about 800 MB) every
-``match --pair`` and every worker of a run would wait for the whole file. Here they are
-decompressed the first time into ``log_cache.cache_root()`` (never beside the bag, which may be
-read-only), with a metadata file that names them uncompressed, and that folder is what rosbags
-opens from then on: the stamps from the storage's own index (``ros2_index.py``), each scan read
-when asked for. The entry is named by every compressed file's path, size and modification time,
-and is removed least recently used first with the cache's other entries (``log_cache.prune``).
+A bag recorded with ``ros2 bag record --compression-mode file`` has zstd streams for storage files
+(``x.db3.zstd``, ``x.mcap.zstd``), with no index a reader can seek in. rosbags decompresses every
+one of them into a temporary folder at each opening, and removes it at the close: on an hour of
+1081-beam scans at 40 Hz (about 800 MB) every ``match --pair`` and every worker of a run would
+wait for the whole file. Here they are decompressed the first time into
+``log_cache.cache_root()`` (never beside the bag, which may be read-only), with a metadata file
+that names them uncompressed, and that folder is what rosbags opens from then on: the stamps from
+the storage's own index (``ros2_index.py``), each scan read when asked for. The entry is named by
+every compressed file's path, size and modification time, and is removed least recently used first
+with the cache's other entries (``log_cache.prune``).
 
-With ``message``, each message is compressed and only the folder's metadata says so: one of its
-storage files opened alone reads as undecodable messages, so its folder is opened instead.
+With ``--compression-mode message`` each message is compressed and only the folder's metadata says
+so: one of its storage files opened alone reads as undecodable messages, so its folder is opened
+instead. A recording stopped before its metadata was written (the recorder killed) is a folder of
+one storage file and no metadata: that file is opened alone.
 """
 
 from __future__ import annotations
@@ -30,10 +32,19 @@ _METADATA = "metadata.yaml"
 _INFO = "rosbag2_bagfile_information"
 
 
-def decompressed(bag: Path) -> tuple[Path, str | None]:
+def storage_to_open(bag: Path) -> tuple[Path, str | None]:
     """The bag to open for the ROS 2 bag ``bag`` (a folder, or a storage file), and what to say
-    of it: itself, its folder when its messages are compressed, or the cache's copy of a folder
-    whose files are compressed whole (decompressed here the first time)."""
+    of it: itself; its folder when its messages are compressed; the cache's copy of a folder whose
+    files are compressed whole (decompressed here the first time); a folder's one storage file
+    when it has no metadata."""
+    if bag.is_dir() and not (bag / _METADATA).exists():
+        files = [f for f in bag.iterdir() if f.suffix in (".db3", ".mcap") and f.is_file()]
+        if len(files) == 1:
+            return files[0], (
+                f"{bag}: no {_METADATA} (a recording stopped before it was written): its one "
+                f"storage file {files[0].name} read alone"
+            )
+        return bag, None
     if bag.is_file():
         info = _metadata(bag.parent)
         if info is None or _mode(info) != "message" or bag.name not in _names(info):
