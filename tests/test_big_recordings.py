@@ -271,9 +271,9 @@ def chunked_mcap(tmp_path_factory) -> Path:
 @given(fraction=st.floats(0.5, 0.999))
 def test_an_mcap_file_cut_short_is_read_to_its_cut(tmp_path_factory, chunked_mcap, fraction):
     """A recording cut short (no summary, no footer: rosbags refuses it) is read up to its last
-    whole record from a closed copy in the cache: its scans are the whole bag's first ones, the
-    command says how many bytes were lost, the next opening reads the copy, and the file itself is
-    left as it was."""
+    whole chunk from a closed copy in the cache, through the index the copy was given: its scans
+    are the whole bag's first ones, the command says how many bytes were lost, the next opening
+    reads the copy, and the file itself is left as it was."""
     tmp = tmp_path_factory.mktemp("cut")
     (whole_file,) = chunked_mcap.glob("*.mcap")
     data = whole_file.read_bytes()
@@ -282,6 +282,11 @@ def test_an_mcap_file_cut_short_is_read_to_its_cut(tmp_path_factory, chunked_mca
     os.environ["MBICP_VIZ_CACHE"], before = str(tmp / "cache"), os.environ["MBICP_VIZ_CACHE"]
     try:
         first, again, whole = read_log(cut), read_log(cut), read_log(chunked_mcap)
+        reader = open_bag(cut, DEFAULT_TYPESTORE)  # the copy, through the index it was given
+        try:
+            indexed = topic_stamps(reader, "/scan", str(cut))
+        finally:
+            reader.close()
     finally:
         os.environ["MBICP_VIZ_CACHE"] = before
     (said,) = [n for n in first.notes if "cut short (no MCAP footer" in n]
@@ -290,6 +295,7 @@ def test_an_mcap_file_cut_short_is_read_to_its_cut(tmp_path_factory, chunked_mca
     assert any("read from its closed copy" in n for n in again.notes), again.notes
     assert cut.read_bytes() == data[: int(len(data) * fraction)]
     assert 0 < first.records <= whole.records  # all of them when the cut is in the summary
+    assert indexed is not None and np.array_equal(indexed, first.store.stamps_ns)
     for k in (0, first.records - 1):
         a, b = first.scan(k), whole.scan(k)
         assert same_scan(a, b) and a.stamp == b.stamp and same_scan(again.scan(k), b)

@@ -2,13 +2,15 @@
 
 An MCAP file ends with a summary and a footer that readers start from; a recording cut short has
 neither, and rosbags refuses it ("File end magic is invalid"). Its data section is still a
-sequence of whole records up to the cut (the MCAP specification: records of an opcode, a length
-and their content). Those are copied into the cache (``log_cache.cache_root()``, never beside the
-input) and closed with a data-end record and a footer that names no summary: a valid MCAP file,
-which rosbags reads by walking its records (a query decompresses only the chunks of its time
-range). The bytes after the last whole record are lost, and the command says how many. The copy
-is keyed by the file's path, size and modification time and removed least recently used first
-with the cache's other entries.
+sequence of whole records up to the cut (the MCAP specification: an opcode, a length, the
+content). Those are copied into the cache (``log_cache.cache_root()``, never beside the input) and
+closed as a writer closes a file: a data end, a summary of the schemas and channels found in the
+chunks and one chunk index per chunk (where its message indexes are, which the copy holds as they
+were written after each chunk), and the footer pointing at it. rosbags then reads the copy through
+its index, as a whole recording: a scan when it is asked for, the scans' stamps from the message
+indexes (``ros2_index.py``). The bytes after the last whole record are lost, and the command says
+how many. The copy is keyed by the file's path, size and modification time and removed least
+recently used first with the cache's other entries.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import json
 import shutil
 import struct
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from mbicp_viz.errors import InputError
@@ -24,16 +27,9 @@ from .log_cache import CACHE_BYTES, entry, prune
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD = struct.Struct("<BQ")  # opcode, content length
-_HEADER, _FOOTER, _DATA_END = 0x01, 0x02, 0x0F
-# the records that close the copy: a data end (its data section's CRC, 0: none) and a footer (no
-# summary, no summary offsets, no CRC), then the magic again
-_CLOSING = (
-    _RECORD.pack(_DATA_END, 4)
-    + struct.pack("<I", 0)
-    + _RECORD.pack(_FOOTER, 20)
-    + struct.pack("<QQI", 0, 0, 0)
-    + MAGIC
-)
+_CHUNK_HEAD = struct.Struct("<QQQI")  # message start and end time, uncompressed size and CRC
+_HEADER, _FOOTER, _SCHEMA, _CHANNEL, _MESSAGE, _MESSAGE_INDEX = 0x01, 0x02, 0x03, 0x04, 0x05, 0x07
+_CHUNK, _CHUNK_INDEX, _DATA_END = 0x06, 0x08, 0x0F
 
 
 def cut_short(path: Path) -> Path | None:
@@ -51,71 +47,164 @@ def cut_short(path: Path) -> Path | None:
 
 
 def recovered(mcap: Path) -> tuple[Path, str]:
-    """A whole copy of the cut-short ``mcap``'s whole records in the cache (made here the first
+    """A closed copy of the cut-short ``mcap``'s whole records in the cache (made here the first
     time), and what to say of it."""
     folder = entry(str(mcap), "mcap cut short", ())
     copy = folder / mcap.name
     if (folder / "meta.json").is_file():
         (folder / "meta.json").touch()  # used: the last to be removed
         return copy, f"{mcap}: cut short; read from its closed copy {copy}"
-    end, records = _whole_records(mcap)
-    if end > CACHE_BYTES:
+    found = _survey(mcap)
+    if found.end > CACHE_BYTES:
         raise InputError(
-            f"cut short (no MCAP footer); its {end / 1e9:.1f} GB of whole records are more than "
-            f"the cache holds ({CACHE_BYTES / 1e9:g} GB) to close a copy of",
+            f"cut short (no MCAP footer); its {found.end / 1e9:.1f} GB of whole records are more "
+            f"than the cache holds ({CACHE_BYTES / 1e9:g} GB) to close a copy of",
             str(mcap),
         )
-    _write(mcap, folder, end)
+    _write(mcap, folder, found)
     prune(folder.parent, CACHE_BYTES, keep=folder)
-    lost = mcap.stat().st_size - end
+    lost = mcap.stat().st_size - found.end
     return copy, (
-        f"{mcap}: cut short (no MCAP footer, as a recording stopped by a crash): its {records} "
-        f"whole records copied and closed in {copy}, the {lost} bytes after them lost; the next "
-        "opening reads the copy"
+        f"{mcap}: cut short (no MCAP footer, as a recording stopped by a crash): its "
+        f"{found.chunks} whole chunks copied and closed in {copy}, the {lost} bytes after them "
+        "lost; the next opening reads the copy"
     )
 
 
-def _whole_records(mcap: Path) -> tuple[int, int]:
-    """Where the data section's whole records end (a byte offset), and how many there are: up to
-    the cut, a record of opcode 0 (zeros after the cut), or the data end (a cut summary after)."""
-    size = mcap.stat().st_size
+@dataclass
+class _Survey:
+    """What the copy holds: its data's end (a byte offset), its summary's records, its chunks."""
+
+    end: int = len(MAGIC)
+    chunks: int = 0
+    schemas: dict[int, bytes] = field(default_factory=dict)  # id -> the whole record
+    channels: dict[int, bytes] = field(default_factory=dict)
+    indexes: list[bytes] = field(default_factory=list)  # a chunk index record per chunk
+
+
+def _survey(mcap: Path) -> _Survey:
+    """The whole records of the data section, up to the cut, a record of opcode 0 (zeros after
+    the cut), a chunk that does not decompress, or the data end (a summary cut short after it):
+    each chunk's schemas and channels, and its chunk index. A last chunk whose message indexes
+    the cut went through is left out: its messages could not be found through them."""
+    from rosbags.rosbag2.storage_mcap import decompress
+
+    size, out = mcap.stat().st_size, _Survey()
+    chunk: list = []  # the last chunk's index fields, its message indexes still to come
+    wanted: set[int] = set()  # the channels of the last chunk's messages
     with mcap.open("rb") as f:
-        f.seek(len(MAGIC))
-        at, n = len(MAGIC), 0
-        while at + _RECORD.size <= size:
+        f.seek(out.end)
+        while out.end + _RECORD.size <= size:
             op, length = _RECORD.unpack(f.read(_RECORD.size))
-            if op in (0, _DATA_END, _FOOTER) or (n == 0 and op != _HEADER):
+            first = out.end == len(MAGIC)
+            if op in (0, _DATA_END, _FOOTER) or first != (op == _HEADER):
                 break
-            if length > size - at - _RECORD.size:  # the record the cut went through
+            if length > size - out.end - _RECORD.size:  # the record the cut went through
                 break
-            at += _RECORD.size + length
-            n += 1
-            f.seek(at)
-    if n < 2:  # the header alone: the cut went through the first chunk
+            content = f.read(length) if op in (_CHUNK, _MESSAGE_INDEX, _SCHEMA, _CHANNEL) else b""
+            if op == _CHUNK:
+                try:
+                    records = _chunk_records(content, decompress)
+                except Exception:  # a chunk damaged where the cut left it: the data ends before
+                    break
+                chunk = _chunk_fields(content, out.end, _RECORD.size + length)
+                wanted = _read_definitions(records, out)
+                out.indexes.append(b"")
+                out.chunks += 1
+            elif op == _MESSAGE_INDEX and chunk:  # after its chunk: where that chunk's are
+                (channel,) = struct.unpack_from("<H", content)
+                chunk[4][channel] = out.end
+                chunk[5] += _RECORD.size + length
+            elif op in (_SCHEMA, _CHANNEL):
+                _read_definitions(_RECORD.pack(op, length) + content, out)
+            out.end += _RECORD.size + length
+            if chunk:
+                out.indexes[-1] = _chunk_index(*chunk)
+            f.seek(out.end)
+    if chunk and not wanted <= set(chunk[4]):
+        out.end, out.chunks = chunk[2], out.chunks - 1
+        out.indexes.pop()
+    if out.chunks == 0:
         raise InputError(
-            "cut short (no MCAP footer) before its first record after the header ended: no "
-            "message to read",
+            "cut short (no MCAP footer) before its first chunk ended: no message to read",
             str(mcap),
         )
-    return at, n
+    return out
 
 
-def _write(mcap: Path, folder: Path, end: int) -> None:
-    """The first ``end`` bytes of ``mcap`` and the closing records into ``folder``, whole or not
-    at all."""
+def _chunk_records(content: bytes, decompress) -> bytes:
+    """A chunk record's records, decompressed and checked (rosbags' own decompression)."""
+    _, _, size, crc = _CHUNK_HEAD.unpack_from(content)
+    at = _CHUNK_HEAD.size
+    (n,) = struct.unpack_from("<I", content, at)
+    compression = content[at + 4 : at + 4 + n].decode()
+    at += 4 + n
+    (compressed,) = struct.unpack_from("<Q", content, at)
+    return decompress(content[at + 8 : at + 8 + compressed], compression, size, crc)
+
+
+def _chunk_fields(content: bytes, offset: int, length: int) -> list:
+    """A chunk index's fields but its message indexes: times, offset, length, the message
+    indexes' offsets (filled as they come) and length, compression, sizes."""
+    start, end, size, _ = _CHUNK_HEAD.unpack_from(content)
+    at = _CHUNK_HEAD.size
+    (n,) = struct.unpack_from("<I", content, at)
+    compression = content[at + 4 : at + 4 + n]
+    (compressed,) = struct.unpack_from("<Q", content, at + 4 + n)
+    return [start, end, offset, length, {}, 0, compression, compressed, size]
+
+
+def _chunk_index(start, end, offset, length, indexes, index_length, compression, compressed, size):
+    """A chunk index record (the MCAP specification's field order)."""
+    pairs = b"".join(struct.pack("<HQ", c, at) for c, at in sorted(indexes.items()))
+    content = (
+        struct.pack("<QQQQI", start, end, offset, length, len(pairs))
+        + pairs
+        + struct.pack("<QI", index_length, len(compression))
+        + compression
+        + struct.pack("<QQ", compressed, size)
+    )
+    return _RECORD.pack(_CHUNK_INDEX, len(content)) + content
+
+
+def _read_definitions(records: bytes, out: _Survey) -> set[int]:
+    """The schema and channel records among ``records`` (whole records end to end) into ``out``,
+    the first of each id kept; the channels of their messages."""
+    at, channels = 0, set()
+    while at + _RECORD.size <= len(records):
+        op, length = _RECORD.unpack_from(records, at)
+        whole = records[at : at + _RECORD.size + length]
+        if op in (_SCHEMA, _CHANNEL, _MESSAGE) and length >= 2:
+            (key,) = struct.unpack_from("<H", whole, _RECORD.size)
+            if op == _MESSAGE:
+                channels.add(key)
+            else:
+                (out.schemas if op == _SCHEMA else out.channels).setdefault(key, whole)
+        at += _RECORD.size + length
+    return channels
+
+
+def _write(mcap: Path, folder: Path, found: _Survey) -> None:
+    """The data section's whole records of ``mcap``, then a data end, the summary and the footer,
+    into ``folder``, whole or not at all."""
     from mbicp_viz.outputs import written_folder
 
+    summary = b"".join([*found.schemas.values(), *found.channels.values(), *found.indexes])
+    data_end = _RECORD.pack(_DATA_END, 4) + struct.pack("<I", 0)  # no CRC of the data
+    summary_start = found.end + len(data_end)
+    # no summary offsets, no CRC of the summary
+    footer = _RECORD.pack(_FOOTER, 20) + struct.pack("<QQI", summary_start, 0, 0) + MAGIC
     shutil.rmtree(folder, ignore_errors=True)  # an entry left incomplete
     try:
         folder.parent.mkdir(parents=True, exist_ok=True)
         with written_folder(folder) as tmp:
             tmp.mkdir()
             with mcap.open("rb") as src, (tmp / mcap.name).open("wb") as dst:
-                left = end
+                left = found.end
                 while left and (block := src.read(min(left, 1 << 20))):
                     dst.write(block)
                     left -= len(block)
-                dst.write(_CLOSING)
+                dst.write(data_end + summary + footer)
             (tmp / "meta.json").write_text(json.dumps({"mcap": str(mcap)}))
     except OSError as e:
         raise InputError(f"could not be copied into {folder}: {e}", str(mcap)) from None
