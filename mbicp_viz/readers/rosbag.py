@@ -103,32 +103,14 @@ def _is_ros1(p: Path) -> bool:
 
 def open_bag(p: Path, typestore: str, notes: list[str] | None = None):
     """A reader on ``p``, its index read: the project's own for a ROS 1 bag, rosbags' for a ROS 2
-    one (a ROS 2 bag whose files are compressed whole: their copy decompressed once into the
-    cache, ``ros2_storage.py``; an MCAP file cut short: a closed copy of its whole records,
-    ``mcap_recovered.py``; ``notes`` is told of either). A bag without a LaserScan topic is
-    refused here, before any message is decoded."""
+    one (``_open_ros2``: ``notes`` is told where it was read from when not from ``p``). A bag
+    without a LaserScan topic is refused here, before any message is decoded."""
     if _is_ros1(p):
         from .ros1_index import Ros1Bag
 
         reader = Ros1Bag(p, (LASER_SCAN, ODOMETRY, TF))
     else:
-        from rosbags.highlevel import AnyReader
-
-        from .ros2_storage import storage_to_open
-
-        bag, said = storage_to_open(p)
-        reader = AnyReader([bag], default_typestore=typestore_named(typestore))
-        try:
-            reader.open()
-        except Exception:  # rosbags refuses it: an MCAP file cut short is read to its cut
-            from .mcap_recovered import cut_short, recovered
-
-            if (cut := cut_short(bag)) is None:
-                raise
-            bag, also = recovered(cut)
-            said = also if said is None else f"{said}; {also}"
-            reader = AnyReader([bag], default_typestore=typestore_named(typestore))
-            reader.open()
+        reader, said = _open_ros2(p, typestore)
         if said is not None and notes is not None:
             notes.append(said)
     if not any(ros2_type(c.msgtype) == LASER_SCAN for c in reader.connections):
@@ -138,6 +120,30 @@ def open_bag(p: Path, typestore: str, notes: list[str] | None = None):
         reader.close()
         raise InputError(f"no {LASER_SCAN} topic; the bag has: {has or 'none'}", str(p))
     return reader
+
+
+def _open_ros2(p: Path, typestore: str):
+    """rosbags' reader, open on the storage ``ros2_storage.py`` says ``p`` is read from (a
+    compressed bag's, a folder's without metadata), or on the closed copy of an MCAP file cut
+    short (``mcap_recovered.py``); and what to say of where it reads."""
+    from rosbags.highlevel import AnyReader
+
+    from .ros2_storage import storage_to_open
+
+    bag, said = storage_to_open(p)
+    reader = AnyReader([bag], default_typestore=typestore_named(typestore))
+    try:
+        reader.open()
+    except Exception:  # rosbags refuses it: an MCAP file cut short is read to its cut
+        from .mcap_recovered import cut_short, recovered
+
+        if (cut := cut_short(bag)) is None:
+            raise
+        bag, also = recovered(cut)
+        said = also if said is None else f"{said}; {also}"
+        reader = AnyReader([bag], default_typestore=typestore_named(typestore))
+        reader.open()
+    return reader, said
 
 
 def raw_messages(reader, path: str, connections, start: int | None = None, stop: int | None = None):
