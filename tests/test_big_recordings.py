@@ -341,6 +341,26 @@ def test_a_recording_stopped_before_its_metadata_was_written_is_read(
     assert same_scan(log.scan(log.records - 1), whole.scan(log.records - 1))
 
 
+@pytest.mark.parametrize("topic", ["/tf_static", "/scan"])
+def test_a_sqlite3_bag_whose_record_stamp_is_not_a_number_is_said(tmp_path, intel, topic):
+    """A damaged row read at the opening (a flipped byte made a stamp NULL in the fuzz; here a
+    text) is one line naming the bag, not a TypeError from arithmetic on it."""
+    import sqlite3
+
+    path = write(tmp_path / "r2", intel_robot(intel, 0, 12, MOUNT), "humble")
+    (db,) = path.glob("*.db3")
+    with sqlite3.connect(db) as c:
+        (row,) = c.execute(
+            "SELECT max(messages.id) FROM messages JOIN topics ON topic_id = topics.id "
+            "WHERE name = ?",
+            (topic,),
+        ).fetchone()
+        c.execute("UPDATE messages SET timestamp = 'damaged' WHERE id = ?", (row,))
+    with pytest.raises(InputError, match="has no record stamp") as e:
+        read_log(path)
+    assert e.value.path == str(path)
+
+
 def test_a_truncated_zstd_file_of_a_ros2_bag_is_said_and_leaves_no_cache_entry(
     tmp_path, intel, monkeypatch
 ):

@@ -37,7 +37,7 @@ def topic_stamps(reader, topic: str, path: str) -> np.ndarray | None:
         for f in getattr(storage, "storages", [storage]):
             ids = [c.id for c in getattr(f, "connections", ()) if c.topic == topic]
             if isinstance(f, Sqlite3Reader) and f.dbconn is not None:
-                parts.append(_sqlite_stamps(f.dbconn, ids))
+                parts.append(_sqlite_stamps(f.dbconn, ids, path))
             elif isinstance(f, McapReader) and f.chunks and f.bio is not None:
                 parts.append(_mcap_stamps(f, ids, path))
             else:
@@ -47,13 +47,16 @@ def topic_stamps(reader, topic: str, path: str) -> np.ndarray | None:
     return np.sort(np.concatenate(parts), kind="stable")
 
 
-def _sqlite_stamps(dbconn, ids: list[int]) -> np.ndarray:
+def _sqlite_stamps(dbconn, ids: list[int], path: str) -> np.ndarray:
     """The stamps of the topics ``ids`` from the ``messages`` table's timestamp column (the
     rows' data, on pages of their own, is not read)."""
     if not ids:
         return np.empty(0, np.int64)
     query = f"SELECT timestamp FROM messages WHERE topic_id IN ({','.join('?' * len(ids))})"
-    return np.fromiter((t for (t,) in dbconn.execute(query, ids)), dtype=np.int64)
+    try:
+        return np.fromiter((t for (t,) in dbconn.execute(query, ids)), dtype=np.int64)
+    except (TypeError, ValueError, OverflowError) as e:  # a damaged row: NULL, text, a blob
+        raise InputError(f"a message has no record stamp ({e})", path) from None
 
 
 def _mcap_stamps(storage, ids: list[int], path: str) -> np.ndarray:

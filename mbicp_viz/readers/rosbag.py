@@ -148,12 +148,16 @@ def _open_ros2(p: Path, typestore: str):
 
 def raw_messages(reader, path: str, connections, start: int | None = None, stop: int | None = None):
     """rosbags' (connection, record stamp [ns], raw bytes) of ``connections`` within [start, stop);
-    damage rosbags meets on the way (a chunk or record its index points at wrongly) is one error
-    naming the bag. No connections, no messages (rosbags reads every topic for none)."""
+    damage rosbags meets on the way (a chunk or record its index points at wrongly, a sqlite3 row
+    whose stamp is not a number) is one error naming the bag. No connections, no messages
+    (rosbags reads every topic for none)."""
     if not connections:
         return
     try:
-        yield from reader.messages(connections, start, stop)
+        for c, t, raw in reader.messages(connections, start, stop):
+            if not isinstance(t, (int, np.integer)):
+                raise InputError(f"a message of {c.topic} has no record stamp ({t!r})", path)
+            yield c, t, raw
     except InputError:
         raise
     except Exception as e:
