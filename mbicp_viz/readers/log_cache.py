@@ -21,7 +21,7 @@ import json
 import os
 import shutil
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -59,9 +59,8 @@ def _pose(p: Pose2 | None) -> tuple[float, float, float]:
 
 def save(log: ScanLog, folder: Path) -> bool:
     """Write ``log`` (as its reader made it) to ``folder``, whole or not at all; False when it
-    holds what the cache does not keep (scans with beam times or a raw scan)."""
-    from mbicp_viz.outputs import written_folder
-
+    holds what the cache does not keep (scans with beam times or a raw scan), or the disk is
+    full."""
     scans = list(log.scans)
     if any(s.beam_times is not None or s.raw is not None for s in scans):
         return False
@@ -88,16 +87,48 @@ def save(log: ScanLog, folder: Path) -> bool:
         "odometry_source": log.odometry_source,
         "notes": log.notes,
     }
-    folder.parent.mkdir(parents=True, exist_ok=True)
+
+    def fill(tmp: Path) -> None:
+        for name, a in arrays.items():
+            np.save(tmp / f"{name}.npy", a)
+
     try:
-        with written_folder(folder) as tmp:
-            tmp.mkdir()
-            for name, a in arrays.items():
-                np.save(tmp / f"{name}.npy", a)
-            (tmp / "meta.json").write_text(json.dumps(meta))
-    except OSError:  # a full disk or a cache another process wrote first: read whole next time
+        write_entry(folder, fill, meta)
+    except OSError:  # a full disk: read whole next time
         return False
     return True
+
+
+def used(folder: Path) -> bool:
+    """Whether the cache holds a whole entry in ``folder``: its ``meta.json``, written last into
+    an entry moved in whole (``write_entry``). It is marked used (``prune`` removes the least
+    recently used first)."""
+    try:
+        os.utime(folder / "meta.json")
+    except OSError:
+        return False
+    return True
+
+
+def write_entry(folder: Path, fill: Callable[[Path], None], meta: dict) -> None:
+    """A cache entry, whole or not at all: ``fill`` writes its files into a folder that becomes
+    ``folder``, then its ``meta.json``; then the entries least recently used beyond
+    ``CACHE_BYTES`` are removed. When another process wrote the same entry meanwhile, its entry
+    stays; an OSError otherwise (a full disk)."""
+    from mbicp_viz.outputs import written_folder
+
+    shutil.rmtree(folder, ignore_errors=True)  # an entry left incomplete, or damaged
+    try:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        with written_folder(folder) as tmp:
+            tmp.mkdir()
+            fill(tmp)
+            (tmp / "meta.json").write_text(json.dumps(meta))
+    except OSError:
+        if used(folder):  # moved in by another process first
+            return
+        raise
+    prune(folder.parent, CACHE_BYTES, keep=folder)
 
 
 ARRAYS = ("ranges", "bearings", "valid", "ends", "records", "poses", "odometry", "stamps", "lines")
@@ -238,11 +269,10 @@ def read_cached(path: str, reader: str, args: tuple, read) -> ScanLog:
     records or more read whole is cached for the next time."""
     folder = entry(path, reader, args)
     if (log := cached_log(folder, path)) is not None:
-        os.utime(folder / "meta.json")  # used: the last to be removed
+        used(folder)
         return log
     log = read()
     if log.records >= CACHED_RECORDS and save(log, folder):
-        prune(folder.parent, CACHE_BYTES, keep=folder)
         note = f"{path}: read whole, and cached in {folder}: the next opening reads it from there"
         return replace(log, notes=[*log.notes, note])
     return log

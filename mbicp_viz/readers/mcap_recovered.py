@@ -15,15 +15,13 @@ recently used first with the cache's other entries.
 
 from __future__ import annotations
 
-import json
-import shutil
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from mbicp_viz.errors import InputError
 
-from .log_cache import CACHE_BYTES, entry, prune
+from .log_cache import CACHE_BYTES, entry, used, write_entry
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD = struct.Struct("<BQ")  # opcode, content length
@@ -51,8 +49,7 @@ def recovered(mcap: Path) -> tuple[Path, str]:
     time), and what to say of it."""
     folder = entry(str(mcap), "mcap cut short", ())
     copy = folder / mcap.name
-    if (folder / "meta.json").is_file():
-        (folder / "meta.json").touch()  # used: the last to be removed
+    if used(folder):
         return copy, f"{mcap}: cut short; read from its closed copy {copy}"
     found = _survey(mcap)
     if found.end > CACHE_BYTES:
@@ -61,8 +58,10 @@ def recovered(mcap: Path) -> tuple[Path, str]:
             f"than the cache holds ({CACHE_BYTES / 1e9:g} GB) to close a copy of",
             str(mcap),
         )
-    _write(mcap, folder, found)
-    prune(folder.parent, CACHE_BYTES, keep=folder)
+    try:
+        write_entry(folder, lambda tmp: _closed_copy(mcap, found, tmp), {"mcap": str(mcap)})
+    except OSError as e:
+        raise InputError(f"could not be copied into {folder}: {e}", str(mcap)) from None
     lost = mcap.stat().st_size - found.end
     return copy, (
         f"{mcap}: cut short (no MCAP footer, as a recording stopped by a crash): its "
@@ -103,11 +102,16 @@ def _survey(mcap: Path) -> _Survey:
                 break
             content = f.read(length) if op in (_CHUNK, _MESSAGE_INDEX, _SCHEMA, _CHANNEL) else b""
             if op == _CHUNK:
-                try:
-                    records = _chunk_records(content, decompress)
+                start, end, plain, crc, compression, compressed, at = _chunk_head(content)
+                try:  # rosbags' own decompression and check
+                    records = decompress(
+                        content[at : at + compressed], compression.decode(), plain, crc
+                    )
                 except Exception:  # a chunk damaged where the cut left it: the data ends before
                     break
-                chunk = _chunk_fields(content, out.end, _RECORD.size + length)
+                # its index's fields: the message indexes' offsets and length filled as they come
+                whole = _RECORD.size + length
+                chunk = [start, end, out.end, whole, {}, 0, compression, compressed, plain]
                 wanted = _read_definitions(records, out)
                 out.indexes.append(b"")
                 out.chunks += 1
@@ -132,26 +136,15 @@ def _survey(mcap: Path) -> _Survey:
     return out
 
 
-def _chunk_records(content: bytes, decompress) -> bytes:
-    """A chunk record's records, decompressed and checked (rosbags' own decompression)."""
-    _, _, size, crc = _CHUNK_HEAD.unpack_from(content)
-    at = _CHUNK_HEAD.size
-    (n,) = struct.unpack_from("<I", content, at)
-    compression = content[at + 4 : at + 4 + n].decode()
-    at += 4 + n
-    (compressed,) = struct.unpack_from("<Q", content, at)
-    return decompress(content[at + 8 : at + 8 + compressed], compression, size, crc)
-
-
-def _chunk_fields(content: bytes, offset: int, length: int) -> list:
-    """A chunk index's fields but its message indexes: times, offset, length, the message
-    indexes' offsets (filled as they come) and length, compression, sizes."""
-    start, end, size, _ = _CHUNK_HEAD.unpack_from(content)
+def _chunk_head(content: bytes) -> tuple:
+    """A chunk record's head: message start and end time, uncompressed size and CRC, compression
+    (bytes), compressed size, and where its compressed records begin."""
+    start, end, size, crc = _CHUNK_HEAD.unpack_from(content)
     at = _CHUNK_HEAD.size
     (n,) = struct.unpack_from("<I", content, at)
     compression = content[at + 4 : at + 4 + n]
     (compressed,) = struct.unpack_from("<Q", content, at + 4 + n)
-    return [start, end, offset, length, {}, 0, compression, compressed, size]
+    return start, end, size, crc, compression, compressed, at + 12 + n
 
 
 def _chunk_index(start, end, offset, length, indexes, index_length, compression, compressed, size):
@@ -184,27 +177,17 @@ def _read_definitions(records: bytes, out: _Survey) -> set[int]:
     return channels
 
 
-def _write(mcap: Path, folder: Path, found: _Survey) -> None:
+def _closed_copy(mcap: Path, found: _Survey, tmp: Path) -> None:
     """The data section's whole records of ``mcap``, then a data end, the summary and the footer,
-    into ``folder``, whole or not at all."""
-    from mbicp_viz.outputs import written_folder
-
+    into ``tmp``."""
     summary = b"".join([*found.schemas.values(), *found.channels.values(), *found.indexes])
     data_end = _RECORD.pack(_DATA_END, 4) + struct.pack("<I", 0)  # no CRC of the data
     summary_start = found.end + len(data_end)
     # no summary offsets, no CRC of the summary
     footer = _RECORD.pack(_FOOTER, 20) + struct.pack("<QQI", summary_start, 0, 0) + MAGIC
-    shutil.rmtree(folder, ignore_errors=True)  # an entry left incomplete
-    try:
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        with written_folder(folder) as tmp:
-            tmp.mkdir()
-            with mcap.open("rb") as src, (tmp / mcap.name).open("wb") as dst:
-                left = found.end
-                while left and (block := src.read(min(left, 1 << 20))):
-                    dst.write(block)
-                    left -= len(block)
-                dst.write(data_end + summary + footer)
-            (tmp / "meta.json").write_text(json.dumps({"mcap": str(mcap)}))
-    except OSError as e:
-        raise InputError(f"could not be copied into {folder}: {e}", str(mcap)) from None
+    with mcap.open("rb") as src, (tmp / mcap.name).open("wb") as dst:
+        left = found.end
+        while left and (block := src.read(min(left, 1 << 20))):
+            dst.write(block)
+            left -= len(block)
+        dst.write(data_end + summary + footer)

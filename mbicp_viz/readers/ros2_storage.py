@@ -9,7 +9,7 @@ wait for the whole file. Here they are decompressed the first time into
 that names them uncompressed, and that folder is what rosbags opens from then on: the stamps from
 the storage's own index (``ros2_index.py``), each scan read when asked for. The entry is named by
 every compressed file's path, size and modification time, and is removed least recently used first
-with the cache's other entries (``log_cache.prune``).
+with the cache's other entries (``log_cache.write_entry``).
 
 With ``--compression-mode message`` each message is compressed and only the folder's metadata says
 so: one of its storage files opened alone reads as undecodable messages, so its folder is opened
@@ -20,13 +20,11 @@ one storage file and no metadata: that file is opened alone.
 from __future__ import annotations
 
 import io
-import json
-import shutil
 from pathlib import Path
 
 from mbicp_viz.errors import InputError
 
-from .log_cache import CACHE_BYTES, entry, prune
+from .log_cache import CACHE_BYTES, entry, used, write_entry
 
 _METADATA = "metadata.yaml"
 _INFO = "rosbag2_bagfile_information"
@@ -61,31 +59,21 @@ def storage_to_open(bag: Path) -> tuple[Path, str | None]:
         return bag, None  # rosbags says what is missing or unknown
     stats = tuple((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in parts)
     folder = entry(str(bag / _METADATA), "ros2 file-compressed bag", stats)
-    if _complete(folder):
-        (folder / "meta.json").touch()  # used: the last to be removed
-        return folder, f"{bag}: its zstd files read from their decompressed copy in {folder}"
-    try:
-        whole = _write(bag, folder, info, parts)
-    except InputError:
-        if _complete(folder):  # another process wrote the same copy meanwhile
-            return folder, f"{bag}: its zstd files read from their decompressed copy in {folder}"
-        raise
-    if not whole:
-        return bag, (
-            f"{bag}: its zstd files decompress to more than the cache holds "
-            f"({CACHE_BYTES / 1e9:g} GB): decompressed again at each opening, by rosbags"
+    if not used(folder):
+        try:
+            write_entry(folder, lambda tmp: _decompress(parts, info, tmp), {"bag": str(bag)})
+        except _TooLarge:
+            return bag, (
+                f"{bag}: its zstd files decompress to more than the cache holds "
+                f"({CACHE_BYTES / 1e9:g} GB): decompressed again at each opening, by rosbags"
+            )
+        except OSError as e:
+            raise InputError(f"could not be decompressed into {folder}: {e}", str(bag)) from None
+        return folder, (
+            f"{bag}: its files are zstd-compressed whole; decompressed once into {folder}: the "
+            "next opening reads them from there"
         )
-    prune(folder.parent, CACHE_BYTES, keep=folder)
-    return folder, (
-        f"{bag}: its files are zstd-compressed whole; decompressed once into {folder}: the next "
-        "opening reads them from there"
-    )
-
-
-def _complete(folder: Path) -> bool:
-    """Whether the cache holds a whole copy in ``folder`` (its last file, written last, is there:
-    a copy is moved in whole, ``outputs.written_folder``)."""
-    return (folder / "meta.json").is_file()
+    return folder, f"{bag}: its zstd files read from their decompressed copy in {folder}"
 
 
 def _metadata(folder: Path) -> dict | None:
@@ -121,18 +109,26 @@ class _TooLarge(Exception):
     """The decompressed files would hold more than the whole cache may."""
 
 
-def _write(bag: Path, folder: Path, info: dict, parts: list[Path]) -> bool:
-    """The decompressed files and their metadata into ``folder``, whole or not at all; False when
-    they would hold more than the whole cache may (nothing written)."""
+def _decompress(parts: list[Path], info: dict, tmp: Path) -> None:
+    """The decompressed storage files and a metadata file naming them into ``tmp``."""
     from ruamel.yaml import YAML
-
-    from mbicp_viz.outputs import written_folder
 
     try:
         from compression import zstd  # Python 3.14
     except ImportError:
         from backports import zstd
 
+    room = CACHE_BYTES  # a few bytes may decompress to many: never past this
+    for part in parts:
+        try:
+            with part.open("rb") as src, zstd.open(src) as z, (tmp / part.stem).open("wb") as dst:
+                while block := z.read(1 << 20):
+                    room -= len(block)
+                    if room < 0:
+                        raise _TooLarge
+                    dst.write(block)
+        except (zstd.ZstdError, EOFError) as e:
+            raise InputError(f"not a whole zstd stream ({e})", str(part)) from None
     plain = {p.name: p.stem for p in parts}  # x.db3.zstd -> x.db3
     info = dict(info, compression_mode="", compression_format="")
     info["relative_file_paths"] = [plain[Path(n).name] for n in info["relative_file_paths"]]
@@ -141,29 +137,6 @@ def _write(bag: Path, folder: Path, info: dict, parts: list[Path]) -> bool:
         for f in info.get("files") or []
         if isinstance(f, dict) and isinstance(f.get("path"), str)
     ]
-    shutil.rmtree(folder, ignore_errors=True)  # an entry left incomplete
-    at = bag
-    try:
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        with written_folder(folder) as tmp:
-            tmp.mkdir()
-            room = CACHE_BYTES  # a few bytes may decompress to many: never past this
-            for at in parts:
-                with at.open("rb") as src, zstd.open(src) as z, (tmp / at.stem).open("wb") as dst:
-                    while block := z.read(1 << 20):
-                        room -= len(block)
-                        if room < 0:
-                            raise _TooLarge
-                        dst.write(block)
-            at = folder
-            text = io.StringIO()
-            YAML(typ="safe").dump({_INFO: info}, text)
-            (tmp / _METADATA).write_text(text.getvalue())
-            (tmp / "meta.json").write_text(json.dumps({"bag": str(bag)}))
-    except _TooLarge:
-        return False
-    except (zstd.ZstdError, EOFError) as e:
-        raise InputError(f"not a whole zstd stream ({e})", str(at)) from None
-    except OSError as e:
-        raise InputError(f"could not be decompressed into {folder}: {e}", str(at)) from None
-    return True
+    text = io.StringIO()
+    YAML(typ="safe").dump({_INFO: info}, text)
+    (tmp / _METADATA).write_text(text.getvalue())
