@@ -55,6 +55,14 @@ def surface_overlap(ref: Scan, obj: Scan, pose: Pose2, radius: float = INLIER_RA
     return agreement(ref, obj, pose, radius)[1]
 
 
+@kernel(inline="always")
+def _within(qx, qy, p, k, radius):
+    """Whether (qx, qy) lies within ``radius`` of point k of ``p`` (the root taken only near the
+    radius: beyond, the squared distance shows it is not)."""
+    d = (qx - p[k, 0]) ** 2 + (qy - p[k, 1]) ** 2
+    return d <= radius * radius * (1.0 + 1e-9) and math.sqrt(d) <= radius, d
+
+
 @kernel
 def _agreeing(p, r, b, q, radius: float, gap_beams: float):
     """How many points of ``q`` lie within ``radius`` of a point of ``p`` (the reference's valid
@@ -63,9 +71,11 @@ def _agreeing(p, r, b, q, radius: float, gap_beams: float):
     (``SURFACE_GAP_BEAMS``), else the point itself.
 
     A point within ``radius`` of any reference point is within it of its nearest and of the
-    surface: it is counted at once, its nearest never sought (most points of a good match). With
-    the directions taken from the points instead of their bearings' cosines, a pair's agreement
-    at 1081 beams takes 99 us against 135 us when every nearest was sought.
+    surface: it is counted at once, its nearest never sought (most points of a good match), and
+    the reference point the point before it was found near (or the next) is tried first, without
+    its bearing. With the directions taken from the points instead of their bearings' cosines, a
+    pair's agreement at 1081 beams took 99 us against 135 us when every nearest was sought; the
+    first try took it from 137 us to 109 us (measured on another day).
 
     Else its nearest is sought within ``reach``: a segment of length l whose ends are both farther
     than d from q passes no nearer than sqrt(d^2 - l^2 / 4), so with reach^2 = radius^2 + l_max^2
@@ -91,8 +101,21 @@ def _agreeing(p, r, b, q, radius: float, gap_beams: float):
     # each bearing's direction, from its point (p = r u; no cosine): |q x u| = |q| sin(D)
     ux, uy = p[:, 0] / r, p[:, 1] / r
     bins = bearing_bins(b)
+    last = -1  # the reference point the last point found within radius
     for i in range(len(q)):
         qx, qy = q[i, 0], q[i, 1]
+        # the object's points come in scan order: most points of a good match lie within radius
+        # of the reference point the point before them was found within radius of, or the next
+        hit = -1
+        for k in (last, last + 1):
+            if 0 <= k < n and _within(qx, qy, p, k, radius)[0]:
+                hit = k
+                break
+        if hit >= 0:
+            last = hit
+            on_point += 1
+            on_surface += 1
+            continue
         norm = math.hypot(qx, qy)
         if not math.isfinite(norm):
             continue
@@ -122,9 +145,9 @@ def _agreeing(p, r, b, q, radius: float, gap_beams: float):
                     low2 = norm * norm
                 if low2 > best:
                     break
-                d = (qx - p[kk, 0]) ** 2 + (qy - p[kk, 1]) ** 2
-                if math.sqrt(d) <= radius:
-                    near = True
+                near, d = _within(qx, qy, p, kk, radius)
+                if near:
+                    last = kk
                     break
                 if d < best or (d == best and (j < 0 or kk < j)):
                     best, j = d, kk
