@@ -828,6 +828,36 @@ def test_a_log_with_two_lasers_opens_the_front_one_and_the_page_says_which_strea
         application.stop()
 
 
+def test_a_files_name_on_the_page_shows_as_written_and_breaks_at_the_panels_edge(
+    browser, tmp_path, intel
+):
+    """A note naming a file shows the name as written: the markdown and the HTML in it are not
+    read (an image whose error handler would run, words that would turn italic), and a name
+    longer than the panel is wide breaks at its edge instead of running past it."""
+    from mbicp_viz.views.debugger.sources import files_source
+
+    from .test_readers import two_lasers
+
+    folder = tmp_path / ("a_b_*c*_<img src=x onerror=window.pwned=1>_" + "x" * 150)
+    folder.mkdir()
+    path = two_lasers(folder / "two-lasers.log", intel)
+    application = App(files_source(str(path), None, guess="identity"), "127.0.0.1", 0)
+    try:
+        page, _ = open_tab(browser, application)
+        note = page.get_by_text("read FLASER (4 scans)").first
+        assert f"{path}: read FLASER" in note.inner_text()
+        assert page.evaluate("window.pwned === undefined")
+        # the text's extent, not the element's: a word running past the edge overflows its box
+        text_right, box_right = note.evaluate(
+            "e => { const r = document.createRange(); r.selectNodeContents(e); "
+            "return [r.getBoundingClientRect().right, e.getBoundingClientRect().right]; }"
+        )
+        assert text_right <= box_right + 1
+        page.close()
+    finally:
+        application.stop()
+
+
 def test_a_box_left_without_enter_says_so_on_the_page(browser, app):
     """Text typed into a parameter box and not applied is never passed off as the matcher's."""
     page, session = open_tab(browser, app)

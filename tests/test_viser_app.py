@@ -17,7 +17,7 @@ from mbicp_viz.choices import Guess
 from mbicp_viz.core import MATCHERS, Pose2, field_specs, pose_error
 from mbicp_viz.readers import read_log
 from mbicp_viz.views import scene
-from mbicp_viz.views.debugger import report
+from mbicp_viz.views.debugger import panels, report
 from mbicp_viz.views.debugger.camera import TopDownCamera
 from mbicp_viz.views.debugger.session import Session
 from mbicp_viz.views.debugger.sources import files_source, scenario_source
@@ -559,7 +559,7 @@ def test_a_tab_says_it_waits_for_the_kernels_then_shows_its_result(server):
 
     ready = threading.Event()
     s = Session(server, Source("hokuyo pair", read_log(PAIR), guess=Pose2()), ready=ready)
-    assert COMPILING in s.h_status.content and not s.state.runs  # built, waiting
+    assert s.h_status.content == panels.warning(COMPILING) and not s.state.runs  # built, waiting
     ready.set()
     s.first_match(ready)
     assert s.state.runs and s.h_status.content == "" and "converged" in s.h_result.content
@@ -576,7 +576,7 @@ def test_while_the_kernels_compile_in_the_background_a_tab_matches_interpreted_a
         s = Session(server, source)
         assert (
             tiers.compiling()
-            and s.h_status.content == f"⚠ {INTERPRETED}"
+            and s.h_status.content == panels.warning(INTERPRETED)
             and "converged" in s.h_result.content
         )
     assert (
@@ -642,7 +642,9 @@ def test_a_box_typed_without_enter_says_it_is_not_applied(session):
     panel = session.matchers.params
     before = session.state.params["improved"].Bw
     panel.boxes["Bw"].handle.value = "60"  # typed, no Enter
-    assert "Bw" in panel.message.content and "'60' is not applied yet" in panel.message.content
+    assert panel.message.content == panels.warning(
+        "Bw [deg]: '60' is not applied yet: Enter applies it"
+    )
     assert session.state.params["improved"].Bw == before
     submit(panel, Bw="60")  # Enter
     assert "not applied" not in panel.message.content

@@ -77,7 +77,9 @@ class LiveTab:
         self.client.scene.reset()
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         gui.main_panel.dock_right()
-        gui.add_markdown(f"**mbicp-viz** — live from {self.run.url}")
+        gui.add_markdown(
+            panels.wrapping(f"**mbicp-viz** — live from {panels.literal(self.run.url)}")
+        )
         self.h_status = gui.add_markdown("waiting for the first pair …")
         self.h_notes = gui.add_markdown("")
         freeze = gui.add_button(
@@ -141,8 +143,13 @@ class LiveTab:
         self.h_status.content = (
             panels.warning(str(error)) if error is not None else line[0].upper() + line[1:]
         )
-        self.h_notes.content = "  \n".join(
-            [_mount_text(log.frames), *(f"*{n}*" for n in status.notes[-3:])]
+        self.h_notes.content = panels.wrapping(
+            "  \n".join(
+                [
+                    panels.literal(_mount_text(log.frames)),
+                    *(f"*{panels.literal(n)}*" for n in status.notes[-3:]),
+                ]
+            )
         )
         if not rows:
             return

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import html
 import math
+import re
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -25,8 +26,24 @@ from .state import DebugState, box_label, parse_entry, shown_value
 
 
 def warning(text: str) -> str:
-    """A status line that something went wrong or is slow ("" clears it)."""
-    return f"⚠ {text}" if text else ""
+    """A status line that something went wrong or is slow ("" clears it), shown as written."""
+    return f"⚠ {literal(text)}" if text else ""
+
+
+def literal(text: str) -> str:
+    """``text`` (a file's name, a reader's note, an error) as markdown that shows it as written:
+    every ASCII punctuation mark escaped, so that neither markdown nor HTML in it is read as such
+    (viser renders a markdown's HTML unsanitised: a file named ``<img onerror=...>`` would run)."""
+    return _PUNCTUATION.sub(r"\\\1", text)
+
+
+_PUNCTUATION = re.compile(r"([!-/:-@\[-`{-~])")
+
+
+def wrapping(markdown: str) -> str:
+    """``markdown`` in a block whose long words (a path, a cache folder) break at the panel's edge
+    instead of running past it."""
+    return f'<div style="overflow-wrap:anywhere">\n\n{markdown}\n\n</div>'
 
 
 class CommitBox:

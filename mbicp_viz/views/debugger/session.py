@@ -98,10 +98,11 @@ class Session:
         """What to look at, and how the log on screen was read (a scan stream picked is read
         anew)."""
         src = self.state.source
-        self.h_notes.content = "\n\n".join(
-            filter(None, [src.note, *(f"*{n}*" for n in src.log.notes)])
+        notes = "\n\n".join(
+            filter(None, [src.note, *(f"*{panels.literal(n)}*" for n in src.log.notes)])
         )
-        self.h_notes.visible = bool(self.h_notes.content)
+        self.h_notes.content = panels.wrapping(notes) if notes else ""
+        self.h_notes.visible = bool(notes)
 
     def first_match(self, ready: threading.Event | None = None) -> None:
         """The tab's first match, once the kernels are ready (``ready`` set)."""
@@ -135,7 +136,7 @@ class Session:
     def _build(self, gui, src: Source) -> None:
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         gui.main_panel.dock_right()  # beside the view, never over it
-        gui.add_markdown(f"**mbicp-viz** — {src.label}", order=0)
+        gui.add_markdown(panels.wrapping(f"**mbicp-viz** — {panels.literal(src.label)}"), order=0)
         self.h_status, self.status = gui.add_markdown("", order=1), ""
         self.h_stop = gui.add_button(
             "stop the match", order=1.5, color="red", visible=False, hint="keeps the last iteration"
