@@ -214,9 +214,13 @@ def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
     stretched by sqrt(1 + theta^2). So any q with d(p, q) <= d0
 
     - lies within atan(d0 / L) + asin(d0 / |p|) of p's bearing;
-    - lies within rho of p, the smaller of d0 (|p| + L) / (L - d0) (when d0 < L) and
-      d0 sqrt(max|q|^2 + L^2) / L (since d^2(p, q) >= |p - q|^2 L^2 / (|q|^2 + L^2)), so within
-      asin(rho / |p|) of p's bearing;
+    - lies on a ray (its bearing's half-line from the origin) that passes within rho of p, the
+      smaller of d0 sqrt(1 + (|p| + d0)^2 / L^2) and d0 sqrt(max|q|^2 + L^2) / L, so within
+      asin(rho / |p|) of p's bearing. The first: with q = s u (u a unit vector),
+      d^2(p, q) = (s - p.u)^2 + (p x u)^2 L^2 / (s^2 + L^2), and s <= |p| + d0 (below); the
+      second: d^2(p, q) >= |p - q|^2 L^2 / (|q|^2 + L^2). (The first replaced
+      d0 (|p| + L) / (L - d0), always wider: at 1081 beams indoors ``nearest`` took 35 us
+      instead of 43 us, the run's rows unchanged);
     - has a range between (|p| - d0) / sqrt(1 + d0^2 / L^2) and |p| + d0.
 
     Points whose bounded window reaches beyond the 2K beams (a ray just outside them passes within
@@ -246,7 +250,7 @@ def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
         # the window that can hold anything closer (see above), never wider than +/-Bw: only
         # when a ray just outside the 2K beams passes within rho of the point is it searched
         d0 = np.sqrt(min(max(d2, 0.0), Br * Br))
-        rho = d0 * min((r + L) / max(L - d0, 1e-12), max_factor)
+        rho = d0 * min(np.sqrt(1.0 + ((r + d0) / L) ** 2), max_factor)
         reach = Bw + 1e-12  # the bounded window's own slack: a beam at +/-Bw by round-off is in
         if (
             lo > 0
