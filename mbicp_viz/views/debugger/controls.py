@@ -19,6 +19,7 @@ from mbicp_viz.readers.params_toml import presets_for
 from .. import scene, viser_draw
 from . import panels, report
 from .camera import on_scan_plane
+from .markdown import literal
 from .state import DEFAULTS, TYPED, preset_name
 
 
@@ -318,7 +319,7 @@ class Scans:
         log = self.s.state.source.log
         self.info.content = (
             f"records 0 .. {log.records - 1}"
-            + (f" of {log.topic}" if log.topic else "")
+            + (f" of {literal(log.topic)}" if log.topic else "")
             + (f" ({len(log.known_unusable)} unusable)" if log.known_unusable else "")
         )
 
@@ -432,7 +433,7 @@ class PairList:
         self.rows = {label(k + 1, r): r for k, r in enumerate(shown)}
         # the file's name inside: a long folder title wraps over the controls above it
         with gui.add_folder(title, order=order):
-            rows_label = session.state.source.rows_label
+            rows_label = literal(session.state.source.rows_label)
             if not shown:
                 gui.add_markdown(f"no {title.lower()} among {rows_label}")
                 return

@@ -25,6 +25,7 @@ from mbicp_viz.core import Pose2
 from .. import scene, viser_draw
 from . import panels
 from .camera import TopDownCamera
+from .markdown import literal, wrapping
 from .run_model import MAP_POINTS, RunModel
 
 REFRESH_S = 0.5  # the page follows the run this often
@@ -77,9 +78,7 @@ class LiveTab:
         self.client.scene.reset()
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         gui.main_panel.dock_right()
-        gui.add_markdown(
-            panels.wrapping(f"**mbicp-viz** — live from {panels.literal(self.run.url)}")
-        )
+        gui.add_markdown(wrapping(f"**mbicp-viz** — live from {literal(self.run.url)}"))
         self.h_status = gui.add_markdown("waiting for the first pair …")
         self.h_notes = gui.add_markdown("")
         freeze = gui.add_button(
@@ -143,11 +142,11 @@ class LiveTab:
         self.h_status.content = (
             panels.warning(str(error)) if error is not None else line[0].upper() + line[1:]
         )
-        self.h_notes.content = panels.wrapping(
+        self.h_notes.content = wrapping(
             "  \n".join(
                 [
-                    panels.literal(_mount_text(log.frames)),
-                    *(f"*{panels.literal(n)}*" for n in status.notes[-3:]),
+                    literal(_mount_text(log.frames)),
+                    *(f"*{literal(n)}*" for n in status.notes[-3:]),
                 ]
             )
         )

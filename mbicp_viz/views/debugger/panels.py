@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import html
 import math
-import re
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -22,28 +21,13 @@ from mbicp_viz.core import MATCHERS, ParamError, Params, field_specs
 
 from .. import scene
 from . import report
+from .markdown import literal
 from .state import DebugState, box_label, parse_entry, shown_value
 
 
 def warning(text: str) -> str:
     """A status line that something went wrong or is slow ("" clears it), shown as written."""
     return f"⚠ {literal(text)}" if text else ""
-
-
-def literal(text: str) -> str:
-    """``text`` (a file's name, a reader's note, an error) as markdown that shows it as written:
-    every ASCII punctuation mark escaped, so that neither markdown nor HTML in it is read as such
-    (viser renders a markdown's HTML unsanitised: a file named ``<img onerror=...>`` would run)."""
-    return _PUNCTUATION.sub(r"\\\1", text)
-
-
-_PUNCTUATION = re.compile(r"([!-/:-@\[-`{-~])")
-
-
-def wrapping(markdown: str) -> str:
-    """``markdown`` in a block whose long words (a path, a cache folder) break at the panel's edge
-    instead of running past it."""
-    return f'<div style="overflow-wrap:anywhere">\n\n{markdown}\n\n</div>'
 
 
 class CommitBox:
@@ -352,7 +336,7 @@ def legend_html(
     grid = (
         '<div class="legend-entry" style="font-size:12px;line-height:1.6;color:#666">grid: '
         f"{grid_m:g} m cells, "
-        f"thicker every {5 * grid_m:g} m; x right, y up ({frame})</div>"
+        f"thicker every {5 * grid_m:g} m; x right, y up ({html.escape(frame)})</div>"
         if grid_m
         else ""
     )

@@ -16,6 +16,7 @@ from mbicp_viz.evaluation.single import reported
 from mbicp_viz.readers.pair_match import PairMatch
 
 from .. import scene, text
+from .markdown import literal
 from .state import WHY_LAYERS, DebugState
 
 
@@ -67,9 +68,11 @@ def row_markdown(state: DebugState, row: PairMatch) -> str:
         f"**loop candidate** ({loop.verdict.value}; matched from the correlative search's best "
         "peak around the chain's prediction)"
         if loop is not None
-        else f"**evaluation** ({state.source.rows_label}, line {row.line})"
+        else f"**evaluation** ({literal(state.source.rows_label)}, line {row.line})"
     )
-    lines = [f"{head}: {row.matcher} gave {row.result.pose} (motion of the {row.frame} frame)"]
+    lines = [
+        f"{head}: {row.matcher} gave {row.result.pose} (motion of the {literal(row.frame)} frame)"
+    ]
     if (sc := row.score) is not None:
         lines.append(
             f"{sc.error_xy * 1000:.1f} mm, {math.degrees(sc.error_theta):.3f} deg from the "

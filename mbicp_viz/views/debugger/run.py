@@ -12,6 +12,7 @@ import numpy as np
 from .. import scene, viser_draw
 from . import panels
 from .camera import on_scan_plane
+from .markdown import literal
 from .run_model import MapAt, RunModel
 
 
@@ -29,7 +30,7 @@ class RunPanel:
         with gui.add_folder("Run", order=order):
             gui.add_markdown(
                 f"{len(rows)} pairs matched with {rows[0].matcher}; {len(model.flagged)} flagged "
-                f"without truth. World frame: the first scan's ({rows[0].frame})."
+                f"without truth. World frame: the first scan's ({literal(rows[0].frame)})."
             )
             self.toggle = gui.add_button("show the run", hint="the whole run, or back to the pair")
             data = model.series

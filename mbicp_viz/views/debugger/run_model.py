@@ -39,6 +39,7 @@ from mbicp_viz.readers import ScanLog
 from mbicp_viz.readers.relations import Relation
 
 from .. import scene
+from .markdown import literal
 
 
 class MapAt(StrEnum):
@@ -256,7 +257,7 @@ class RunModel:
         r = row.result
         parts = [
             f"**pair {n + 1} of {len(self.rows)}**: scans {row.ref} → {row.obj}, {row.matcher}, "
-            f"motion {r.pose} of the {row.frame} frame",
+            f"motion {r.pose} of the {literal(row.frame)} frame",
             f"{r.iterations} iterations, {r.reason.value}; {r.pairs_kept} pairs kept, "
             f"{r.pairs_rejected} rejected",
         ]

@@ -21,6 +21,7 @@ from mbicp_viz.readers.params_toml import params_to_toml
 from .. import scene, viser_draw
 from . import controls, lesson, panels, report
 from .camera import TopDownCamera
+from .markdown import literal, wrapping
 from .state import DebugState, Source
 
 # A callback running longer than this shows how long it has run, the budget and the stop button
@@ -98,10 +99,8 @@ class Session:
         """What to look at, and how the log on screen was read (a scan stream picked is read
         anew)."""
         src = self.state.source
-        notes = "\n\n".join(
-            filter(None, [src.note, *(f"*{panels.literal(n)}*" for n in src.log.notes)])
-        )
-        self.h_notes.content = panels.wrapping(notes) if notes else ""
+        notes = "\n\n".join(filter(None, [src.note, *(f"*{literal(n)}*" for n in src.log.notes)]))
+        self.h_notes.content = wrapping(notes) if notes else ""
         self.h_notes.visible = bool(notes)
 
     def first_match(self, ready: threading.Event | None = None) -> None:
@@ -136,7 +135,7 @@ class Session:
     def _build(self, gui, src: Source) -> None:
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         gui.main_panel.dock_right()  # beside the view, never over it
-        gui.add_markdown(panels.wrapping(f"**mbicp-viz** — {panels.literal(src.label)}"), order=0)
+        gui.add_markdown(wrapping(f"**mbicp-viz** — {literal(src.label)}"), order=0)
         self.h_status, self.status = gui.add_markdown("", order=1), ""
         self.h_stop = gui.add_button(
             "stop the match", order=1.5, color="red", visible=False, hint="keeps the last iteration"
