@@ -71,11 +71,12 @@ def _agreeing(p, r, b, q, radius: float, gap_beams: float):
     (``SURFACE_GAP_BEAMS``), else the point itself.
 
     A point within ``radius`` of any reference point is within it of its nearest and of the
-    surface: it is counted at once, its nearest never sought (most points of a good match), and
-    the reference point the point before it was found near (or the next) is tried first, without
-    its bearing. With the directions taken from the points instead of their bearings' cosines, a
-    pair's agreement at 1081 beams took 99 us against 135 us when every nearest was sought; the
-    first try took it from 137 us to 109 us (measured on another day).
+    surface: it is counted at once, its nearest never sought (most points of a good match). The
+    object's points come in scan order, so the reference point the point before was found near,
+    and the next one, are tried first, before the point's bearing is computed. At 1081 beams a
+    pair's agreement took 135 us when every nearest was sought, 99 us with the early count (and
+    the directions taken from the points instead of their bearings' cosines), and the first try
+    took it from 137 us to 106-109 us on a slower day.
 
     Else its nearest is sought within ``reach``: a segment of length l whose ends are both farther
     than d from q passes no nearer than sqrt(d^2 - l^2 / 4), so with reach^2 = radius^2 + l_max^2

@@ -317,6 +317,25 @@ def test_an_mcap_file_cut_before_its_first_chunk_ended_is_said(
     assert e.value.path == str(cut) and not (tmp_path / "cache").exists()
 
 
+def test_an_mcap_file_whose_first_chunk_is_too_short_for_its_head_is_said(
+    tmp_path, chunked_mcap, monkeypatch
+):
+    """A chunk record whole by its length but too short to hold a chunk's head (damage where the
+    cut left it) ends the data like a chunk that does not decompress: one line, no traceback."""
+    import struct
+
+    monkeypatch.setenv("MBICP_VIZ_CACHE", str(tmp_path / "cache"))
+    (whole_file,) = chunked_mcap.glob("*.mcap")
+    data = whole_file.read_bytes()
+    (header_length,) = struct.unpack_from("<Q", data, 9)  # after the magic and the opcode
+    head = data[: 8 + 9 + header_length]
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(head + struct.pack("<BQ", 0x06, 5) + bytes(5) + b"\x01" * 40)
+    with pytest.raises(InputError, match="before its first chunk ended") as e:
+        read_log(damaged)
+    assert e.value.path == str(damaged)
+
+
 @pytest.mark.parametrize("kind", ["humble", "mcap"])
 def test_a_recording_stopped_before_its_metadata_was_written_is_read(
     tmp_path, intel, kind, chunked_mcap, monkeypatch

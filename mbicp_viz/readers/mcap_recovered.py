@@ -102,8 +102,8 @@ def _survey(mcap: Path) -> _Survey:
                 break
             content = f.read(length) if op in (_CHUNK, _MESSAGE_INDEX, _SCHEMA, _CHANNEL) else b""
             if op == _CHUNK:
-                start, end, plain, crc, compression, compressed, at = _chunk_head(content)
-                try:  # rosbags' own decompression and check
+                try:  # its head, then rosbags' own decompression and check
+                    start, end, plain, crc, compression, compressed, at = _chunk_head(content)
                     records = decompress(
                         content[at : at + compressed], compression.decode(), plain, crc
                     )
@@ -115,7 +115,7 @@ def _survey(mcap: Path) -> _Survey:
                 wanted = _read_definitions(records, out)
                 out.indexes.append(b"")
                 out.chunks += 1
-            elif op == _MESSAGE_INDEX and chunk:  # after its chunk: where that chunk's are
+            elif op == _MESSAGE_INDEX and chunk and length >= 2:  # after its chunk: where its are
                 (channel,) = struct.unpack_from("<H", content)
                 chunk[4][channel] = out.end
                 chunk[5] += _RECORD.size + length
