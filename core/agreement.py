@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .correspondence import bearing_bins, first_at_least
+from .correspondence import bearing_bins, first_at_least, turn_mod
 from .scan import Scan
 from .se2 import Pose2
 from .tiers import kernel, run
@@ -93,7 +93,8 @@ def _agreeing(p, r, b, q, radius: float, gap_beams: float):
     surface = np.zeros(m, dtype=np.bool_)
     longest = 0.0
     for i in range(m):
-        length = math.hypot(p[i + 1, 0] - p[i, 0], p[i + 1, 1] - p[i, 1])
+        dx, dy = p[i + 1, 0] - p[i, 0], p[i + 1, 1] - p[i, 1]
+        length = math.sqrt(dx * dx + dy * dy)  # metres: no overflow for hypot to guard against
         if length <= gap_beams * max(r[i], r[i + 1]) * (b[i + 1] - b[i]) + radius:
             surface[i] = True
             longest = max(longest, length)
@@ -117,11 +118,11 @@ def _agreeing(p, r, b, q, radius: float, gap_beams: float):
             on_point += 1
             on_surface += 1
             continue
-        norm = math.hypot(qx, qy)
+        norm = math.sqrt(qx * qx + qy * qy)
         if not math.isfinite(norm):
             continue
         # q's bearing as one of the reference's turn [b[0], b[0] + 2 pi), and where it falls
-        a = b[0] + (math.atan2(qy, qx) - b[0]) % turn
+        a = b[0] + turn_mod(math.atan2(qy, qx) - b[0], turn)
         s = first_at_least(b, bins, a, False)
         best, j, near = reach2, -1, False
         for way in (1, -1):

@@ -165,6 +165,22 @@ def first_at_least(b, bins, a: float, strict: bool) -> int:
 
 
 @kernel(inline="always")
+def turn_mod(x: float, m: float) -> float:
+    """Python's ``x % m`` for ``m > 0``, without numba's call to fmod when ``x`` lies within
+    (-m, 2m), as a bearing difference does: there fmod is x or x - m exactly (Sterbenz), and the
+    sign's correction adds m as Python's does, so the result is the same float (a zero, which
+    Python makes +0, takes the general way). The z-buffer's modulo per point and iteration was
+    2 % of a run's time at 1081 beams."""
+    if 0.0 < x < m:
+        return x
+    if -m < x < 0.0:
+        return x + m
+    if m <= x < 2.0 * m:
+        return x - m
+    return x % m
+
+
+@kernel(inline="always")
 def _window_min(px: float, py: float, ex, ey, ek, lo: int, hi: int):
     """Metric-nearest of the reference points ext[lo, hi) to (px, py): (ext index, d^2); (-1, inf)
     if empty; the first of equal minima. ``ek`` holds the metric's denominators |q|^2 + L^2."""
@@ -257,11 +273,14 @@ def nearest(p, alpha, rng, R: ReferenceIndex, Bw: float, Br: float, L: float):
             and a - eb[lo - 1] <= reach
             and _reaches(px, py, r, eux[lo - 1], euy[lo - 1], rho)
         ) or (hi < len(eb) and eb[hi] - a <= reach and _reaches(px, py, r, eux[hi], euy[hi], rho)):
-            half = min(
-                np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi,
-                np.arctan(d0 / L) + (np.arcsin(d0 / r) if d0 < r else np.pi),
-                Bw,
-            )
+            half = min(np.arcsin(min(rho / r, 1.0)) if rho < r else np.pi, Bw)
+            # the bearing bound only where it can be the narrower: it is at least t - t^3/3 +
+            # d0/r (t = d0/L; atan t >= t - t^3/3, asin x >= x), taken a little lower than that
+            # so round-off never skips it when it is (a window computed as before; most points
+            # are spared an arctan and an arcsin)
+            t = d0 / L
+            if d0 < r and (t - t * t * t / 3.0 + d0 / r) * (1.0 - 1e-9) < half:
+                half = min(half, np.arctan(t) + np.arcsin(d0 / r))
             half += 1e-12
             wlo = first_at_least(eb, bins, a - half, False)
             # each reference point once, however wide the window
@@ -504,7 +523,7 @@ def visible_in_order(alpha: np.ndarray) -> np.ndarray:
     a_prev, unwrapped, highest = 0.0, 0.0, -np.inf
     for i in range(len(alpha)):
         step = alpha[i] - a_prev if i > 0 else 0.0
-        unwrapped = unwrapped + ((step + np.pi) % (2.0 * np.pi) - np.pi) if i > 0 else alpha[i]
+        unwrapped = unwrapped + (turn_mod(step + np.pi, 2.0 * np.pi) - np.pi) if i > 0 else alpha[i]
         a_prev = alpha[i]
         vis[i] = unwrapped >= highest
         highest = max(highest, unwrapped)
@@ -525,7 +544,7 @@ def visible_from_reference(
     bins = np.empty(len(alpha), dtype=np.int64)
     for i in range(len(alpha)):
         # non-negative: truncation floors
-        bins[i] = int(((alpha[i] - bin_start) % (2 * np.pi)) / bin_width)
+        bins[i] = int(turn_mod(alpha[i] - bin_start, 2 * np.pi) / bin_width)
         zbuf[bins[i]] = min(zbuf[bins[i]], r[i])
     vis = np.empty(len(alpha), dtype=np.bool_)
     for i in range(len(alpha)):

@@ -14,6 +14,7 @@ from mbicp_viz.core.correspondence import (
     candidates,
     first_at_least,
     nearest,
+    turn_mod,
 )
 from mbicp_viz.core.events import PairKind
 from mbicp_viz.core.mbicp import rejection_floor
@@ -60,6 +61,28 @@ def test_the_bearing_lookup_finds_what_a_bisection_finds(steps, start, at, queri
         for strict in (False, True):
             expected = 0 if math.isnan(a) else np.searchsorted(b, a, "right" if strict else "left")
             assert first_at_least(b, bins, a, strict) == expected, (a, strict)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    m=st.one_of(st.just(2 * math.pi), st.floats(1e-6, 1e6)),
+    fraction=st.one_of(
+        st.floats(-3.0, 3.0), st.sampled_from([-2.0, -1.0, -0.0, 0.0, 1.0, 2.0, 3.0])
+    ),
+    nudge=st.sampled_from([-1, 0, 1]),
+    special=st.sampled_from([None, math.nan, math.inf, -math.inf, 5e-324, -5e-324]),
+)
+def test_the_turns_modulo_is_pythons(m, fraction, nudge, special):
+    """``turn_mod`` gives the very float Python's ``%`` gives (its sign too), within its fast
+    range (-m, 2m), at its edges and an ulp either side, and outside it."""
+    x = special if special is not None else fraction * m
+    if special is None and nudge:
+        x = math.nextafter(x, math.copysign(math.inf, nudge))
+    got, expected = turn_mod(x, m), x % m
+    if math.isnan(expected):
+        assert math.isnan(got)
+    else:
+        assert got == expected and math.copysign(1.0, got) == math.copysign(1.0, expected), x
 
 
 @pytest.fixture(scope="module")

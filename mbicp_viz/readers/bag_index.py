@@ -190,7 +190,7 @@ class BagScans:
     ) -> Iterator[tuple[int, Scan | UnusableScan]]:
         """Records ``start`` ... in order, read front to back once: each scan leaves once the
         odometry a window past it has been read (``odometry``: False, the scans without it)."""
-        from .rosbag import decoded_messages, header_stamp
+        from .rosbag import decode, header_stamp, raw_messages
 
         if start >= self.records:
             return
@@ -206,17 +206,21 @@ class BagScans:
         same = start - bisect.bisect_left(self.stamps_ns, first)
         w = ODOMETRY_WINDOW_S
         odometry = OdometryWindow()  # the samples within the waiting scans' window
-        waiting: deque = deque()  # (record, record stamp, message)
-        k = start
+        # (record, record stamp [s] and [ns], connection, raw message): a scan is decoded as it
+        # leaves, so a stream stopped early decodes none of the window read past it (nor any scan
+        # of the window read before its start)
+        waiting: deque = deque()
+        k, path = start, Path(self.path)
 
         def ready(now: float) -> Iterator[tuple[int, Scan | UnusableScan]]:
             while waiting and waiting[0][1] + w < now:
-                r, t, msg = waiting.popleft()
+                r, t, t_ns, c, raw = waiting.popleft()
+                msg = decode(reader.deserialize, raw, c.msgtype, path, f"at {t_ns} ns")
                 track = odometry.around(t - w, t + w, header_stamp(msg)) if with_odometry else None
                 yield r, self._scan(r, msg, track)
             odometry.drop_before((waiting[0][1] if waiting else now) - w)
 
-        for c, t, msg in self._locked(decoded_messages(reader, self.path, wanted, begin)):
+        for c, t, raw in self._locked(raw_messages(reader, self.path, wanted, begin)):
             stamp = t * 1e-9
             if c.topic == self.topic:
                 if t < first or (t == first and same > 0):
@@ -228,9 +232,10 @@ class BagScans:
                         f"(scan {k} recorded at {t} ns)",
                         self.path,
                     )
-                waiting.append((k, stamp, msg))
+                waiting.append((k, stamp, t, c, raw))
                 k += 1
             else:
+                msg = decode(reader.deserialize, raw, c.msgtype, path, f"at {t} ns")
                 odometry.add(stamp, self._samples(stamp, msg))
             yield from ready(stamp)
         yield from ready(np.inf)
