@@ -613,8 +613,8 @@ def test_a_run_makes_its_jobs_as_the_workers_need_them():
     out = pool.ordered_map(abs, jobs(), 2, take, total=400)
     assert out == list(range(400))
     # when the first result came back, only the chunks sent ahead had been made
-    size = max(1, min(16, 400 // 16))
-    assert seen[0][1] <= pool.IN_FLIGHT_PER_WORKER * 2 * size + size
+    size = pool.chunk_size(400, 2)
+    assert seen[0][1] <= pool.IN_FLIGHT_PER_WORKER * 2 * size + size < 400
 
 
 def test_bench_throughput_times_the_run_eval_sequence_makes(intel):

@@ -21,6 +21,13 @@ from contextlib import contextmanager
 
 POLL_S = 0.1  # how often a waiting parent looks at the flag: a stop takes effect within this
 IN_FLIGHT_PER_WORKER = 3  # chunks sent ahead per worker: each busy while the parent takes results
+# Jobs a chunk holds at most: each chunk wakes the parent's threads, which, with every core busy
+# matching, run cold and take a worker's core. On two cores at 1081 beams (``bench throughput``'s
+# run in memory, 4000 pairs, two alternations) chunks of 16 pairs cost the parent 0.135-0.155 ms
+# of CPU a pair and scaled 1.48-1.50x; of 64, 0.094-0.100 ms and 1.62-1.68x; of 128, 0.08 ms and
+# 1.56-1.60x. At ~1.4 ms a pair 64 are a tenth of a second of a worker's time: a Ctrl-C drops
+# about half a second of the run's work (the chunks under way).
+CHUNK_MAX = 64
 # Set by Ctrl-C during a run: the run stops; within ``one_command`` later runs start no job (a
 # command that runs several, one per matcher, ends instead of going on with the next).
 INTERRUPTED = threading.Event()
@@ -123,6 +130,12 @@ def _chunks(jobs: Iterable, size: int) -> Iterator[list]:
         yield chunk
 
 
+def chunk_size(total: int | None, workers: int) -> int:
+    """Jobs a chunk sent to a worker holds: at least eight chunks per worker (a run's last chunks
+    keep every core busy), at most ``CHUNK_MAX``."""
+    return max(1, min(CHUNK_MAX, (total or CHUNK_MAX * 8 * workers) // (8 * workers)))
+
+
 def ordered_map(
     fn: Callable,
     jobs: Iterable,
@@ -167,8 +180,7 @@ def ordered_map(
                     stop.set()
                     break
             return out
-        size = max(1, min(16, (total or 16 * 8 * workers) // (8 * workers)))
-        chunks = _chunks(jobs, size)
+        chunks = _chunks(jobs, chunk_size(total, workers))
         pool = multiprocessing.get_context().Pool(workers, initializer=ignore_interrupts)
         under_way: deque = deque()
 
