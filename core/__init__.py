@@ -47,7 +47,7 @@ _EXPORTS = {
     "result": ("Degeneracy", "MatchResult", "Termination"),
     "errors": ("ScanError", "ScanSource", "UnusableScan"),
     "deskew": ("deskew", "twist"),
-    "scan": ("Scan", "make_scan", "uniform_bearings"),
+    "scan": ("Scan", "bearing_layout", "make_scan", "uniform_bearings"),
     "se2": ("Pose2", "pose_error", "relative", "wrap_angle"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}

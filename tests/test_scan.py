@@ -1,14 +1,17 @@
-"""A scan's points: computed once and kept on the scan, equal to those computed afresh."""
+"""A scan's points and its bearings' layout: found once and kept, equal to those found afresh."""
 
+import math
 import pickle
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mbicp_viz.core import Scan
+from mbicp_viz.core import Scan, ScanError, make_scan
 from mbicp_viz.core.points import valid_points
+from mbicp_viz.core.scan import _layout
 
 LIMITS = st.sampled_from([0.5, 2.0, 999.0, 1000.0, 1500.0, np.inf])
 
@@ -42,3 +45,53 @@ def test_a_scan_says_whether_its_valid_readings_are_finite_points():
     assert Scan(np.array([1.0, np.nan, 2.0]), b, np.array([True, False, True])).has_finite_points()
     assert not Scan(np.array([1.0, np.inf, 2.0]), b, np.ones(3, bool)).has_finite_points()
     assert not Scan(np.array([1.0, 2.0, 3.0]), b, np.zeros(3, bool)).has_finite_points()
+
+
+def _bearings(kind: str, n: int) -> np.ndarray:
+    """Bearings a reader may give: a laser's, a full turn with its closing beams, one nudged by an
+    ulp in its middle (its ends, and so its key, the same), not increasing, not numbers."""
+    b = np.linspace(-2.0, 2.0, n)
+    if kind == "turn":
+        b = -math.pi + 2.0 * math.pi / (n - 2) * np.arange(n)
+    elif kind == "nudged":
+        b[n // 2] = math.nextafter(b[n // 2], math.inf)
+    elif kind == "backwards":
+        b[n // 2] = b[n // 2 - 1]
+    elif kind == "nan":
+        b[n // 2] = math.nan
+    return b
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    stream=st.lists(
+        st.tuples(
+            st.sampled_from(["laser", "turn", "nudged", "backwards", "nan"]),
+            st.sampled_from([5, 6, 361]),
+        ),
+        min_size=1,
+        max_size=25,
+    )
+)
+def test_a_scans_bearings_are_those_found_afresh_and_shared_when_equal(stream):
+    """Scans made one after another, their bearings alike or not (the same ends, an ulp apart in
+    the middle): each scan's bearings and kept beams, or its error, are what the bearings alone
+    give; a scan whose bearings equal the last scan's shares its array (a stream's scans), which
+    is C-contiguous and writable."""
+    last = None
+    for kind, n in stream:
+        b = _bearings(kind, n)
+        fresh = _layout(b.copy())
+        r = np.linspace(1.0, 2.0, n)
+        if fresh.error is not None:
+            with pytest.raises(ScanError, match=fresh.error.split(":")[0]):
+                make_scan(r, b)
+            last = None
+            continue
+        scan = make_scan(r, b)
+        assert np.array_equal(scan.bearings, fresh.bearings)
+        assert len(scan.ranges) == len(fresh.bearings)
+        assert scan.bearings.flags.c_contiguous and scan.bearings.flags.writeable
+        if last is not None and np.array_equal(last, b):
+            assert scan.bearings is last_made
+        last, last_made = b, scan.bearings

@@ -20,7 +20,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mbicp_viz.core import Pose2, Scan, ScanError, ScanSource, UnusableScan, make_scan
+from mbicp_viz.core import (
+    Pose2,
+    Scan,
+    ScanError,
+    ScanSource,
+    UnusableScan,
+    bearing_layout,
+    make_scan,
+)
 from mbicp_viz.errors import InputError
 
 if TYPE_CHECKING:
@@ -347,12 +355,11 @@ def scan_or_reason(
     and skips: no valid reading, or bearings closer than any scanner steps (a scan of a log that
     writes its bearings unevenly). Malformed beams are an error naming the file, line (or message)
     and field."""
-    b = np.asarray(bearings, dtype=float)
-    steps = np.abs(np.diff(b))
-    if len(steps) and np.all(np.isfinite(steps)) and steps.min() < MIN_BEARING_STEP_RAD:
+    step = bearing_layout(bearings).min_step
+    if step < MIN_BEARING_STEP_RAD:
         return UnusableScan(
             kw.get("source") or ScanSource(path, 0, line),
-            f"bearings {steps.min():.3g} rad apart: below the finest scanner's step "
+            f"bearings {step:.3g} rad apart: below the finest scanner's step "
             f"({MIN_BEARING_STEP_RAD} rad)",
         )
     try:
