@@ -108,7 +108,9 @@ ABSURD_RANGE_M = 1000.0
 class BearingLayout:
     """What a scan's bearings are, found once for a stream's scans (``bearing_layout``)."""
 
-    given: np.ndarray  # the bearings as a reader gave them (a copy: the next are compared to it)
+    # the bearings as a reader gave them (a copy, the next are compared to it; shared: never
+    # written to)
+    given: np.ndarray
     bearings: np.ndarray  # the bearings a scan keeps (those past a full turn dropped), shared
     keep: np.ndarray | None  # which beams a scan keeps; None: all
     min_step: float  # the least gap between neighbours (inf: fewer than two, or one not finite)

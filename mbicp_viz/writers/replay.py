@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mbicp_viz.core import Pose2, Scan
+from mbicp_viz.core import Pose2, Scan, bearing_layout
 from mbicp_viz.readers import ScanLog
 
 from .bag import Robot, Topic
@@ -24,7 +24,8 @@ def resampled(scan: Scan, beams: int) -> Scan:
     real beam nearest its bearing (no range is interpolated: a new beam between a wall and the
     background would read a point on neither)."""
     b = scan.bearings
-    bearings = np.linspace(b[0], b[-1], beams)
+    # one array for the scans resampled alike, as a reader's scans of one laser share theirs
+    bearings = bearing_layout(np.linspace(b[0], b[-1], beams)).given
     nearest = np.clip(np.searchsorted(b, bearings), 1, len(b) - 1)
     nearest -= bearings - b[nearest - 1] < b[nearest] - bearings
     return replace(
