@@ -6,6 +6,7 @@ never turned into points. Bearings are in the sensor frame, strictly increasing,
 
 from __future__ import annotations
 
+import os
 import threading
 from dataclasses import dataclass, field
 
@@ -123,13 +124,27 @@ class BearingLayout:
 # to a worker.
 _LAYOUTS: list[BearingLayout] = []
 _LAYOUTS_KEPT = 8
+# Bearings of more beams than any 2-D laser has (a damaged or hostile file) are checked each time,
+# never kept: the layouts kept hold at most 8 MB
+_LAYOUT_MAX_BEAMS = 65536
 _LAYOUTS_LOCK = threading.Lock()  # a debugger's threads read scans
+
+
+def _fresh_lock() -> None:
+    # a fork while another thread held the lock would leave it held in the child for ever
+    global _LAYOUTS_LOCK
+    _LAYOUTS_LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_fresh_lock)
 
 
 def bearing_layout(bearings) -> BearingLayout:
     """The layout of ``bearings`` (any 1-D sequence of floats): the one of equal bearings when one
     was met lately, else found and kept."""
     b = np.asarray(bearings, dtype=float).reshape(-1)
+    if len(b) > _LAYOUT_MAX_BEAMS:
+        return _layout(b)
     with _LAYOUTS_LOCK:
         for k, known in enumerate(_LAYOUTS):
             if np.array_equal(known.given, b):
@@ -199,6 +214,7 @@ def make_scan(
     source = source or ScanSource()
     # Copies, C-contiguous and writable whatever the reader gave (a broadcast or a buffer's view):
     # numba compiles a kernel once per array kind, and the warm-up compiles these (core/tiers.py).
+    # The bearings are their layout's, checked and copied once for a stream's scans.
     r = np.array(ranges, dtype=float).reshape(-1)
     b = np.asarray(bearings, dtype=float).reshape(-1)
     if r.shape != b.shape:

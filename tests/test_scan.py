@@ -95,3 +95,17 @@ def test_a_scans_bearings_are_those_found_afresh_and_shared_when_equal(stream):
         if last is not None and np.array_equal(last, b):
             assert scan.bearings is last_made
         last, last_made = b, scan.bearings
+
+
+def test_bearings_of_more_beams_than_any_laser_has_are_checked_but_not_kept():
+    """A damaged file's scan of 70,000 beams is made as any other, its layout not kept (the
+    layouts kept stay a few megabytes whatever a file holds)."""
+    from mbicp_viz.core import scan as scan_module
+
+    n = scan_module._LAYOUT_MAX_BEAMS + 1
+    b = np.linspace(-2.0, 2.0, n)
+    first, second = make_scan(np.ones(n), b), make_scan(np.ones(n), b)
+    assert np.array_equal(first.bearings, b) and first.bearings is not second.bearings
+    assert all(
+        len(layout.given) <= scan_module._LAYOUT_MAX_BEAMS for layout in scan_module._LAYOUTS
+    )
