@@ -78,7 +78,7 @@ def test_a_scans_bearings_are_those_found_afresh_and_shared_when_equal(stream):
     the middle): each scan's bearings and kept beams, or its error, are what the bearings alone
     give; a scan whose bearings equal the last scan's shares its array (a stream's scans), which
     is C-contiguous and writable."""
-    last = None
+    last = last_made = None
     for kind, n in stream:
         b = _bearings(kind, n)
         fresh = _layout(b.copy())
