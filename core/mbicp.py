@@ -118,9 +118,7 @@ def _move(P, x, y, th, moved, alpha, rng):
     c, s = np.cos(th), np.sin(th)
     for i in range(len(P)):
         mx, my = c * P[i, 0] - s * P[i, 1] + x, s * P[i, 0] + c * P[i, 1] + y
-        # metres do not overflow a square: hypot's care for that was 3 % of a run at 1081 beams
-        moved[i, 0], moved[i, 1], alpha[i] = mx, my, np.arctan2(my, mx)
-        rng[i] = np.sqrt(mx * mx + my * my)
+        moved[i, 0], moved[i, 1], alpha[i], rng[i] = mx, my, np.arctan2(my, mx), np.hypot(mx, my)
 
 
 @kernel
