@@ -56,16 +56,18 @@ class ReferenceIndex(NamedTuple):
         """The index of ``scan``'s valid points below ``max_range`` (the matcher's range limit)."""
         pts, b = scan.points_and_bearings(max_range)
         full = scan.is_full_circle()
-        ext_b, *extended, neighbours = run(_extended, pts, b, float(L), full)
+        ext_b, *extended, neighbours = run(
+            _extended, pts, b, *scan.directions(max_range), float(L), full
+        )
         return ReferenceIndex(pts, b, ext_b, run(bearing_bins, ext_b), *extended, full, neighbours)
 
 
 @kernel
-def _extended(pts, b, L: float, full: bool):
+def _extended(pts, b, cos_b, sin_b, L: float, full: bool):
     """``ReferenceIndex``'s arrays over the three turns (bearings, point index, x, y, |q|^2 + L^2,
-    the bearing's unit direction), the ranges of their blocks, sqrt(max |q|^2 + L^2) / L, the
-    widest bearing step (1 and 2 pi without points) and the scan neighbours (-1 past the ends of a
-    partial scan)."""
+    the bearing's unit direction: ``cos_b``, ``sin_b``), the ranges of their blocks,
+    sqrt(max |q|^2 + L^2) / L, the widest bearing step (1 and 2 pi without points) and the scan
+    neighbours (-1 past the ends of a partial scan)."""
     n = len(b)
     ext_b, ext_map = np.empty(3 * n), np.empty(3 * n, dtype=np.int64)
     ext_x, ext_y, ext_k, ext_ux, ext_uy = (
@@ -82,7 +84,7 @@ def _extended(pts, b, L: float, full: bool):
     for i in range(n):
         sq = pts[i, 0] * pts[i, 0] + pts[i, 1] * pts[i, 1]
         k, r = sq + L * L, np.sqrt(sq)
-        c, s = np.cos(b[i]), np.sin(b[i])
+        c, s = cos_b[i], sin_b[i]
         k_max = max(k_max, k)
         for t in range(3):
             e = t * n + i

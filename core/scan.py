@@ -48,25 +48,34 @@ class Scan:
         return self.points_and_bearings(max_range)[0]
 
     def points_and_bearings(self, max_range: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
-        """``points(max_range)`` and their bearings [rad], shared: not to be written to.
+        """``points(max_range)`` and their bearings [rad], shared: not to be written to."""
+        return self._valid_points(max_range)[:2]
 
-        Kept on the scan, which never changes: a run reads each scan's points four times (as the
-        reference and the object of a match, and again for its agreement), a tenth of a pair's
-        time outside the matcher's loop at 1081 beams. A limit above every valid reading is no
-        limit, so the matcher's 1000 m and the agreement's none share one computation."""
+    def directions(self, max_range: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """The cosine and sine of the bearing of each of ``points(max_range)``, shared."""
+        return self._valid_points(max_range)[2:4]
+
+    def _valid_points(self, max_range: float) -> tuple[np.ndarray, ...]:
+        """``points.valid_points``, kept on the scan, which never changes: a run reads each scan's
+        points four times (as the reference and the object of a match, and again for its
+        agreement), a tenth of a pair's time outside the matcher's loop at 1081 beams. A limit
+        above every valid reading is no limit, so the matcher's 1000 m and the agreement's none
+        share one computation."""
         memo = self.__dict__.setdefault("_memo", {})  # frozen: set past __setattr__
         top = memo.get("top")
         if top is None:
             top = memo["top"] = float(np.max(self.ranges, where=self.valid, initial=-np.inf))
         key = ("points", np.inf if max_range > top else float(max_range))
         if key not in memo:
-            from .points import valid_points
+            from .points import directions, valid_points
             from .tiers import run
 
+            b = np.ascontiguousarray(self.bearings)
             memo[key] = run(
                 valid_points,
                 np.ascontiguousarray(self.ranges),
-                np.ascontiguousarray(self.bearings),
+                b,
+                *directions(b),
                 np.ascontiguousarray(self.valid),
                 float(max_range),
             )
@@ -74,15 +83,11 @@ class Scan:
 
     def has_finite_points(self) -> bool:
         """Whether it has valid readings and each is a finite point: a point r (cos b, sin b) is
-        finite exactly when r and b are (|r cos b| <= |r|). Kept on the scan as its points are."""
-        memo = self.__dict__.setdefault("_memo", {})
-        if "finite" not in memo:
-            r, b = self.ranges[self.valid], self.bearings[self.valid]
-            memo["finite"] = bool(len(r)) and bool(np.isfinite(r).all() and np.isfinite(b).all())
-        return memo["finite"]
+        finite exactly when r and b are (|r cos b| <= |r|). Found with its points."""
+        return bool(self._valid_points(np.inf)[4])
 
     def __getstate__(self) -> dict:
-        """Pickled without what ``points_and_bearings`` keeps (a worker computes its own)."""
+        """Pickled without what ``_valid_points`` keeps (a worker computes its own)."""
         return {k: v for k, v in self.__dict__.items() if k != "_memo"}
 
     def valid_indices(self) -> np.ndarray:
@@ -126,7 +131,7 @@ _LAYOUTS: list[BearingLayout] = []
 _LAYOUTS_KEPT = 8
 # Bearings of more beams than any 2-D laser has (a damaged or hostile file) are checked each time,
 # never kept: the layouts kept hold at most 8 MB
-_LAYOUT_MAX_BEAMS = 65536
+KEPT_BEAMS_MAX = 65536
 _LAYOUTS_LOCK = threading.Lock()  # a debugger's threads read scans
 
 
@@ -143,7 +148,7 @@ def bearing_layout(bearings) -> BearingLayout:
     """The layout of ``bearings`` (any 1-D sequence of floats): the one of equal bearings when one
     was met lately, else found and kept."""
     b = np.asarray(bearings, dtype=float).reshape(-1)
-    if len(b) > _LAYOUT_MAX_BEAMS:
+    if len(b) > KEPT_BEAMS_MAX:
         return _layout(b)
     with _LAYOUTS_LOCK:
         for k, known in enumerate(_LAYOUTS):

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mbicp_viz.core import Scan, ScanError, make_scan
-from mbicp_viz.core.points import valid_points
+from mbicp_viz.core.points import _cos_sin, directions, valid_points
 from mbicp_viz.core.scan import _layout
 
 LIMITS = st.sampled_from([0.5, 2.0, 999.0, 1000.0, 1500.0, np.inf])
@@ -33,8 +33,9 @@ def test_a_scans_kept_points_equal_those_computed_afresh(ranges, limits):
     scan = Scan(r, b, np.isfinite(r))
     for limit in limits:
         pts, bearings = scan.points_and_bearings(limit)
-        fresh = valid_points(r, b, np.isfinite(r), float(limit))
+        fresh = valid_points(r, b, *_cos_sin(b), np.isfinite(r), float(limit))
         assert np.array_equal(pts, fresh[0]) and np.array_equal(bearings, fresh[1])
+        assert all(map(np.array_equal, scan.directions(limit), fresh[2:4]))
     assert scan.points(limits[0]) is scan.points_and_bearings(limits[0])[0]
     assert "_memo" not in pickle.loads(pickle.dumps(scan)).__dict__
     assert "_memo" not in replace(scan).__dict__
@@ -102,10 +103,28 @@ def test_bearings_of_more_beams_than_any_laser_has_are_checked_but_not_kept():
     layouts kept stay a few megabytes whatever a file holds)."""
     from mbicp_viz.core import scan as scan_module
 
-    n = scan_module._LAYOUT_MAX_BEAMS + 1
+    n = scan_module.KEPT_BEAMS_MAX + 1
     b = np.linspace(-2.0, 2.0, n)
     first, second = make_scan(np.ones(n), b), make_scan(np.ones(n), b)
     assert np.array_equal(first.bearings, b) and first.bearings is not second.bearings
-    assert all(
-        len(layout.given) <= scan_module._LAYOUT_MAX_BEAMS for layout in scan_module._LAYOUTS
-    )
+    assert all(len(layout.given) <= scan_module.KEPT_BEAMS_MAX for layout in scan_module._LAYOUTS)
+
+
+def test_scans_sharing_bearings_share_their_cosines_and_sines():
+    """A stream's scans, and a worker's chunk of them unpickled, share one bearings array and so one
+    computation of its cosines and sines (numba's, as a scan's points take them); bearings of more
+    beams than a laser has are never kept."""
+    from mbicp_viz.core import scan as scan_module
+
+    b = np.linspace(-2.0, 2.0, 361)
+    stream = [make_scan(np.full(361, 1.0 + k), b) for k in range(3)]
+    c, s = directions(stream[0].bearings)
+    assert all(directions(scan.bearings)[0] is c for scan in stream)
+    assert all(map(np.array_equal, (c, s), _cos_sin(b.copy())))
+    assert np.allclose(c, np.cos(b), rtol=0, atol=1e-15)
+    chunk = pickle.loads(pickle.dumps(stream))
+    assert chunk[0].bearings is not stream[0].bearings
+    assert directions(chunk[0].bearings)[0] is directions(chunk[2].bearings)[0]
+    assert np.array_equal(chunk[1].points(), stream[1].points())
+    big = np.linspace(-2.0, 2.0, scan_module.KEPT_BEAMS_MAX + 1)
+    assert directions(big)[0] is not directions(big)[0]
