@@ -8,11 +8,12 @@ import numpy as np
 from .scan import KEPT_BEAMS_MAX
 from .tiers import kernel, run
 
-# The bearings met last with their cosines and sines, the latest first, found by identity: a
-# stream's scans share one bearings array (``scan.bearing_layout``; a worker's chunk of pickled
-# scans one too), so a run takes them once a stream, not twice a scan (as its points and as a
-# reference's directions: 20 us a pair at 1081 beams). A tuple rebound whole: threads that meet a
-# new array at once may drop one entry, never see a torn one.
+# The bearings met last with their cosines and sines, the latest first. A stream's scans have
+# equal bearings (a reader's share one array: ``scan.bearing_layout``; a worker's chunks of pickled
+# scans one array each), so a run takes them once, not twice a scan (as its points and as a
+# reference's directions: 20 us a pair at 1081 beams). Found by the bearings' bytes, not by the
+# array: a caller may write new bearings into the array of an earlier scan. A tuple rebound whole:
+# threads that meet new bearings at once may drop one entry, never see a torn one.
 _DIRECTIONS: tuple = ()
 _DIRECTIONS_KEPT = 8
 
@@ -20,12 +21,13 @@ _DIRECTIONS_KEPT = 8
 def directions(bearings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The cosine and sine of each of ``bearings`` (never to be written to)."""
     global _DIRECTIONS
+    key = (bearings.dtype.str, bearings.tobytes())
     for known, c, s in _DIRECTIONS:
-        if known is bearings:
+        if known == key:
             return c, s
     c, s = run(_cos_sin, bearings)
     if len(bearings) <= KEPT_BEAMS_MAX:
-        _DIRECTIONS = ((bearings, c, s), *_DIRECTIONS[: _DIRECTIONS_KEPT - 1])
+        _DIRECTIONS = ((key, c, s), *_DIRECTIONS[: _DIRECTIONS_KEPT - 1])
     return c, s
 
 

@@ -111,9 +111,10 @@ def test_bearings_of_more_beams_than_any_laser_has_are_checked_but_not_kept():
 
 
 def test_scans_sharing_bearings_share_their_cosines_and_sines():
-    """A stream's scans, and a worker's chunk of them unpickled, share one bearings array and so one
-    computation of its cosines and sines (numba's, as a scan's points take them); bearings of more
-    beams than a laser has are never kept."""
+    """A stream's scans, and a worker's chunk of them unpickled, have equal bearings and so share
+    one computation of their cosines and sines (numba's, as a scan's points take them), found by
+    the bearings' bytes: new bearings written into an earlier scan's array, or a zero of the other
+    sign, get their own; bearings of more beams than a laser has are never kept."""
     from mbicp_viz.core import scan as scan_module
 
     b = np.linspace(-2.0, 2.0, 361)
@@ -124,7 +125,18 @@ def test_scans_sharing_bearings_share_their_cosines_and_sines():
     assert np.allclose(c, np.cos(b), rtol=0, atol=1e-15)
     chunk = pickle.loads(pickle.dumps(stream))
     assert chunk[0].bearings is not stream[0].bearings
-    assert directions(chunk[0].bearings)[0] is directions(chunk[2].bearings)[0]
+    assert directions(chunk[0].bearings)[0] is c
     assert np.array_equal(chunk[1].points(), stream[1].points())
+
+    buffer = np.linspace(-1.0, 1.0, 5)
+    first = Scan(np.ones(5), buffer, np.ones(5, bool))
+    assert np.allclose(first.points()[:, 1], np.sin(buffer))
+    buffer += 0.5  # a caller's buffer, filled anew for the next scan
+    second = Scan(np.ones(5), buffer, np.ones(5, bool))
+    assert np.allclose(second.points()[:, 1], np.sin(buffer))
+    zero = np.array([-1.0, 0.0, 1.0])
+    assert math.copysign(1.0, directions(zero)[1][1]) == 1.0
+    assert math.copysign(1.0, directions(-zero[::-1].copy())[1][1]) == -1.0
+
     big = np.linspace(-2.0, 2.0, scan_module.KEPT_BEAMS_MAX + 1)
     assert directions(big)[0] is not directions(big)[0]
