@@ -33,10 +33,12 @@ def agreement(
     if not len(q):
         return 0.0, 0.0
     p, b = ref.points_and_bearings()
+    # the ranges of those points: a valid reading that is no number below inf makes no point
+    r = ref.ranges[ref.valid & (ref.ranges < np.inf)]
     on_point, on_surface = run(
         _agreeing,
         p,
-        ref.ranges[ref.valid],
+        r,
         b,
         *ref.directions(),
         q,

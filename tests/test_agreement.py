@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from mbicp_viz.cli import app
-from mbicp_viz.core import Pose2
+from mbicp_viz.core import Pose2, Scan
 from mbicp_viz.core.agreement import SURFACE_GAP_BEAMS, agreement, inlier_fraction
 from mbicp_viz.evaluation.pairs import seen_from
 from mbicp_viz.readers import read_log
@@ -105,3 +105,20 @@ def test_eval_sequence_reports_failures_the_points_doubt(tmp_path):
     # counted by hand from the written rows
     doubted = sum(r["inliers_match"] > r["inliers_truth"] for r in failed)
     assert f"than at the scan poses: {doubted} of {len(failed)}" in res.output
+
+
+def test_a_hand_made_scans_valid_readings_that_make_no_point_are_left_out():
+    """A scan made without ``make_scan`` may mark an infinite reading valid: its points leave it
+    out, and so must the ranges the surface is judged by. Here it sits where the range jumps by
+    12 cm, a gap wider than a surface seen at 1 m with 0.01 rad beams: the jump's midpoint lies on
+    no surface (with the reading's range taken for its neighbour's, the gap counted as one)."""
+    b = np.linspace(-0.5, 0.49, 100)
+    r = np.where(np.arange(100) < 50, 1.0, 1.12)
+    r[50] = np.inf
+    loose, strict = Scan(r, b, np.ones(100, bool)), Scan(r, b, np.isfinite(r))
+    p = loose.points()
+    mid = 0.5 * (p[49] + p[50])
+    obj = Scan(np.array([np.hypot(*mid)]), np.array([np.arctan2(mid[1], mid[0])]), np.ones(1, bool))
+    assert agreement(strict, obj, Pose2()) == (0.0, 0.0)
+    assert agreement(loose, obj, Pose2()) == (0.0, 0.0)
+    assert agreement(loose, loose, Pose2()) == (1.0, 1.0)
