@@ -5,30 +5,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scan import KEPT_BEAMS_MAX
+from .scan import bearing_layout
 from .tiers import kernel, run
-
-# The bearings met last with their cosines and sines, the latest first. A stream's scans have
-# equal bearings (a reader's share one array: ``scan.bearing_layout``; a worker's chunks of pickled
-# scans one array each), so a run takes them once, not twice a scan (as its points and as a
-# reference's directions: 20 us a pair at 1081 beams). Found by the bearings' bytes, not by the
-# array: a caller may write new bearings into the array of an earlier scan. A tuple rebound whole:
-# threads that meet new bearings at once may drop one entry, never see a torn one.
-_DIRECTIONS: tuple = ()
-_DIRECTIONS_KEPT = 8
 
 
 def directions(bearings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The cosine and sine of each of ``bearings`` (never to be written to)."""
-    global _DIRECTIONS
-    key = (bearings.dtype.str, bearings.tobytes())
-    for known, c, s in _DIRECTIONS:
-        if known == key:
-            return c, s
-    c, s = run(_cos_sin, bearings)
-    if len(bearings) <= KEPT_BEAMS_MAX:
-        _DIRECTIONS = ((key, c, s), *_DIRECTIONS[: _DIRECTIONS_KEPT - 1])
-    return c, s
+    """The cosine and sine of each of ``bearings`` (never to be written to), found once for the
+    scans of their layout (``scan.bearing_layout``: a stream's scans, a worker's unpickled chunk),
+    not twice a scan (as its points and as a reference's directions: 20 us a pair at 1081 beams)."""
+    layout = bearing_layout(bearings)
+    found = layout.derived.get("directions")
+    if found is None:  # two threads may both compute it: the same numbers
+        found = layout.derived["directions"] = run(_cos_sin, layout.given)
+    return found
 
 
 @kernel

@@ -121,12 +121,16 @@ class BearingLayout:
     keep: np.ndarray | None  # which beams a scan keeps; None: all
     min_step: float  # the least gap between neighbours (inf: fewer than two, or one not finite)
     error: str | None  # why no scan can have them (ScanError's reason), else None
+    # what compiled code finds of ``given`` once for every scan of the layout (its cosines and
+    # sines: ``points.directions``), by name
+    derived: dict = field(default_factory=dict)
 
 
 # The layouts met last, the latest first: a stream's scans share one (a laser's bearings do not
 # change), a few streams or files may alternate. A 1081-beam scan's bearings were checked, copied,
 # differenced and masked in 20 of the 36 us that making it took, and pickled with each scan sent
-# to a worker.
+# to a worker. Found by the bearings' bytes: equal numbers, a zero's sign included (a stream's
+# scans, a worker's unpickled chunk), not the array (a caller may write new bearings into it).
 _LAYOUTS: list[BearingLayout] = []
 _LAYOUTS_KEPT = 8
 # Bearings of more beams than any 2-D laser has (a damaged or hostile file) are checked each time,
@@ -150,9 +154,10 @@ def bearing_layout(bearings) -> BearingLayout:
     b = np.asarray(bearings, dtype=float).reshape(-1)
     if len(b) > KEPT_BEAMS_MAX:
         return _layout(b)
+    bits = b.view(np.uint64)
     with _LAYOUTS_LOCK:
         for k, known in enumerate(_LAYOUTS):
-            if np.array_equal(known.given, b):
+            if np.array_equal(known.given.view(np.uint64), bits):
                 _LAYOUTS.insert(0, _LAYOUTS.pop(k))
                 return known
     layout = _layout(b)
