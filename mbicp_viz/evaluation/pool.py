@@ -11,7 +11,9 @@ from __future__ import annotations
 import _thread
 import itertools
 import multiprocessing
+import multiprocessing.connection
 import os
+import queue
 import signal
 import sys
 import threading
@@ -119,9 +121,79 @@ def stopping(flag: threading.Event | None = None) -> Iterator[threading.Event]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _chunk(job: tuple[Callable, list]) -> list:
-    fn, jobs = job
-    return [fn(j) for j in jobs]
+def _serve(fn: Callable, tasks, results) -> None:
+    """A worker's life: run ``fn`` on every job of each chunk received, send back the results (or
+    the exception, which the parent raises as a run on one process would)."""
+    ignore_interrupts()
+    while True:
+        jobs = tasks.recv()
+        try:
+            out = (True, [fn(j) for j in jobs])
+        except Exception as e:
+            out = (False, e)
+        try:
+            results.send(out)
+        except Exception as e:  # pickling failed: nothing of it was sent
+            results.send((False, RuntimeError(f"a worker could not send its result back: {e!r}")))
+
+
+class _Worker:
+    """One process running ``fn`` on the chunks sent through its own pipe, and a thread sending
+    them: a chunk of scans outgrows the pipe, and the parent must go on taking results meanwhile.
+
+    Ended by killing its process, whose pipe then breaks under the sending thread: nothing waits
+    on anything that can no longer come. ``multiprocessing.Pool.terminate`` cannot promise that:
+    its task thread, caught writing a chunk just as the pool stops, waits forever on a pipe no
+    worker reads any more, and ``terminate`` waits on that thread (CPython issues 73945 and 96995;
+    a Ctrl-C hung a run that way)."""
+
+    def __init__(self, ctx, fn: Callable):
+        tasks_in, self._tasks = ctx.Pipe(duplex=False)
+        self.results, results_out = ctx.Pipe(duplex=False)
+        self.process = ctx.Process(target=_serve, args=(fn, tasks_in, results_out), daemon=True)
+        self.process.start()
+        # the worker's ends, closed here so that its death breaks the pipes (the workers forked
+        # later do not hold them either)
+        tasks_in.close()
+        results_out.close()
+        self.sent: deque[int] = deque()  # numbers of the chunks sent, in the order they return
+        self._outbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._sender = threading.Thread(target=self._send_all, daemon=True)
+
+    def start_sending(self) -> None:  # once every process is forked: no fork copies a thread
+        self._sender.start()
+
+    def _send_all(self) -> None:
+        while (chunk := self._outbox.get()) is not None:
+            try:
+                self._tasks.send(chunk)
+            except OSError:  # the worker was ended
+                return
+
+    def send(self, number: int, chunk: list) -> None:
+        self.sent.append(number)
+        self._outbox.put(chunk)
+
+    def take(self) -> tuple[int, list]:
+        """The number and results of the oldest chunk sent, once they have arrived."""
+        try:
+            ok, value = self.results.recv()
+        except EOFError:  # killed (out of memory?): never a result of the run, never a hang
+            self.process.join(1.0)
+            code = self.process.exitcode
+            raise RuntimeError(f"a worker process ended in a run (exit code {code})") from None
+        if not ok:
+            raise value
+        return self.sent.popleft(), value
+
+    def end(self) -> None:
+        self.process.terminate()  # signals the sender's blocked write (EPIPE) too
+        self.process.join()
+        self._outbox.put(None)
+        if self._sender.is_alive():
+            self._sender.join()
+        self._tasks.close()
+        self.results.close()
 
 
 def _chunks(jobs: Iterable, size: int) -> Iterator[list]:
@@ -180,28 +252,34 @@ def ordered_map(
                     stop.set()
                     break
             return out
-        chunks = _chunks(jobs, chunk_size(total, workers))
-        pool = multiprocessing.get_context().Pool(workers, initializer=ignore_interrupts)
-        under_way: deque = deque()
+        chunks = enumerate(_chunks(jobs, chunk_size(total, workers)))
+        ctx = multiprocessing.get_context()
+        pool = [_Worker(ctx, fn) for _ in range(workers)]
+        finished: dict[int, list] = {}  # results of chunks that came back before an earlier one
+        first = 0  # number of the next chunk whose results are taken
 
-        def send() -> None:
-            chunk = next(chunks, None)
-            if chunk is not None:
-                under_way.append(pool.apply_async(_chunk, ((fn, chunk),)))
+        def send(w: _Worker) -> None:
+            numbered = next(chunks, None)
+            if numbered is not None:
+                w.send(*numbered)
 
         try:
-            for _ in range(IN_FLIGHT_PER_WORKER * workers):
-                send()
-            while under_way and not stop.is_set():
-                try:
-                    results = under_way[0].get(timeout=POLL_S)
-                except multiprocessing.TimeoutError:
-                    continue
-                under_way.popleft()
-                send()
-                for r in results:
-                    take(r)
+            for w in pool:
+                w.start_sending()
+                for _ in range(IN_FLIGHT_PER_WORKER):
+                    send(w)
+            by_pipe = {w.results: w for w in pool}
+            while not stop.is_set() and (busy := [w.results for w in pool if w.sent]):
+                for pipe in multiprocessing.connection.wait(busy, timeout=POLL_S):
+                    w = by_pipe[pipe]
+                    number, results = w.take()
+                    finished[number] = results
+                    send(w)
+                while first in finished:  # what has come back in order is kept, stopped or not
+                    for r in finished.pop(first):
+                        take(r)
+                    first += 1
         finally:
-            pool.terminate()  # a stop ends the jobs under way; their results are not waited for
-            pool.join()
+            for w in pool:  # a stop ends the jobs under way; their results are not waited for
+                w.end()
     return out
