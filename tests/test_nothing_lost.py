@@ -239,6 +239,26 @@ def test_ctrl_c_in_a_command_of_several_runs_stops_them_all(monkeypatch):
     assert len(calls) == 2  # no pair of any later matcher's pass
 
 
+def test_ctrl_c_during_bench_throughput_ends_it_in_one_line(monkeypatch):
+    """The run Ctrl-C stopped keeps the pairs finished: the bench took them for a whole run and
+    ended in a traceback (its check that every pair was matched)."""
+    import mbicp_viz.evaluation.sequence as seq
+
+    real, calls = seq.match_row, []
+
+    def match_row(job, **kw):
+        calls.append(job)
+        if len(calls) == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(job, **kw)
+
+    monkeypatch.setattr(seq, "match_row", match_row)
+    args = ("bench", "throughput", "--from", INTEL, "--beams", 180, "--pairs", 20, "--repeat", 1)
+    code, out, err = run(*args)
+    assert code == 130 and err.strip().splitlines()[-1] == "mbicp-viz: interrupted", err
+    assert len(calls) == 3 and "real time" not in out
+
+
 def test_a_long_run_says_its_rate_and_time_left_and_where_it_resumed(tmp_path, monkeypatch):
     out = tmp_path / "seq.json"
     args = ("eval", "sequence", LASERAZOS, "--out", out, "--limit", 10, "--workers", 1)

@@ -266,7 +266,8 @@ def ordered_map(
         try:
             for w in pool:
                 w.start_sending()
-                for _ in range(IN_FLIGHT_PER_WORKER):
+            for _ in range(IN_FLIGHT_PER_WORKER):  # in turn: a run of few chunks gets every core
+                for w in pool:
                     send(w)
             by_pipe = {w.results: w for w in pool}
             while not stop.is_set() and (busy := [w.results for w in pool if w.sent]):

@@ -109,6 +109,7 @@ def throughput(
             t0 = time.perf_counter()
             rows = match_sequence(fresh, params, workers=w)
             walls[w].append(time.perf_counter() - t0)
+            _raise_if_stopped()
             assert len(rows) == pairs
         if most > 1:
             apart_s.append(apart(run, params, most))
@@ -121,12 +122,20 @@ def apart(run: ScanLog, params: Params, n: int) -> float:
     all at once, each on its own (no parent sends them scans or takes their rows): the slowest
     one's time, from when each has its share. What ``n`` cores give to a run that needs nothing
     of the others; a pool's scaling below it is the pool's, at it the machine's."""
-    import multiprocessing
+    from .pool import ordered_map
 
-    from .pool import ignore_interrupts
+    times = ordered_map(_timed_run, [(s, params) for s in split(run, n)], workers=n)
+    _raise_if_stopped()
+    return max(times)
 
-    with multiprocessing.get_context().Pool(n, initializer=ignore_interrupts) as pool:
-        return max(pool.map(_timed_run, [(s, params) for s in split(run, n)], chunksize=1))
+
+def _raise_if_stopped() -> None:
+    """A run Ctrl-C stopped kept what it had finished (``pool.ordered_map``); a timing of a part
+    of it would be wrong, so the bench ends as any command Ctrl-C stops."""
+    from .pool import INTERRUPTED
+
+    if INTERRUPTED.is_set():
+        raise KeyboardInterrupt
 
 
 def split(run: ScanLog, n: int) -> list[ScanLog]:
