@@ -256,30 +256,35 @@ def ordered_map(
         ctx = multiprocessing.get_context()
         pool = [_Worker(ctx, fn) for _ in range(workers)]
         finished: dict[int, list] = {}  # results of chunks that came back before an earlier one
-        first = 0  # number of the next chunk whose results are taken
+        first, sent = 0, 0  # numbers of the next chunk whose results are taken, and to be sent
 
-        def send(w: _Worker) -> None:
-            numbered = next(chunks, None)
-            if numbered is not None:
-                w.send(*numbered)
+        def send_more() -> None:
+            """Chunks to the least busy workers, up to ``IN_FLIGHT_PER_WORKER`` each on average
+            counted from the oldest not yet taken: jobs are made as they are needed, and a worker
+            slow on one chunk holds back no more results than that."""
+            nonlocal sent
+            while sent - first < IN_FLIGHT_PER_WORKER * workers:
+                numbered = next(chunks, None)
+                if numbered is None:
+                    return
+                min(pool, key=lambda w: len(w.sent)).send(*numbered)
+                sent += 1
 
         try:
             for w in pool:
                 w.start_sending()
-            for _ in range(IN_FLIGHT_PER_WORKER):  # in turn: a run of few chunks gets every core
-                for w in pool:
-                    send(w)
+            send_more()
             by_pipe = {w.results: w for w in pool}
             while not stop.is_set() and (busy := [w.results for w in pool if w.sent]):
                 for pipe in multiprocessing.connection.wait(busy, timeout=POLL_S):
-                    w = by_pipe[pipe]
-                    number, results = w.take()
+                    number, results = by_pipe[pipe].take()
                     finished[number] = results
-                    send(w)
                 while first in finished:  # what has come back in order is kept, stopped or not
                     for r in finished.pop(first):
                         take(r)
                     first += 1
+                if not stop.is_set():
+                    send_more()
         finally:
             for w in pool:  # a stop ends the jobs under way; their results are not waited for
                 w.end()
