@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from mbicp_viz.cli import app
 from mbicp_viz.outputs import written
 
-from .conftest import HOKUYO_BAG, INTEL, LASERAZOS, json_lines
+from .conftest import HOKUYO_BAG, INTEL, LASERAZOS, json_lines, wait_for
 
 # How a process a Ctrl-C ended exits: code 130, or killed by SIGINT (a shell shows 130 for both).
 # Seen beside two busy loops (5 runs in 60, `bench matches` interrupted): when the Ctrl-C first
@@ -179,6 +179,33 @@ def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(t
     assert f"interrupted after {len(rows)} of up to 359 pairs" in stderr and not out.exists()
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
     assert not [w for w in workers if Path(f"/proc/{w}").exists()]
+
+
+def test_the_workers_of_a_killed_run_end_with_it(tmp_path):
+    """A run's parent killed outright (no Ctrl-C to handle): its workers see their pipes closed
+    and end after the chunk under way, silently, instead of living on."""
+    out = tmp_path / "seq.json"
+    cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess"]
+    cmd += ["search", "--out", str(out), "--workers", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen, deadline = "", time.monotonic() + 120
+    while "matching: 1/359" not in seen and time.monotonic() < deadline and proc.poll() is None:
+        if select.select([proc.stderr], [], [], 1.0)[0]:
+            seen += os.read(proc.stderr.fileno(), 4096).decode()
+    workers = children_of(proc.pid)
+    assert len(workers) == 2
+    proc.kill()
+    _, err = proc.communicate(timeout=60)
+    assert wait_for(lambda: not [w for w in workers if alive(w)], timeout=STOPS_WITHIN_S)
+    assert "Traceback" not in err  # the workers' stderr is the run's
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, ended and not yet reaped by init, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
 
 
 def test_ctrl_c_ends_any_command_in_one_line_without_a_traceback():

@@ -121,18 +121,27 @@ def stopping(flag: threading.Event | None = None) -> Iterator[threading.Event]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _serve(fn: Callable, tasks, results) -> None:
+def _serve(fn: Callable, tasks, results, parents_ends: list) -> None:
     """A worker's life: run ``fn`` on every job of each chunk received, send back the results (or
-    the exception, which the parent raises as a run on one process would)."""
+    the exception, which the parent raises as a run on one process would). ``parents_ends`` are
+    the parent's ends of this worker's pipes and of those before it, which a fork copied: held
+    here, they would keep the pipes open when the parent dies."""
     ignore_interrupts()
+    for end in parents_ends:
+        end.close()
     while True:
-        jobs = tasks.recv()
+        try:
+            jobs = tasks.recv()
+        except EOFError:  # the parent is gone (killed): nothing is left to do
+            return
         try:
             out = (True, [fn(j) for j in jobs])
         except Exception as e:
             out = (False, e)
         try:
             results.send(out)
+        except OSError:  # the parent is gone (killed)
+            return
         except Exception as e:  # pickling failed: nothing of it was sent
             results.send((False, RuntimeError(f"a worker could not send its result back: {e!r}")))
 
@@ -147,20 +156,24 @@ class _Worker:
     worker reads any more, and ``terminate`` waits on that thread (CPython issues 73945 and 96995;
     a Ctrl-C hung a run that way)."""
 
-    def __init__(self, ctx, fn: Callable):
+    def __init__(self, ctx, fn: Callable, before: list[_Worker]):
         tasks_in, self._tasks = ctx.Pipe(duplex=False)
         self.results, results_out = ctx.Pipe(duplex=False)
-        self.process = ctx.Process(target=_serve, args=(fn, tasks_in, results_out), daemon=True)
+        ends = [e for w in (*before, self) for e in (w._tasks, w.results)]
+        args = (fn, tasks_in, results_out, ends)
+        self.process = ctx.Process(target=_serve, args=args, daemon=True)
         self.process.start()
-        # the worker's ends, closed here so that its death breaks the pipes (the workers forked
-        # later do not hold them either)
+        # The worker's ends, closed here (before the next worker is forked): each pipe has one
+        # process at either end, so either's death is seen at once by the other, as a closed pipe.
         tasks_in.close()
         results_out.close()
         self.sent: deque[int] = deque()  # numbers of the chunks sent, in the order they return
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
         self._sender = threading.Thread(target=self._send_all, daemon=True)
 
-    def start_sending(self) -> None:  # once every process is forked: no fork copies a thread
+    def start_sending(self) -> None:
+        # once every worker is forked: a fork copies the locks a running thread may hold, held
+        # for ever in the child
         self._sender.start()
 
     def _send_all(self) -> None:
@@ -254,7 +267,9 @@ def ordered_map(
             return out
         chunks = enumerate(_chunks(jobs, chunk_size(total, workers)))
         ctx = multiprocessing.get_context()
-        pool = [_Worker(ctx, fn) for _ in range(workers)]
+        pool: list[_Worker] = []
+        for _ in range(workers):
+            pool.append(_Worker(ctx, fn, pool))
         finished: dict[int, list] = {}  # results of chunks that came back before an earlier one
         first, sent = 0, 0  # numbers of the next chunk whose results are taken, and to be sent
 
