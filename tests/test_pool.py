@@ -32,6 +32,12 @@ def _raise_at_500(i: int) -> int:
     return i
 
 
+def _refuse_the_first_slowly(i: int) -> int:
+    if i == 0:
+        time.sleep(0.3)
+    raise ValueError(f"job {i} is bad")
+
+
 def _die_at_300(i: int) -> int:
     if i == 300:
         os.kill(os.getpid(), signal.SIGKILL)
@@ -53,6 +59,13 @@ def test_results_come_in_the_order_of_the_jobs_however_the_workers_finish():
 def test_a_workers_error_is_raised_in_the_parent_and_no_worker_is_left():
     with pytest.raises(ValueError, match="job 500 is bad"):
         pool.ordered_map(_raise_at_500, range(2000), workers=2)
+    assert multiprocessing.active_children() == []
+
+
+def test_the_first_error_in_the_jobs_order_is_raised_not_the_first_to_arrive():
+    """As one process would meet them: job 1's error comes back first, from the other worker."""
+    with pytest.raises(ValueError, match="job 0 is bad"):
+        pool.ordered_map(_refuse_the_first_slowly, range(8), workers=2)
     assert multiprocessing.active_children() == []
 
 

@@ -167,7 +167,7 @@ class _Worker:
         # process at either end, so either's death is seen at once by the other, as a closed pipe.
         tasks_in.close()
         results_out.close()
-        self.sent: deque[int] = deque()  # numbers of the chunks sent, in the order they return
+        self.held: deque[int] = deque()  # numbers of the chunks sent it, in the order they return
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
         self._sender = threading.Thread(target=self._send_all, daemon=True)
 
@@ -184,20 +184,19 @@ class _Worker:
                 return
 
     def send(self, number: int, chunk: list) -> None:
-        self.sent.append(number)
+        self.held.append(number)
         self._outbox.put(chunk)
 
-    def take(self) -> tuple[int, list]:
-        """The number and results of the oldest chunk sent, once they have arrived."""
+    def take(self) -> tuple[int, tuple[bool, list | Exception]]:
+        """The number of the oldest chunk sent, with its results (True, [...]) or the exception
+        a job raised (False, e), once they have arrived."""
         try:
-            ok, value = self.results.recv()
+            outcome = self.results.recv()
         except EOFError:  # killed (out of memory?): never a result of the run, never a hang
             self.process.join(1.0)
             code = self.process.exitcode
             raise RuntimeError(f"a worker process ended in a run (exit code {code})") from None
-        if not ok:
-            raise value
-        return self.sent.popleft(), value
+        return self.held.popleft(), outcome
 
     def end(self) -> None:
         self.process.terminate()  # signals the sender's blocked write (EPIPE) too
@@ -265,12 +264,9 @@ def ordered_map(
                     stop.set()
                     break
             return out
-        chunks = enumerate(_chunks(jobs, chunk_size(total, workers)))
-        ctx = multiprocessing.get_context()
+        chunks = _chunks(jobs, chunk_size(total, workers))
         pool: list[_Worker] = []
-        for _ in range(workers):
-            pool.append(_Worker(ctx, fn, pool))
-        finished: dict[int, list] = {}  # results of chunks that came back before an earlier one
+        finished: dict[int, tuple] = {}  # chunks that came back before an earlier one
         first, sent = 0, 0  # numbers of the next chunk whose results are taken, and to be sent
 
         def send_more() -> None:
@@ -279,23 +275,29 @@ def ordered_map(
             slow on one chunk holds back no more results than that."""
             nonlocal sent
             while sent - first < IN_FLIGHT_PER_WORKER * workers:
-                numbered = next(chunks, None)
-                if numbered is None:
+                chunk = next(chunks, None)
+                if chunk is None:
                     return
-                min(pool, key=lambda w: len(w.sent)).send(*numbered)
+                min(pool, key=lambda w: len(w.held)).send(sent, chunk)
                 sent += 1
 
         try:
+            ctx = multiprocessing.get_context()
+            for _ in range(workers):
+                pool.append(_Worker(ctx, fn, pool))
             for w in pool:
                 w.start_sending()
             send_more()
             by_pipe = {w.results: w for w in pool}
-            while not stop.is_set() and (busy := [w.results for w in pool if w.sent]):
+            while not stop.is_set() and (busy := [w.results for w in pool if w.held]):
                 for pipe in multiprocessing.connection.wait(busy, timeout=POLL_S):
-                    number, results = by_pipe[pipe].take()
-                    finished[number] = results
+                    number, outcome = by_pipe[pipe].take()
+                    finished[number] = outcome
                 while first in finished:  # what has come back in order is kept, stopped or not
-                    for r in finished.pop(first):
+                    ok, results = finished.pop(first)
+                    if not ok:  # the first error in the jobs' order, as one process meets it
+                        raise results
+                    for r in results:
                         take(r)
                     first += 1
                 if not stop.is_set():
