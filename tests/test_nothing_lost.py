@@ -151,21 +151,35 @@ def children_of(pid: int) -> list[int]:
 STOPS_WITHIN_S = 5.0
 
 
+def read_until(proc: subprocess.Popen, stream, text: str) -> str:
+    """What ``proc`` printed on ``stream`` until ``text`` (or its end, or two minutes): a test
+    acts once the work is under way, where a fixed delay raced the run's own length, which varies
+    with the machine's speed."""
+    seen, deadline = "", time.monotonic() + 120
+    while text not in seen and time.monotonic() < deadline and proc.poll() is None:
+        if select.select([stream], [], [], 1.0)[0]:
+            seen += os.read(stream.fileno(), 4096).decode()
+    return seen
+
+
+def parallel_run_under_way(out: Path) -> tuple[subprocess.Popen, str, list[int]]:
+    """``eval sequence --workers 2`` on the hand-held bag, once its first pairs are finished (the
+    progress line of a run whose stderr is not a terminal): the process, what it printed on
+    stderr so far, its two workers."""
+    cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess"]
+    cmd += ["search", "--out", str(out), "--workers", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen = read_until(proc, proc.stderr, "matching: 1/359")
+    workers = children_of(proc.pid)
+    assert len(workers) == 2
+    return proc, seen, workers
+
+
 def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(tmp_path):
     """Real SIGINTs to a real process running the pool: the parent ends within seconds
     (``STOPS_WITHIN_S``) with the finished rows kept, its workers ended with it, no traceback."""
     out = tmp_path / "seq.json"
-    cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess"]
-    cmd += ["search", "--out", str(out), "--workers", "2"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    # interrupt once the first pairs are finished (the progress line of a run whose stderr is not
-    # a terminal); a fixed delay raced the run's own length, which varies with the machine's speed
-    seen, deadline = "", time.monotonic() + 120
-    while "matching: 1/359" not in seen and time.monotonic() < deadline and proc.poll() is None:
-        if select.select([proc.stderr], [], [], 1.0)[0]:
-            seen += os.read(proc.stderr.fileno(), 4096).decode()
-    workers = children_of(proc.pid)
-    assert len(workers) == 2
+    proc, seen, workers = parallel_run_under_way(out)
     t0 = time.monotonic()
     for _ in range(3):
         proc.send_signal(signal.SIGINT)
@@ -184,16 +198,7 @@ def test_ctrl_c_pressed_three_times_stops_a_parallel_run_and_leaves_no_process(t
 def test_the_workers_of_a_killed_run_end_with_it(tmp_path):
     """A run's parent killed outright (no Ctrl-C to handle): its workers see their pipes closed
     and end after the chunk under way, silently, instead of living on."""
-    out = tmp_path / "seq.json"
-    cmd = [sys.executable, "-m", "mbicp_viz", "eval", "sequence", str(HOKUYO_BAG), "--guess"]
-    cmd += ["search", "--out", str(out), "--workers", "2"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    seen, deadline = "", time.monotonic() + 120
-    while "matching: 1/359" not in seen and time.monotonic() < deadline and proc.poll() is None:
-        if select.select([proc.stderr], [], [], 1.0)[0]:
-            seen += os.read(proc.stderr.fileno(), 4096).decode()
-    workers = children_of(proc.pid)
-    assert len(workers) == 2
+    proc, _, workers = parallel_run_under_way(tmp_path / "seq.json")
     proc.kill()
     _, err = proc.communicate(timeout=60)
     assert wait_for(lambda: not [w for w in workers if alive(w)], timeout=STOPS_WITHIN_S)
@@ -213,10 +218,7 @@ def test_ctrl_c_ends_any_command_in_one_line_without_a_traceback():
     line and exit code 130, never numba's SystemError."""
     cmd = [sys.executable, "-m", "mbicp_viz", "bench", "matches", str(HOKUYO_BAG), "--repeat", "50"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    seen, deadline = "", time.monotonic() + 120
-    while "681 beams" not in seen and time.monotonic() < deadline and proc.poll() is None:
-        if select.select([proc.stdout], [], [], 1.0)[0]:
-            seen += os.read(proc.stdout.fileno(), 4096).decode()
+    read_until(proc, proc.stdout, "681 beams")
     t0 = time.monotonic()
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)

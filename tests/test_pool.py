@@ -21,7 +21,7 @@ BIG = 1 << 13  # floats in a job: 64 KB, so a chunk is far more than a pipe hold
 
 def _index_after_a_while(job) -> int:
     i, payload = job
-    # later jobs finish sooner: a chunk often comes back before the one sent ahead of it
+    # jobs take 0-8 ms by their index: a chunk often comes back before the one sent ahead of it
     time.sleep(0.002 * ((i * 7919) % 5))
     return i + int(payload.size == 0)
 

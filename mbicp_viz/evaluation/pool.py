@@ -22,7 +22,8 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 
 POLL_S = 0.1  # how often a waiting parent looks at the flag: a stop takes effect within this
-IN_FLIGHT_PER_WORKER = 3  # chunks sent ahead per worker: each busy while the parent takes results
+# Chunks sent and not yet taken, per worker: each has the next while the parent takes results
+IN_FLIGHT_PER_WORKER = 3
 # Jobs a chunk holds at most: each chunk wakes the parent's threads, which, with every core busy
 # matching, run cold and take a worker's core. On two cores at 1081 beams (``bench throughput``'s
 # run in memory, 4000 pairs, two alternations) chunks of 16 pairs cost the parent 0.135-0.155 ms
