@@ -140,6 +140,29 @@ def test_the_rows_of_another_run_are_refused(tmp_path, monkeypatch):
     assert len(json_lines(tmp_path / "seq.json.partial")) == 5 and not out.exists()
 
 
+def test_a_run_refused_before_its_first_row_leaves_no_rows_file(tmp_path):
+    out = tmp_path / "seq.json"
+    args = [
+        "eval",
+        "sequence",
+        INTEL,
+        "--out",
+        out,
+        "--limit",
+        3,
+        "--workers",
+        1,
+        "--truth",
+        "pose",
+    ]
+    code, _, err = run(*args)  # the scan poses are its default guess: refused once it runs
+    assert code == 2 and "--truth: the scan poses cannot be both" in err, err
+    assert list(tmp_path.iterdir()) == []
+    code, _, err = run(*args, "--guess", "identity")  # the corrected command is not refused
+    assert code == 0 and "resuming" not in err, err
+    assert len(json_lines(out)) == 3
+
+
 def children_of(pid: int) -> list[int]:
     out = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout
     return [int(p) for p in out.split()]

@@ -272,8 +272,12 @@ class PartialRows:
         self._good += len(line)
         self.count += 1
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, exc_type, *exc) -> None:
         self._file.close()
+        # a run refused or failed before its first row leaves no file: one naming only the run
+        # would refuse the corrected command as "rows of another run" and keeps nothing
+        if exc_type is not None and self.count == 0:
+            self.path.unlink(missing_ok=True)
 
     def finish(self) -> None:
         """The run is complete: ``out`` written whole (the partial file's rows, copied line by
