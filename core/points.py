@@ -31,16 +31,19 @@ def _cos_sin(bearings):
 @kernel
 def valid_points(ranges, bearings, cos_b, sin_b, valid, max_range: float):
     """The points (M, 2) of the valid readings below ``max_range``, in scan order, their bearings,
-    their bearings' cosines and sines (``cos_b``, ``sin_b``: of every beam), and whether the scan
-    has valid readings, each a finite range at a finite bearing (whatever ``max_range``).
+    their bearings' cosines and sines (``cos_b``, ``sin_b``: of every beam), whether the scan
+    has valid readings, each a finite range at a finite bearing, and its longest valid reading
+    (-inf: none; NaN: one is NaN, as numpy's maximum says) — the last two whatever ``max_range``.
     Compiled because every match reads both scans' points: numpy's masks, trigonometry and
     stacking cost more per call than the arithmetic."""
-    n, n_valid, finite = 0, 0, True
+    n, n_valid, finite, top, nan = 0, 0, True, -np.inf, False
     for i in range(len(ranges)):
         n += valid[i] and ranges[i] < max_range
         if valid[i]:
             n_valid += 1
             finite = finite and np.isfinite(ranges[i]) and np.isfinite(bearings[i])
+            nan = nan or np.isnan(ranges[i])
+            top = max(top, ranges[i])
     pts, b, c, s = np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n)
     k = 0
     for i in range(len(ranges)):
@@ -48,4 +51,4 @@ def valid_points(ranges, bearings, cos_b, sin_b, valid, max_range: float):
             pts[k, 0], pts[k, 1], b[k] = ranges[i] * cos_b[i], ranges[i] * sin_b[i], bearings[i]
             c[k], s[k] = cos_b[i], sin_b[i]
             k += 1
-    return pts, b, c, s, n_valid > 0 and finite
+    return pts, b, c, s, n_valid > 0 and finite, np.nan if nan else top

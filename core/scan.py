@@ -59,27 +59,31 @@ class Scan:
         """``points.valid_points``, kept on the scan, which never changes: a run reads each scan's
         points four times (as the reference and the object of a match, and again for its
         agreement), a tenth of a pair's time outside the matcher's loop at 1081 beams. A limit
-        above every valid reading is no limit, so the matcher's 1000 m and the agreement's none
-        share one computation."""
+        above every valid reading (the last of the limitless points' numbers) is no limit, so the
+        matcher's 1000 m and the agreement's none share one computation."""
         memo = self.__dict__.setdefault("_memo", {})  # frozen: set past __setattr__
-        top = memo.get("top")
-        if top is None:
-            top = memo["top"] = float(np.max(self.ranges, where=self.valid, initial=-np.inf))
-        key = ("points", np.inf if max_range > top else float(max_range))
-        if key not in memo:
-            from .points import directions, valid_points
-            from .tiers import run
+        every = memo.get(np.inf)
+        if every is None:
+            every = memo[np.inf] = self._compute_points(np.inf)
+        if max_range > every[5]:
+            return every
+        if max_range not in memo:
+            memo[max_range] = self._compute_points(float(max_range))
+        return memo[max_range]
 
-            b = np.ascontiguousarray(self.bearings)
-            memo[key] = run(
-                valid_points,
-                np.ascontiguousarray(self.ranges),
-                b,
-                *directions(b),
-                np.ascontiguousarray(self.valid),
-                float(max_range),
-            )
-        return memo[key]
+    def _compute_points(self, max_range: float) -> tuple[np.ndarray, ...]:
+        from .points import directions, valid_points
+        from .tiers import run
+
+        b = np.ascontiguousarray(self.bearings)
+        return run(
+            valid_points,
+            np.ascontiguousarray(self.ranges),
+            b,
+            *directions(b),
+            np.ascontiguousarray(self.valid),
+            max_range,
+        )
 
     def has_finite_points(self) -> bool:
         """Whether it has valid readings and each is a finite point: a point r (cos b, sin b) is
@@ -157,7 +161,10 @@ def bearing_layout(bearings) -> BearingLayout:
     bits = b.view(np.uint64)
     with _LAYOUTS_LOCK:
         for k, known in enumerate(_LAYOUTS):
-            if np.array_equal(known.given.view(np.uint64), bits):
+            # a scan's own bearings are its layout's, never written to: known without a comparison
+            if (bearings is known.bearings and known.keep is None) or np.array_equal(
+                known.given.view(np.uint64), bits
+            ):
                 _LAYOUTS.insert(0, _LAYOUTS.pop(k))
                 return known
     layout = _layout(b)
