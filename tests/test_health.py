@@ -227,3 +227,27 @@ def test_the_runs_recording_marks_the_flagged_pair_and_plots_health(hokuyo, tmp_
         assert len(objects) == rows[n].result.iterations + 1  # the initial guess, then each
     img = viewer_screenshot(path, tmp_path / "run.png", "1400x900")
     assert img.std() > 10  # the viewer drew the run, not a blank window
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    factor=st.lists(st.floats(-10.0, 10.0), min_size=9, max_size=9),
+    scale=st.floats(-8.0, 2.0),
+    e=st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3),
+    indefinite=st.booleans(),
+)
+def test_the_sigma_sign_reads_the_distance_numpy_solves(factor, scale, e, indefinite):
+    """The squared Mahalanobis distance by L D L' equals numpy's solve for every positive-definite
+    covariance (a match's plus the odometry's) and leaves the others to it."""
+    from mbicp_viz.evaluation.health import _ldl_quadratic
+
+    A = np.reshape(factor, (3, 3))
+    c = A @ A.T * 10.0**scale + np.diag([0.05, 0.05, 0.035]) ** 2
+    if indefinite:
+        c[2, 2] = -1.0
+    got = _ldl_quadratic(c.tolist(), e)
+    if indefinite:
+        assert got is None
+    else:
+        want = float(np.asarray(e) @ np.linalg.solve(c, e))
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-300)
