@@ -238,7 +238,8 @@ def make_scan(
         raise ScanError(source, f"{len(r)} ranges but {len(b)} bearings")
     if len(r) == 0:
         raise UnusableScan(source, "empty scan (no beams)")
-    layout = bearing_layout(b)
+    # the given array, not a view of it: a layout's own is known without a comparison
+    layout = bearing_layout(bearings)
     if layout.error is not None:
         raise ScanError(source, layout.error)
     v = None if valid is None else np.asarray(valid, dtype=bool).reshape(-1)
