@@ -156,8 +156,13 @@ class Params:
 
     def as_dict(self) -> dict[str, Any]:
         # the fields are numbers and flags: dataclasses.asdict's deep copy was a tenth of the time
-        # a run's parent spends writing a row
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        # a run's parent spends writing a row. Made once (the object never changes; set past the
+        # frozen __setattr__), a copy given: each row of a run writes them
+        made = self.__dict__.get("_as_dict")
+        if made is None:
+            made = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+            object.__setattr__(self, "_as_dict", made)
+        return dict(made)
 
     # What the front ends show of a matcher's per-iteration threshold (IterationEvent.threshold)
     # and of the distance beyond which it never pairs: each matcher's parameters say it.
