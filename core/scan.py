@@ -134,7 +134,9 @@ class BearingLayout:
 # change), a few streams or files may alternate. A 1081-beam scan's bearings were checked, copied,
 # differenced and masked in 20 of the 36 us that making it took, and pickled with each scan sent
 # to a worker. Found by the bearings' bytes: equal numbers, a zero's sign included (a stream's
-# scans, a worker's unpickled chunk), not the array (a caller may write new bearings into it).
+# scans, a worker's unpickled chunk), not by a caller's array (it may write new bearings into it);
+# but a layout's own array, which its scans share and never write, is known by itself (a bag's
+# stream hands it on: readers/rosbag.py).
 _LAYOUTS: list[BearingLayout] = []
 _LAYOUTS_KEPT = 8
 # Bearings of more beams than any 2-D laser has (a damaged or hostile file) are checked each time,

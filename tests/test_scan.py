@@ -140,3 +140,23 @@ def test_scans_sharing_bearings_share_their_cosines_and_sines():
 
     big = np.linspace(-2.0, 2.0, scan_module.KEPT_BEAMS_MAX + 1)
     assert directions(big)[0] is not directions(big)[0]
+
+
+def test_a_bags_scans_share_their_first_scans_bearings_known_without_a_comparison(monkeypatch):
+    """A bag's stream makes its bearings once: every scan after the first is given the first's
+    array (``readers/rosbag._beams``), whose layout is its own, found without comparing the
+    bearings; an equal array of a caller's is compared, and gets the same layout."""
+    from mbicp_viz.readers import read_log
+
+    from .conftest import HOKUYO_BAG
+
+    log = read_log(str(HOKUYO_BAG))
+    scans = log.scans_from(0)
+    _, first = next(scans)
+    compared = []
+    equal = np.array_equal
+    monkeypatch.setattr(np, "array_equal", lambda *a, **k: compared.append(1) or equal(*a, **k))
+    later = [scan for _, (_, scan) in zip(range(20), scans)]
+    assert len(later) == 20 and all(s.bearings is first.bearings for s in later) and not compared
+    again = make_scan(np.ones(len(first.ranges)), first.bearings.copy())
+    assert again.bearings is first.bearings and compared
