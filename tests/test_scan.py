@@ -160,3 +160,50 @@ def test_a_bags_scans_share_their_first_scans_bearings_known_without_a_compariso
     assert len(later) == 20 and all(s.bearings is first.bearings for s in later) and not compared
     again = make_scan(np.ones(len(first.ranges)), first.bearings.copy())
     assert again.bearings is first.bearings and compared
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    stream=st.lists(
+        st.tuples(
+            st.sampled_from([0.0, -0.0, -1.5707963705062866, 2.0]),
+            st.sampled_from([0.002892721677199006, -0.002892721677199006, 0.0174533, -0.0174533]),
+            st.sampled_from([0.0, 1e-4, math.nan]),
+            st.sampled_from([5, 361]),
+            st.booleans(),
+        ),
+        min_size=1,
+        max_size=12,
+    )
+)
+def test_a_bags_scans_get_the_bearings_and_beam_times_their_message_gives(stream):
+    """However a bag's messages alternate their geometry (a zero of either sign, clockwise or not,
+    upside down or not), each scan's bearings and beam times are, bit for bit, those its message
+    gives, though a stream's are made once (``readers/rosbag._beams``)."""
+    from types import SimpleNamespace
+
+    from mbicp_viz.core import Pose2
+    from mbicp_viz.readers.rosbag import laser_scan
+
+    for k, (angle_min, inc, dt, n, upside_down) in enumerate(stream):
+        stamp = SimpleNamespace(sec=k, nanosec=0)
+        m = SimpleNamespace(
+            header=SimpleNamespace(stamp=stamp, frame_id="laser"),
+            ranges=np.linspace(1.0, 2.0, n).astype(np.float32),
+            angle_min=angle_min,
+            angle_increment=inc,
+            time_increment=dt,
+            range_min=0.1,
+            range_max=30.0,
+        )
+        scan = laser_scan(m, "test.bag", k, upside_down, None, Pose2())
+        b = (angle_min + inc * np.arange(n)) * (-1.0 if upside_down else 1.0)
+        t = dt * np.arange(n) if dt > 0 else None
+        if b[1] < b[0]:
+            b, t = b[::-1], None if t is None else t[::-1]
+        fresh = _layout(b.copy())  # a full turn's closing beams dropped
+        kept = slice(None) if fresh.keep is None else fresh.keep
+        assert scan.bearings.tobytes() == fresh.bearings.tobytes()
+        assert (scan.beam_times is None) == (t is None)
+        assert t is None or scan.beam_times.tobytes() == t[kept].tobytes()
+        assert scan.ranges[0] == (1.0 if inc * (1 - 2 * upside_down) > 0 else 2.0)

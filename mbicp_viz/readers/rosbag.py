@@ -580,9 +580,10 @@ def laser_scan(m, path: str, k: int, upside_down: bool, track, mount: Pose2):
     # damaged numbers become invalid readings, silently
     with np.errstate(invalid="ignore", over="ignore"):
         ranges = np.asarray(m.ranges, dtype=float)
-    # between two beams [s]; 0 when the driver does not say
-    key = (len(ranges), float(m.angle_min), float(m.angle_increment), float(m.time_increment))
-    bearings, times, clockwise = _beams(*key, upside_down)
+    # time_increment: between two beams [s]; 0 when the driver does not say
+    angles = (float(m.angle_min), float(m.angle_increment), float(m.time_increment))
+    key = (len(ranges), struct.pack("<3d", *angles), upside_down)  # a zero's sign counts
+    bearings, times, clockwise = _BEAMS.get(key) or _beams(len(ranges), *angles, upside_down)
     if clockwise:  # clockwise in the upright frame: stored increasing
         ranges = ranges[::-1]
     stamp = header_stamp(m)
@@ -606,13 +607,15 @@ def laser_scan(m, path: str, k: int, upside_down: bool, track, mount: Pose2):
         beam_times=times,
     )
     if isinstance(scan, Scan) and len(scan.bearings) == len(ranges):
-        _BEAMS[(*key, upside_down)] = (scan.bearings, scan.beam_times, clockwise)
+        if len(_BEAMS) >= _BEAMS_KEPT and key not in _BEAMS:
+            _BEAMS.clear()
+        _BEAMS[key] = (scan.bearings, scan.beam_times, clockwise)
     return scan
 
 
-# A stream's beams, as its first scan kept them: (beams, angle_min, angle_increment,
-# time_increment, upside down) -> (its bearings, shared with their layout (core/scan.py), its beam
-# times, whether the message's beams run clockwise). Making a 1081-beam scan's bearings and
+# A stream's beams, as its first scan kept them: (beams, the bits of angle_min, angle_increment
+# and time_increment, upside down) -> (its bearings, shared with their layout (core/scan.py), its
+# beam times, whether the message's beams run clockwise). Making a 1081-beam scan's bearings and
 # comparing them with their layout's was 11 of the 95 us that reading a scan from a bag took.
 _BEAMS: dict[tuple, tuple] = {}
 _BEAMS_KEPT = 8  # a few streams (a bag's lasers, the debugger's logs): bounded whatever the file
@@ -620,11 +623,6 @@ _BEAMS_KEPT = 8  # a few streams (a bag's lasers, the debugger's logs): bounded 
 
 def _beams(n: int, angle_min: float, inc: float, dt: float, upside_down: bool):
     """The bearings (increasing), beam times (None: not given) and clockwise flag of a scan."""
-    found = _BEAMS.get((n, angle_min, inc, dt, upside_down))
-    if found is not None:
-        return found
-    if len(_BEAMS) >= _BEAMS_KEPT:
-        _BEAMS.clear()
     bearings = angle_min + inc * np.arange(n)
     times = dt * np.arange(n) if np.isfinite(dt) and dt > 0 else None
     if upside_down:  # the laser's z axis points down: seen upright, every bearing is mirrored
