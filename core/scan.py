@@ -59,13 +59,14 @@ class Scan:
         """``points.valid_points``, kept on the scan, which never changes: a run reads each scan's
         points four times (as the reference and the object of a match, and again for its
         agreement), a tenth of a pair's time outside the matcher's loop at 1081 beams. A limit
-        above every valid reading (the last of the limitless points' numbers) is no limit, so the
-        matcher's 1000 m and the agreement's none share one computation."""
+        above every valid reading is no limit, so the matcher's 1000 m and the agreement's none
+        share one computation."""
         memo = self.__dict__.setdefault("_memo", {})  # frozen: set past __setattr__
         every = memo.get(np.inf)
         if every is None:
             every = memo[np.inf] = self._compute_points(np.inf)
-        if max_range > every[5]:
+        top = every[5]  # the longest valid reading (NaN: one is NaN)
+        if max_range > top:
             return every
         if max_range not in memo:
             memo[max_range] = self._compute_points(float(max_range))

@@ -3,15 +3,20 @@
 import math
 import pickle
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mbicp_viz.core import Scan, ScanError, make_scan
+from mbicp_viz.core import Pose2, Scan, ScanError, make_scan
 from mbicp_viz.core.points import _cos_sin, directions, valid_points
 from mbicp_viz.core.scan import _layout
+from mbicp_viz.readers import read_log
+from mbicp_viz.readers.rosbag import laser_scan
+
+from .conftest import HOKUYO_BAG
 
 LIMITS = st.sampled_from([0.5, 2.0, 999.0, 1000.0, 1500.0, np.inf])
 
@@ -146,10 +151,6 @@ def test_a_bags_scans_share_their_first_scans_bearings_known_without_a_compariso
     """A bag's stream makes its bearings once: every scan after the first is given the first's
     array (``readers/rosbag._beams``), whose layout is its own, found without comparing the
     bearings; an equal array of a caller's is compared, and gets the same layout."""
-    from mbicp_viz.readers import read_log
-
-    from .conftest import HOKUYO_BAG
-
     log = read_log(str(HOKUYO_BAG))
     scans = log.scans_from(0)
     _, first = next(scans)
@@ -180,11 +181,6 @@ def test_a_bags_scans_get_the_bearings_and_beam_times_their_message_gives(stream
     """However a bag's messages alternate their geometry (a zero of either sign, clockwise or not,
     upside down or not), each scan's bearings and beam times are, bit for bit, those its message
     gives, though a stream's are made once (``readers/rosbag._beams``)."""
-    from types import SimpleNamespace
-
-    from mbicp_viz.core import Pose2
-    from mbicp_viz.readers.rosbag import laser_scan
-
     for k, (angle_min, inc, dt, n, upside_down) in enumerate(stream):
         stamp = SimpleNamespace(sec=k, nanosec=0)
         m = SimpleNamespace(

@@ -74,13 +74,13 @@ _ODOMETRY_COVARIANCE = np.diag(np.square(ODOMETRY_SIGMA))
 def _mahalanobis2(pose: Pose2, odometry: Pose2, covariance: np.ndarray | None) -> float:
     """(match - odometry)' (C_match + C_odometry)^-1 (match - odometry), the difference taken in the
     reference frame as the covariance is."""
-    e = np.array([pose.x - odometry.x, pose.y - odometry.y, 0.0])
-    e[2] = math.remainder(pose.theta - odometry.theta, 2.0 * math.pi)
+    e = [pose.x - odometry.x, pose.y - odometry.y]
+    e.append(math.remainder(pose.theta - odometry.theta, 2.0 * math.pi))
     c = _ODOMETRY_COVARIANCE
     if covariance is not None and np.isfinite(covariance).all():
         c = c + covariance
-    d2 = _ldl_quadratic(c.tolist(), e.tolist())
-    return d2 if d2 is not None else float(e @ np.linalg.solve(c, e))
+    d2 = _ldl_quadratic(c.tolist(), e)
+    return d2 if d2 is not None else float(np.asarray(e) @ np.linalg.solve(c, e))
 
 
 def _ldl_quadratic(c: list, e: list) -> float | None:
